@@ -1,0 +1,43 @@
+# Set-up and main entry points. `make demo` runs the main job, `make test` the test suite.
+# Both create (once) and reuse .venv; the installed command is .venv/bin/breastplan.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+DEMO   := out/demo
+export PATH := $(PATH):/sbin:/usr/sbin
+
+.PHONY: demo test bench libusb clean
+
+$(STAMP): pyproject.toml
+	@$(MAKE) --no-print-directory libusb
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV) || { \
+	  echo "python3 cannot create a virtual environment: install python3-venv (apt-get install python3-venv) and run make again." >&2; exit 1; }
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[test]'
+	@touch $@
+
+# open3d cannot be imported without the system library libusb-1.0-0.
+libusb:
+	@if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing the system library libusb-1.0-0 (needed by open3d)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libusb-1.0-0 >/dev/null; \
+	  else \
+	    echo "breastplan needs the system library libusb-1.0-0: install it (sudo apt-get install libusb-1.0-0) and run make again." >&2; exit 1; \
+	  fi; \
+	fi
+
+demo: $(STAMP)
+	$(BIN)/breastplan synth --db S --out $(DEMO)/database-S --ply
+	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind ptosis --param b0=1.125 --param b1=0.25 --out $(DEMO)/S-shape1-00-ptosis.ply
+	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind turn --param c0=1.1 --param c1=0.5 --out $(DEMO)/S-shape1-00-turn.ply
+	@echo "demo written to $(abspath $(DEMO))"
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/bench_model.py
+
+clean:
+	rm -rf $(VENV) out

@@ -1,0 +1,164 @@
+"""The `breastplan` command (DESIGN.md "Command line")."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import List, Optional
+
+import numpy as np
+import typer
+
+from breastplan import BadInputError, Primitive, read_ply, to_mm, to_model_units, write_ply
+from breastplan.deform.conditions import CONDITIONS, find_condition
+from breastplan.deform.global_deformations import KIND_PARAMS, NEEDS_PRIMITIVE, apply_kind
+from breastplan.learn.databases import Database, build_database, grid_for
+from breastplan.learn.datasets import build_dataset
+
+from .output import Timer, progress, report, stderr, usage_error
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="Plan the aesthetic result of breast surgery from a 3-D scan.")
+
+JSON = typer.Option(False, "--json", help="Print one JSON object on stdout (logs go to stderr).")
+
+
+@app.command()
+def synth(
+    db: str = typer.Option(..., "--db", help="Database to generate: V (65 breasts) or S (60)."),
+    out: Path = typer.Option(..., "--out", help="Folder for database.npz (and the PLYs)."),
+    seed: int = typer.Option(0, "--seed", help="Random seed; the database is a pure function of it."),
+    points: int = typer.Option(10_000, "--points", help="Points per breast (a square number)."),
+    ply: bool = typer.Option(False, "--ply", help="Also write one PLY per breast (mm, breast frame)."),
+    as_json: bool = JSON,
+):
+    """Write synthetic database V or S (MODEL.md §4) as DIR/database.npz."""
+    timer = Timer()
+    if db not in ("V", "S"):
+        raise usage_error(f"'{db}' is not a database; choose V or S", "--db")
+    try:
+        grid_for(points)
+    except ValueError as exc:
+        raise usage_error(str(exc), "--points") from None
+    database = build_database(db, seed=seed, n_points=points)
+    path = database.save(out / "database.npz")
+    if ply:
+        with progress(f"writing {len(database)} PLYs", len(database)) as advance:
+            database.write_plys(out, advance)
+    train = database.split == "train"
+    report({"database": str(path), "breasts": len(database), "train": int(train.sum()),
+            "test": int((~train).sum()), "points_per_breast": int(database.points.shape[1]),
+            "volume_mean_cc": float(database.volume_cc.mean()),
+            "volume_sd_cc": float(database.volume_cc.std(ddof=1)),
+            "ply_folder": str(out) if ply else None, "seconds": timer.seconds},
+           as_json, f"database {db}")
+
+
+def _parse_pairs(items: List[str], what: str, option: str) -> dict[str, float]:
+    pairs = {}
+    for item in (p for chunk in items for p in chunk.split(",") if p.strip()):
+        name, sep, value = item.partition("=")
+        try:
+            if not sep:
+                raise ValueError
+            pairs[name.strip()] = float(value)
+        except ValueError:
+            raise usage_error(f"'{item}' is not NAME=VALUE with a number VALUE ({what})", option) from None
+        if not np.isfinite(pairs[name.strip()]):
+            raise usage_error(f"'{item}' is not a finite number ({what})", option)
+    return pairs
+
+
+@app.command()
+def deform(
+    input: Path = typer.Argument(..., help="Breast PLY (points or mesh), mm, breast frame."),
+    kind: str = typer.Option(..., "--kind", help=f"Deformation: {', '.join(KIND_PARAMS)}."),
+    param: List[str] = typer.Option([], "--param", help="NAME=VALUE, model units (MODEL.md §3); "
+                                    "repeat or comma-separate; unnamed parameters are 0."),
+    primitive: Optional[str] = typer.Option(None, "--primitive", help="a1=..,a2=..,a3=..,a4=..,a5=..[,eps1=..,eps2=..] "
+                                            "in model units (1 mu = 6 mm); needed by top-shape, flatten-side, turn-top."),
+    out: Path = typer.Option(..., "--out", help="Output PLY, mm, breast frame, same point order."),
+    as_json: bool = JSON,
+):
+    """Apply one deformation with explicit parameters to a breast PLY."""
+    timer = Timer()
+    if kind not in KIND_PARAMS:
+        raise usage_error(f"'{kind}' is not a deformation; choose one of {', '.join(KIND_PARAMS)}", "--kind")
+    params = _parse_pairs(param, f"parameters of {kind}", "--param")
+    unknown = sorted(set(params) - set(KIND_PARAMS[kind]))
+    if unknown:
+        raise usage_error(f"{kind} takes {', '.join(KIND_PARAMS[kind])}, not {', '.join(unknown)}", "--param")
+    prim = _parse_primitive(primitive, kind)
+    geometry = read_ply(input)
+    before = to_model_units(geometry.points)
+    after = to_mm(apply_kind(before, kind, params, prim))
+    if not np.isfinite(after).all():
+        raise BadInputError(input, f"{kind} with these parameters sends points to infinity")
+    write_ply(out, after, faces=geometry.faces,
+              comments=[f"breastplan deform {kind} " + " ".join(f"{k}={v:g}" for k, v in params.items())])
+    moved = np.linalg.norm(after - geometry.points, axis=1)
+    report({"output": str(out), "points": len(after), "kind": kind,
+            "params": {n: params.get(n, 0.0) for n in KIND_PARAMS[kind]},
+            "mean_displacement_mm": float(moved.mean()), "max_displacement_mm": float(moved.max()),
+            "seconds": timer.seconds}, as_json, f"{kind} → {out}")
+
+
+def _parse_primitive(text: Optional[str], kind: str) -> Optional[Primitive]:
+    if text is None:
+        if kind in NEEDS_PRIMITIVE:
+            raise usage_error(f"{kind} needs the breast primitive: --primitive a1=..,a2=..,a3=..,a4=..,a5=..",
+                              "--primitive")
+        return None
+    values = _parse_pairs([text], "primitive", "--primitive")
+    names = ("a1", "a2", "a3", "a4", "a5", "eps1", "eps2")
+    missing = [n for n in names[:5] if n not in values]
+    unknown = sorted(set(values) - set(names))
+    if missing or unknown:
+        raise usage_error(f"the primitive needs a1..a5 (and optionally eps1, eps2); "
+                          f"missing {missing}, unknown {unknown}", "--primitive")
+    try:
+        return Primitive(**values)
+    except ValueError as exc:
+        raise usage_error(str(exc), "--primitive") from None
+
+
+@app.command()
+def dataset(
+    db: Path = typer.Option(..., "--db", help="database.npz written by `breastplan synth`."),
+    condition: str = typer.Option(..., "--condition", help=f"One of: {'; '.join(CONDITIONS)}."),
+    dd: int = typer.Option(8, "--dd", help="Number of degrees of deformation (4 or 8 in the thesis)."),
+    out: Path = typer.Option(..., "--out", help="Output dataset NPZ."),
+    as_json: bool = JSON,
+):
+    """Deform every breast of a database by every row of a condition; extents and degrees."""
+    timer = Timer()
+    try:
+        cond = find_condition(condition)
+    except ValueError as exc:
+        raise usage_error(str(exc), "--condition") from None
+    if dd < 2:
+        raise usage_error(f"--dd must be at least 2, got {dd}", "--dd")
+    database = Database.load(db)
+    with progress(f"{cond.name} × {dd} degrees", len(database)) as advance:
+        data = build_dataset(database, cond, dd, advance)
+    path = data.save(out)
+    report({"dataset": str(path), "condition": cond.name, "dd": dd, "examples": len(data),
+            "reference_extents": data.reference_extents.round(5),
+            "examples_per_degree": np.bincount(data.degree, minlength=dd + 1)[1:],
+            "seconds": timer.seconds}, as_json, f"dataset {cond.name}")
+
+
+def main() -> None:
+    """Entry point: run the app, mapping deliberate errors to exit codes (DESIGN.md)."""
+    try:
+        app()
+    except BadInputError as exc:
+        stderr.print(f"error: {exc}", markup=False)
+        sys.exit(3)
+    except OSError as exc:  # an output we cannot write, a disk that is full
+        where = f"{exc.filename}: " if exc.filename else ""
+        stderr.print(f"error: {where}{exc.strerror or exc}.", markup=False)
+        sys.exit(3)
+
+
+if __name__ == "__main__":
+    main()

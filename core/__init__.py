@@ -1,0 +1,23 @@
+"""breastplan: plan the aesthetic result of breast surgery from a 3-D scan.
+
+The core package holds artefact I/O, units and frames, the breast primitive and errors.
+Stages live in the subpackages ingest, fitting, deform, learn and cli (DESIGN.md).
+"""
+from importlib.metadata import PackageNotFoundError, version as _version
+
+try:
+    __version__ = _version("breastplan")
+except PackageNotFoundError:  # running from a source tree that is not installed
+    __version__ = "0+unknown"
+
+from .artefacts import load_npz, save_npz
+from .errors import ArtefactError, BadInputError, BreastplanError
+from .ply import Geometry, read_ply, write_ply
+from .primitive import Primitive, spow, uv_grid
+from .units import MM_PER_MU, cc_to_mu3, mu3_to_cc, to_mm, to_model_units
+
+__all__ = [
+    "__version__", "ArtefactError", "BadInputError", "BreastplanError", "Geometry", "MM_PER_MU",
+    "Primitive", "cc_to_mu3", "load_npz", "mu3_to_cc", "read_ply", "save_npz", "spow",
+    "to_mm", "to_model_units", "uv_grid", "write_ply",
+]

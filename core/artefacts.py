@@ -1,0 +1,108 @@
+"""NPZ artefacts (DESIGN.md "Artefacts"): schema-tagged, pickle-free, validated, atomic.
+
+Every artefact holds `schema` ("breastplan.<name>/<version>"), `units`, `frame`,
+`version` (of the producing breastplan), `meta` (a JSON string) and plain numeric or
+string arrays. `load_npz` checks the schema and, given a spec, each array's dtype kind
+and shape; any defect raises ArtefactError naming the file.
+"""
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from .atomic import atomic_open
+from .errors import ArtefactError
+
+RESERVED = ("schema", "units", "frame", "version", "meta")
+
+Spec = Mapping[str, tuple[str, tuple]]
+"""name → (dtype kinds, shape); shape entries are ints, or names bound to one size across arrays."""
+
+
+def save_npz(path: str | Path, schema: str, arrays: Mapping[str, np.ndarray], *,
+             units: str = "mm", frame: str = "breast", meta: Mapping | None = None) -> Path:
+    """Write an artefact atomically; `schema` like "breastplan.database/1"."""
+    from . import __version__
+
+    clash = set(arrays) & set(RESERVED)
+    if clash:
+        raise ValueError(f"array names {sorted(clash)} are reserved")
+    payload = {k: np.asarray(v) for k, v in arrays.items()}
+    for k, v in payload.items():
+        if v.dtype.kind == "O":
+            raise ValueError(f"array '{k}' has dtype object, which would need pickle")
+    payload.update(schema=np.str_(schema), units=np.str_(units), frame=np.str_(frame),
+                   version=np.str_(__version__), meta=np.str_(json.dumps(dict(meta or {}))))
+    path = Path(path)
+    with atomic_open(path) as fh:
+        np.savez(fh, **payload)
+    return path
+
+
+class Artefact(dict):
+    """Loaded arrays by name, plus `schema`, `units`, `frame`, `version`, `meta` attributes."""
+
+    schema: str
+    units: str
+    frame: str
+    version: str
+    meta: dict
+
+
+def load_npz(path: str | Path, schema: str, spec: Spec | None = None) -> Artefact:
+    """Load and validate an artefact of `schema` ("breastplan.<name>/<version>")."""
+    path = Path(path)
+    if not path.is_file():
+        raise ArtefactError(path, "no such file" if not path.exists() else "is not a file")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            raw = {k: npz[k] for k in npz.files}
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError, KeyError) as exc:
+        problem = "holds arrays that would need pickle" if "pickle" in str(exc) else "is not a valid NPZ file"
+        raise ArtefactError(path, problem) from None
+    if "schema" not in raw:
+        raise ArtefactError(path, f"is not a breastplan artefact (it has no schema; expected {schema})")
+    found = str(raw["schema"])
+    want_name, want_ver = _split_schema(schema)
+    name, ver = _split_schema(found)
+    if name != want_name:
+        raise ArtefactError(path, f"has schema {found}, expected {schema}")
+    if ver is None or ver > want_ver:
+        raise ArtefactError(path, f"has schema {found}, newer than this breastplan reads ({schema})")
+    art = Artefact({k: v for k, v in raw.items() if k not in RESERVED})
+    art.schema, art.units = found, str(raw.get("units", ""))
+    art.frame, art.version = str(raw.get("frame", "")), str(raw.get("version", ""))
+    try:
+        art.meta = json.loads(str(raw.get("meta", "{}")))
+    except json.JSONDecodeError:
+        raise ArtefactError(path, "has metadata that is not valid JSON") from None
+    if spec:
+        _check_spec(path, art, spec)
+    return art
+
+
+def _split_schema(schema: str) -> tuple[str, int | None]:
+    name, _, ver = schema.partition("/")
+    return name, int(ver) if ver.isdigit() else None
+
+
+def _check_spec(path: Path, art: Artefact, spec: Spec) -> None:
+    sizes: dict[str, int] = {}
+    for key, (kinds, shape) in spec.items():
+        if key not in art:
+            raise ArtefactError(path, f"lacks the array '{key}'")
+        a = art[key]
+        if a.dtype.kind not in kinds:
+            raise ArtefactError(path, f"has array '{key}' of dtype {a.dtype}, expected kind '{kinds}'")
+        if a.ndim != len(shape):
+            raise ArtefactError(path, f"has array '{key}' of shape {a.shape}, expected {len(shape)} dimensions")
+        for dim, want in zip(a.shape, shape):
+            want = sizes.setdefault(want, dim) if isinstance(want, str) else want
+            if dim != want:
+                raise ArtefactError(path, f"has array '{key}' of shape {a.shape}, inconsistent with the rest")
+        if a.dtype.kind == "f" and not np.isfinite(a).all():
+            raise ArtefactError(path, f"has NaN or infinite values in '{key}'")

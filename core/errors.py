@@ -1,0 +1,22 @@
+"""Errors breastplan raises on purpose; the CLI maps them to exit codes (DESIGN.md)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class BreastplanError(Exception):
+    """Base class of the errors breastplan raises deliberately."""
+
+
+class BadInputError(BreastplanError):
+    """Bad user input (file or value): CLI exit code 3, one sentence, no traceback."""
+
+    def __init__(self, path: str | Path | None, problem: str):
+        self.path = None if path is None else Path(path)
+        self.problem = problem.rstrip(".")
+        where = f"{self.path}: " if self.path is not None else ""
+        super().__init__(f"{where}{self.problem}.")
+
+
+class ArtefactError(BadInputError):
+    """An artefact file (PLY or NPZ) that is missing, corrupt or of the wrong schema."""

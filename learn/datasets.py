@@ -1,0 +1,113 @@
+"""Deformation datasets: database × condition × #dd (MODEL.md §4–§5, thesis §4.1.1).
+
+Every breast of the database deformed by every row of the condition, with its extent and
+its degree (discrete and continuous). Deformed points are recomputed on demand from the
+embedded database (a few hundred µs per breast, faster than storing and reading them).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from breastplan import ArtefactError, load_npz, save_npz, to_mm, to_model_units
+from breastplan.deform.conditions import Condition, find_condition
+from breastplan.deform.degree import (condition_extent, continuous_degree, discrete_degree,
+                                      reference_extents)
+from breastplan.deform.global_deformations import apply_kind
+
+from .databases import _SPEC as _DB_SPEC
+from .databases import Database
+
+SCHEMA = "breastplan.dataset/1"
+_SPEC = {
+    "breast": ("iu", ("examples",)), "row": ("iu", ("examples",)),
+    "params": ("f", ("examples", "n_params")), "extent": ("f", ("examples",)),
+    "degree": ("iu", ("examples",)), "degree_continuous": ("f", ("examples",)),
+    "rows": ("f", ("dd", "n_params")), "reference_extents": ("f", ("dd",)),
+    **{f"db_{k}": v for k, v in _DB_SPEC.items()},
+}
+
+
+@dataclass
+class Dataset:
+    """Examples (breast i, row j) of one condition; `breast` indexes `database`."""
+
+    condition: Condition
+    dd: int
+    database: Database
+    rows: np.ndarray                # (dd, n_params) model units
+    reference_extents: np.ndarray   # (dd,) E_0j of P00
+    breast: np.ndarray              # (n_examples,) database index
+    row: np.ndarray                 # (n_examples,) row index 0..dd-1
+    params: np.ndarray              # (n_examples, n_params) = rows[row]
+    extent: np.ndarray              # (n_examples,) extent (signed for top-shape)
+    degree: np.ndarray              # (n_examples,) discrete degree 1..dd
+    degree_continuous: np.ndarray   # (n_examples,) in [1, dd]
+
+    def __len__(self) -> int:
+        return len(self.breast)
+
+    @property
+    def split(self) -> np.ndarray:
+        """(n_examples,) "train" | "test", the split of each example's breast."""
+        return self.database.split[self.breast]
+
+    def original_points(self, k: int) -> np.ndarray:
+        """Example k's breast before deformation, mm."""
+        return self.database.points[self.breast[k]]
+
+    def deformed_points(self, k: int) -> np.ndarray:
+        """Example k's deformed breast, mm, recomputed from the database."""
+        i = int(self.breast[k])
+        p = apply_kind(self.database.points_mu(i), self.condition.kind, self.params[k],
+                       self.database.primitive(i))
+        return to_mm(p)
+
+    def save(self, path: str | Path) -> Path:
+        arrays = {k: getattr(self, k) for k in ("rows", "reference_extents", "breast", "row", "params",
+                                                 "extent", "degree", "degree_continuous")}
+        arrays.update({f"db_{k}": v for k, v in self.database.arrays().items()})
+        meta = {"condition": self.condition.name, "kind": self.condition.kind, "dd": self.dd,
+                "database": self.database.name, "seed": self.database.seed}
+        return save_npz(path, SCHEMA, arrays, meta=meta)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Dataset":
+        art = load_npz(path, SCHEMA, _SPEC)
+        try:
+            condition = find_condition(art.meta["condition"])
+            dd = int(art.meta["dd"])
+        except (KeyError, ValueError, TypeError):
+            raise ArtefactError(path, "names no known condition and number of degrees") from None
+        if art["rows"].shape != (dd, len(condition.param_names)):
+            raise ArtefactError(path, f"has rows of shape {art['rows'].shape}, not {dd} rows of {condition.kind}")
+        n_breasts = len(art["db_names"])
+        if art["breast"].size and (art["breast"].max() >= n_breasts or art["row"].max() >= dd):
+            raise ArtefactError(path, "has examples that point outside its database or rows")
+        db = Database.from_arrays({k[3:]: v for k, v in art.items() if k.startswith("db_")},
+                                  {"name": art.meta.get("database"), "seed": art.meta.get("seed", -1)})
+        return cls(condition=condition, dd=dd, database=db,
+                   **{k: art[k] for k in ("rows", "reference_extents", "breast", "row", "params",
+                                          "extent", "degree", "degree_continuous")})
+
+
+def build_dataset(database: Database, condition: Condition | str, dd: int, progress=None) -> Dataset:
+    """Deform every breast by every row; extents and degrees per example (MODEL.md §5)."""
+    cond = find_condition(condition) if isinstance(condition, str) else condition
+    rows = cond.rows(dd)
+    ref = reference_extents(cond, dd, *database.grid)
+    n = len(database)
+    extents = np.empty((n, dd))
+    for i in range(n):
+        original, prim = database.points_mu(i), database.primitive(i)
+        for j, row in enumerate(rows):
+            extents[i, j] = condition_extent(cond, original, apply_kind(original, cond.kind, row, prim), prim)
+        if progress:
+            progress()
+    breast, row = (a.ravel() for a in np.meshgrid(np.arange(n), np.arange(dd), indexing="ij"))
+    ext = extents.ravel()
+    return Dataset(condition=cond, dd=dd, database=database, rows=rows, reference_extents=ref,
+                   breast=breast, row=row, params=rows[row], extent=ext,
+                   degree=discrete_degree(ext, ref), degree_continuous=continuous_degree(ext, ref))
