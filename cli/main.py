@@ -152,11 +152,11 @@ def main() -> None:
     try:
         app()
     except BadInputError as exc:
-        stderr.print(f"error: {exc}", markup=False)
+        stderr.print(f"error: {exc}", markup=False, soft_wrap=True)
         sys.exit(3)
     except OSError as exc:  # an output we cannot write, a disk that is full
         where = f"{exc.filename}: " if exc.filename else ""
-        stderr.print(f"error: {where}{exc.strerror or exc}.", markup=False)
+        stderr.print(f"error: {where}{exc.strerror or exc}.", markup=False, soft_wrap=True)
         sys.exit(3)
 
 

@@ -58,11 +58,15 @@ def load_npz(path: str | Path, schema: str, spec: Spec | None = None) -> Artefac
     path = Path(path)
     if not path.is_file():
         raise ArtefactError(path, "no such file" if not path.exists() else "is not a file")
+    if path.stat().st_size == 0:
+        raise ArtefactError(path, "is empty")
+    if not zipfile.is_zipfile(path):
+        raise ArtefactError(path, f"is not an NPZ file (expected a {schema} artefact)")
     try:
         with np.load(path, allow_pickle=False) as npz:
             raw = {k: npz[k] for k in npz.files}
     except (zipfile.BadZipFile, OSError, EOFError, ValueError, KeyError) as exc:
-        problem = "holds arrays that would need pickle" if "pickle" in str(exc) else "is not a valid NPZ file"
+        problem = "holds arrays that would need pickle" if "pickle" in str(exc) else "is a corrupt NPZ file"
         raise ArtefactError(path, problem) from None
     if "schema" not in raw:
         raise ArtefactError(path, f"is not a breastplan artefact (it has no schema; expected {schema})")

@@ -105,18 +105,27 @@ def top_shape(points, s0: float, s1: float, t0: float, t1: float, *, primitive: 
 
 def top_shape_inverse(points, s0: float, s1: float, t0: float, t1: float, *,
                       primitive: Primitive) -> np.ndarray:
-    """Inverse of top_shape where z ↦ z·β(w(z)) is increasing on [0, a5] (outside it β = 1)."""
+    """Inverse of top_shape on its first increasing branch.
+
+    On the upper half top-shape maps z ↦ f(z) = z·β(w(z)). Where f is increasing on
+    [0, a5] this is the exact inverse. With s1 < 0 (every Table 4.1 shape) f folds back
+    just below the nipple, because dw/dz is unbounded there, so no inverse exists for
+    points from that band; they are mapped to the branch [0, z*] before f's first maximum.
+    """
     prim = _need(primitive, "top-shape")
-    p = _copy(points)
-    z = p[..., 2]
-    sel = (p[..., 1] > 0) & (z > 0) & (z < prim.a5)
 
     def forward(zz):
-        w = np.arcsin((zz / prim.a5) ** (1 / prim.eps1)) * (2 / np.pi)
+        w = np.arcsin(np.clip(zz / prim.a5, 0.0, 1.0) ** (1 / prim.eps1)) * (2 / np.pi)
         return zz * beta(w, s0, s1, t0, t1)
 
-    target = z[sel]
-    z[sel] = _solve_increasing(forward, target, np.zeros_like(target), np.full_like(target, prim.a5))
+    grid = np.linspace(0.0, prim.a5, 4097)
+    rising = np.diff(forward(grid)) > 0
+    z_star = prim.a5 if rising.all() else grid[np.argmin(rising)]
+    p = _copy(points)
+    z = p[..., 2]
+    sel = (p[..., 1] > 0) & (z > 0) & ((z < prim.a5) | (z_star < prim.a5))
+    target = np.minimum(z[sel], forward(z_star))
+    z[sel] = _solve_increasing(forward, target, np.zeros_like(target), np.full_like(target, z_star))
     return p
 
 
