@@ -1,0 +1,144 @@
+"""PLY and NPZ artefacts: round trips, validation, atomic writes (DESIGN.md "Artefacts")."""
+import os
+import zipfile
+
+import numpy as np
+import pytest
+
+from breastplan import ArtefactError, load_npz, read_ply, save_npz, write_ply
+from breastplan.atomic import atomic_open
+
+SPEC = {"points": ("f", ("n", 3)), "label": ("U", ("n",))}
+
+
+def sample_mesh():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.5]], float)
+    F = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+    return V, F
+
+
+def test_ply_round_trip_mesh_with_normals(tmp_path):
+    V, F = sample_mesh()
+    N = V / np.maximum(np.linalg.norm(V, axis=1, keepdims=True), 1)
+    g = read_ply(write_ply(tmp_path / "m.ply", V, faces=F, normals=N, comments=["hello"]))
+    assert np.array_equal(g.points, V) and np.array_equal(g.faces, F) and np.array_equal(g.normals, N)
+    assert "hello" in g.comments
+    assert (tmp_path / "m.ply").read_bytes().startswith(b"ply\nformat binary_little_endian 1.0\n")
+
+
+def test_ply_ascii_big_endian_and_quads(tmp_path):
+    ascii_ply = ("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                 "property float z\nproperty uchar red\nelement face 1\nproperty list uchar int vertex_indices\n"
+                 "end_header\n0 0 0 255\n1 0 0 0\n1 1 0 0\n0 1 0 9\n4 0 1 2 3\n")
+    (tmp_path / "a.ply").write_text(ascii_ply)
+    g = read_ply(tmp_path / "a.ply")
+    assert np.allclose(g.points[2], [1, 1, 0])
+    assert np.array_equal(g.faces, [[0, 1, 2], [0, 2, 3]])      # quad fan-triangulated
+    header = b"ply\nformat binary_big_endian 1.0\nelement vertex 2\nproperty double x\nproperty double y\nproperty double z\nend_header\n"
+    (tmp_path / "b.ply").write_bytes(header + np.array([[1, 2, 3], [4, 5, 6]], ">f8").tobytes())
+    assert np.array_equal(read_ply(tmp_path / "b.ply").points, [[1, 2, 3], [4, 5, 6]])
+
+
+@pytest.mark.parametrize("content,message", [
+    (b"", "is empty"),
+    (b"solid stl\nfacet normal 0 0 1\n", "not a PLY file"),
+    (b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n", "end_header"),
+    (b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n",
+     "no vertices"),
+    (b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+     b"0 0 0\nnan 1 1\n", "NaN"),
+    (b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+     b"0 0 0\n1 1 inf\n", "NaN or infinite"),
+    (b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+     b"element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n",
+     "outside 0..2"),
+    (b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+     b"0 0 0\n1 0 0\n", "truncated"),
+    (b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+     b"0 zero 0\n", "not a number"),
+    (b"ply\nformat binary_middle_endian 1.0\nend_header\n", "unsupported PLY format"),
+    (b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float u\nend_header\n1\n", "x, y and z"),
+])
+def test_bad_ply_is_refused_with_the_file_name(tmp_path, content, message):
+    path = tmp_path / "scan.ply"
+    path.write_bytes(content)
+    with pytest.raises(ArtefactError, match=message) as err:
+        read_ply(path)
+    assert str(path) in str(err.value)
+
+
+def test_truncated_binary_ply(tmp_path):
+    V, F = sample_mesh()
+    data = write_ply(tmp_path / "m.ply", V, faces=F).read_bytes()
+    for cut in (len(data) - 5, len(data) - 40):
+        (tmp_path / "t.ply").write_bytes(data[:cut])
+        with pytest.raises(ArtefactError, match="truncated"):
+            read_ply(tmp_path / "t.ply")
+
+
+def test_missing_file_and_folder(tmp_path):
+    with pytest.raises(ArtefactError, match="no such file"):
+        read_ply(tmp_path / "nope.ply")
+    with pytest.raises(ArtefactError, match="folder"):
+        read_ply(tmp_path)
+
+
+def test_npz_round_trip_and_header(tmp_path):
+    pts = np.arange(12.0).reshape(4, 3)
+    path = save_npz(tmp_path / "a.npz", "breastplan.test/2", {"points": pts, "label": np.array(list("abcd"))},
+                    units="mm", frame="camera", meta={"k": 1})
+    art = load_npz(path, "breastplan.test/2", SPEC)
+    assert np.array_equal(art["points"], pts)
+    assert (art.schema, art.units, art.frame, art.meta) == ("breastplan.test/2", "mm", "camera", {"k": 1})
+    assert load_npz(path, "breastplan.test/3", SPEC)["points"].shape == (4, 3)  # older versions load
+
+
+def test_npz_validation(tmp_path):
+    good = {"points": np.zeros((4, 3)), "label": np.array(list("abcd"))}
+    path = save_npz(tmp_path / "a.npz", "breastplan.test/2", good)
+    with pytest.raises(ArtefactError, match="expected breastplan.other/1"):
+        load_npz(path, "breastplan.other/1")
+    with pytest.raises(ArtefactError, match="newer"):
+        load_npz(path, "breastplan.test/1")
+    bad_shape = save_npz(tmp_path / "b.npz", "breastplan.test/2", {"points": np.zeros((4, 2)), "label": good["label"]})
+    with pytest.raises(ArtefactError, match="shape"):
+        load_npz(bad_shape, "breastplan.test/2", SPEC)
+    mismatch = save_npz(tmp_path / "c.npz", "breastplan.test/2", {"points": np.zeros((4, 3)), "label": np.array(["a"])})
+    with pytest.raises(ArtefactError, match="inconsistent"):
+        load_npz(mismatch, "breastplan.test/2", SPEC)
+    nan = save_npz(tmp_path / "d.npz", "breastplan.test/2", {"points": np.full((4, 3), np.nan), "label": good["label"]})
+    with pytest.raises(ArtefactError, match="NaN"):
+        load_npz(nan, "breastplan.test/2", SPEC)
+    with pytest.raises(ArtefactError, match="lacks the array 'label'"):
+        load_npz(save_npz(tmp_path / "e.npz", "breastplan.test/2", {"points": good["points"]}), "breastplan.test/2", SPEC)
+
+
+def test_npz_without_schema_pickles_and_corruption(tmp_path):
+    np.savez(tmp_path / "plain.npz", x=np.zeros(3))
+    with pytest.raises(ArtefactError, match="no schema"):
+        load_npz(tmp_path / "plain.npz", "breastplan.test/1")
+    np.savez(tmp_path / "pickle.npz", schema=np.str_("breastplan.test/1"), x=np.array([{"a": 1}], dtype=object))
+    with pytest.raises(ArtefactError, match="pickle"):
+        load_npz(tmp_path / "pickle.npz", "breastplan.test/1")
+    data = (tmp_path / "plain.npz").read_bytes()
+    (tmp_path / "cut.npz").write_bytes(data[: len(data) // 2])
+    with pytest.raises(ArtefactError, match="not an NPZ file|corrupt"):
+        load_npz(tmp_path / "cut.npz", "breastplan.test/1")
+    with pytest.raises(ValueError, match="pickle"):
+        save_npz(tmp_path / "o.npz", "breastplan.test/1", {"x": np.array([None], dtype=object)})
+
+
+def test_atomic_write_leaves_nothing_on_failure(tmp_path):
+    target = tmp_path / "sub" / "out.bin"
+    with pytest.raises(RuntimeError):
+        with atomic_open(target) as fh:
+            fh.write(b"half")
+            raise RuntimeError("crash")
+    assert os.listdir(tmp_path / "sub") == []
+    target.write_bytes(b"old")
+    with pytest.raises(RuntimeError):
+        with atomic_open(target) as fh:
+            fh.write(b"new")
+            raise RuntimeError("crash")
+    assert target.read_bytes() == b"old" and os.listdir(tmp_path / "sub") == ["out.bin"]
+    assert zipfile.is_zipfile(save_npz(tmp_path / "z.npz", "breastplan.test/1", {"x": np.zeros(1)}))
