@@ -106,3 +106,14 @@ def test_loading_the_wrong_artefact_is_refused(tmp_path, db_s):
         Database.load(data_path)
     with pytest.raises(ArtefactError, match="no such file"):
         Dataset.load(tmp_path / "missing.npz")
+
+
+def test_drawn_volumes_follow_the_truncated_normal():
+    from scipy.stats import kstest, truncnorm
+
+    from breastplan.learn.databases import draw_volumes
+
+    law = truncnorm((150 - 452) / 120, (1200 - 452) / 120, loc=452, scale=120)
+    sample = draw_volumes(np.random.default_rng(3), 5000)
+    assert sample.min() >= 150 and sample.max() <= 1200
+    assert kstest(sample, law.cdf).statistic < 1 / 5000 + 1e-9   # one draw per quantile bin

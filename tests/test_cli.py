@@ -1,0 +1,122 @@
+"""The `breastplan` command end to end through files, as a user runs it (DESIGN.md exit codes)."""
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+from breastplan import read_ply
+
+
+def run(cli, *args):
+    return subprocess.run([cli, *map(str, args)], capture_output=True, text=True, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def synth_s(cli, tmp_path_factory):
+    out = tmp_path_factory.mktemp("synth") / "S"
+    res = run(cli, "synth", "--db", "S", "--points", 2500, "--out", out, "--ply", "--json")
+    assert res.returncode == 0, res.stderr
+    return out, json.loads(res.stdout)
+
+
+def test_synth_writes_database_and_plys(synth_s):
+    out, info = synth_s
+    assert (info["breasts"], info["train"], info["test"], info["points_per_breast"]) == (60, 48, 12, 2500)
+    assert (out / "database.npz").is_file()
+    assert len(list(out.glob("S-shape*.ply"))) == 60
+
+
+def test_deform_round_trip_matches_the_formula(cli, synth_s, tmp_path):
+    out, _ = synth_s
+    src = out / "S-shape3-04.ply"
+    res = run(cli, "deform", src, "--kind", "ptosis", "--param", "b0=1.125", "--param", "b1=0.25",
+              "--out", tmp_path / "d.ply", "--json")
+    assert res.returncode == 0, res.stderr
+    before, after = read_ply(src).points, read_ply(tmp_path / "d.ply").points
+    zeta = before[:, 2] / 60.0                         # ζ = z/10 in model units, z_mm/6 = z_mu
+    assert np.allclose(after[:, 1], before[:, 1] - 6 * (1.125 * zeta + 0.25 * zeta**2))
+    assert np.array_equal(after[:, [0, 2]], before[:, [0, 2]])
+    info = json.loads(res.stdout)
+    assert info["points"] == 2500 and info["params"] == {"b0": 1.125, "b1": 0.25}
+
+
+def test_deform_with_primitive(cli, synth_s, tmp_path):
+    out, _ = synth_s
+    res = run(cli, "deform", out / "S-shape1-00.ply", "--kind", "flatten-side", "--param", "h0=0.1",
+              "--primitive", "a1=10,a2=10,a3=10,a4=10,a5=10", "--out", tmp_path / "f.ply")
+    assert res.returncode == 0, res.stderr
+    before, after = read_ply(out / "S-shape1-00.ply").points, read_ply(tmp_path / "f.ply").points
+    medial = before[:, 0] >= 0
+    assert np.array_equal(after[medial], before[medial])
+    assert np.all(np.abs(after[~medial, 0]) <= np.abs(before[~medial, 0]) + 1e-9)
+
+
+def test_dataset_command(cli, synth_s, tmp_path):
+    out, _ = synth_s
+    res = run(cli, "dataset", "--db", out / "database.npz", "--condition", "ptosis b0>b1", "--dd", 8,
+              "--out", tmp_path / "ds.npz", "--json")
+    assert res.returncode == 0, res.stderr
+    info = json.loads(res.stdout)
+    assert info["examples"] == 480 and sum(info["examples_per_degree"]) == 480
+    assert np.all(np.diff(info["reference_extents"]) > 0)
+
+
+def assert_bad_input(res, path, folder):
+    assert res.returncode == 3, (res.returncode, res.stderr)
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(path) in lines[0] and "Traceback" not in res.stderr
+    assert res.stdout == ""
+    assert not any(p.name.endswith(".part") or p.name.startswith("out") for p in folder.iterdir())
+
+
+@pytest.mark.parametrize("content", [b"ply\nformat binary_little_endian 1.0\nelement vertex 100\n"
+                                     b"property double x\nproperty double y\nproperty double z\nend_header\n" + b"\0" * 50,
+                                     b"\x89PNG\r\n\x1a\n", b""])
+def test_corrupt_ply_exits_3_and_writes_nothing(cli, tmp_path, content):
+    bad = tmp_path / "corrupt.ply"
+    bad.write_bytes(content)
+    res = run(cli, "deform", bad, "--kind", "turn", "--param", "c0=1", "--out", tmp_path / "out.ply")
+    assert_bad_input(res, bad, tmp_path)
+
+
+def test_wrong_schema_npz_exits_3_and_writes_nothing(cli, synth_s, tmp_path):
+    out, _ = synth_s
+    ok = run(cli, "dataset", "--db", out / "database.npz", "--condition", "turn c1>c0", "--dd", 4,
+             "--out", tmp_path / "ds.npz")
+    assert ok.returncode == 0, ok.stderr
+    res = run(cli, "dataset", "--db", tmp_path / "ds.npz", "--condition", "turn c1>c0", "--dd", 4,
+              "--out", tmp_path / "out.ply")
+    assert_bad_input(res, tmp_path / "ds.npz", tmp_path)
+    assert "breastplan.database/1" in res.stderr
+
+
+def test_missing_and_nan_inputs_exit_3(cli, tmp_path):
+    res = run(cli, "deform", tmp_path / "absent.ply", "--kind", "turn", "--out", tmp_path / "out.ply")
+    assert_bad_input(res, tmp_path / "absent.ply", tmp_path)
+    nan = tmp_path / "nan.ply"
+    nan.write_text("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+                   "property float z\nend_header\nnan 0 0\n")
+    assert_bad_input(run(cli, "deform", nan, "--kind", "turn", "--out", tmp_path / "out.ply"), nan, tmp_path)
+
+
+@pytest.mark.parametrize("args", [
+    ["deform", "x.ply", "--kind", "top-shape", "--param", "s0=1", "--out", "o.ply"],       # no primitive
+    ["deform", "x.ply", "--kind", "sag", "--out", "o.ply"],                                # unknown kind
+    ["deform", "x.ply", "--kind", "ptosis", "--param", "c0=1", "--out", "o.ply"],          # wrong parameter
+    ["deform", "x.ply", "--kind", "ptosis", "--param", "b0=lots", "--out", "o.ply"],       # not a number
+    ["synth", "--db", "Q", "--out", "o"],
+    ["synth", "--db", "S", "--points", "1000", "--out", "o"],
+    ["dataset", "--db", "x.npz", "--condition", "ptosis sideways", "--out", "o.npz"],
+])
+def test_usage_errors_exit_2(cli, tmp_path, args):
+    res = subprocess.run([cli, *args], capture_output=True, text=True, cwd=tmp_path)
+    assert res.returncode == 2, res.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_help_lists_the_commands(cli):
+    res = run(cli, "--help")
+    assert res.returncode == 0
+    for command in ("synth", "deform", "dataset"):
+        assert command in res.stdout
