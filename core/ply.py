@@ -128,17 +128,14 @@ def _face_dtype(path: Path, el: _Element, body: bytes, offset: int, order: str) 
     for name, t, count_t in el.props:
         if count_t is None:
             fields.append((name, order + t))
-        else:
-            pre = np.dtype([(n, order + tt) for n, tt, _ in el.props[: el.props.index((name, t, count_t))]])
-            if el.count == 0:
-                k = 3
-            elif offset + pre.itemsize + np.dtype(count_t).itemsize > len(body):
-                raise ArtefactError(path, "is truncated: the file ends before its face data")
-            else:
-                k = int(np.frombuffer(body, order + count_t, 1, offset + pre.itemsize)[0])
-            if k < 3:
-                raise ArtefactError(path, f"has a face with {k} vertices; faces need at least 3")
-            fields += [("_n", order + count_t), ("_idx", order + t, (k,))]
+            continue
+        at = offset + np.dtype(fields).itemsize  # the first face's vertex count
+        if el.count and at + np.dtype(count_t).itemsize > len(body):
+            raise ArtefactError(path, "is truncated: the file ends before its face data")
+        k = int(np.frombuffer(body, order + count_t, 1, at)[0]) if el.count else 3
+        if k < 3:
+            raise ArtefactError(path, f"has a face with {k} vertices; faces need at least 3")
+        fields += [("_n", order + count_t), ("_idx", order + t, (k,))]
     return np.dtype(fields)
 
 

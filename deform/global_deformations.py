@@ -55,12 +55,17 @@ def gamma(w, h0, h1):
 
 
 # --- ptosis, turn: shears along y, x driven by z ------------------------------------
-def ptosis(points, b0: float, b1: float) -> np.ndarray:
-    """y ← y − (b0·ζ + b1·ζ²), ζ = z/10, all points (MODEL.md §3)."""
+def _shear_by_z(points, axis: int, k0: float, k1: float) -> np.ndarray:
+    """coordinate `axis` ← itself − (k0·ζ + k1·ζ²), ζ = z/10, all points."""
     p = _copy(points)
     zeta = p[..., 2] / REFERENCE_AXIS
-    p[..., 1] -= zeta * (b0 + b1 * zeta)
+    p[..., axis] -= zeta * (k0 + k1 * zeta)
     return p
+
+
+def ptosis(points, b0: float, b1: float) -> np.ndarray:
+    """y ← y − (b0·ζ + b1·ζ²), ζ = z/10, all points (MODEL.md §3)."""
+    return _shear_by_z(points, 1, b0, b1)
 
 
 def ptosis_inverse(points, b0: float, b1: float) -> np.ndarray:
@@ -69,10 +74,7 @@ def ptosis_inverse(points, b0: float, b1: float) -> np.ndarray:
 
 def turn(points, c0: float, c1: float) -> np.ndarray:
     """x ← x − (c0·ζ + c1·ζ²), ζ = z/10, all points (MODEL.md §3)."""
-    p = _copy(points)
-    zeta = p[..., 2] / REFERENCE_AXIS
-    p[..., 0] -= zeta * (c0 + c1 * zeta)
-    return p
+    return _shear_by_z(points, 0, c0, c1)
 
 
 def turn_inverse(points, c0: float, c1: float) -> np.ndarray:

@@ -142,3 +142,13 @@ def test_atomic_write_leaves_nothing_on_failure(tmp_path):
             raise RuntimeError("crash")
     assert target.read_bytes() == b"old" and os.listdir(tmp_path / "sub") == ["out.bin"]
     assert zipfile.is_zipfile(save_npz(tmp_path / "z.npz", "breastplan.test/1", {"x": np.zeros(1)}))
+
+
+def test_binary_faces_with_extra_properties(tmp_path):
+    header = (b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+              b"property float z\nelement face 2\nproperty uchar flags\nproperty list uchar int vertex_indices\n"
+              b"end_header\n")
+    face = np.zeros(2, dtype=[("flags", "u1"), ("n", "u1"), ("idx", "<i4", (3,))])
+    face["flags"], face["n"], face["idx"] = 7, 3, [[0, 1, 2], [2, 1, 0]]
+    (tmp_path / "f.ply").write_bytes(header + np.eye(3, dtype="<f4").tobytes() + face.tobytes())
+    assert np.array_equal(read_ply(tmp_path / "f.ply").faces, [[0, 1, 2], [2, 1, 0]])
