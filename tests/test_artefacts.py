@@ -4,6 +4,8 @@ import zipfile
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from breastplan import ArtefactError, load_npz, read_ply, save_npz, write_ply
 from breastplan.atomic import atomic_open
@@ -152,3 +154,14 @@ def test_binary_faces_with_extra_properties(tmp_path):
     face["flags"], face["n"], face["idx"] = 7, 3, [[0, 1, 2], [2, 1, 0]]
     (tmp_path / "f.ply").write_bytes(header + np.eye(3, dtype="<f4").tobytes() + face.tobytes())
     assert np.array_equal(read_ply(tmp_path / "f.ply").faces, [[0, 1, 2], [2, 1, 0]])
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(1, 300), st.integers(0, 2**32 - 1), st.booleans())
+def test_ply_round_trip_is_exact(tmp_path_factory, n, seed, with_faces):
+    rng = np.random.default_rng(seed)
+    V = rng.normal(scale=100.0, size=(n, 3))
+    F = rng.integers(0, n, size=(2 * n, 3)) if with_faces else None
+    g = read_ply(write_ply(tmp_path_factory.mktemp("ply") / "r.ply", V, faces=F))
+    assert np.array_equal(g.points, V)
+    assert (g.faces is None) if not with_faces else np.array_equal(g.faces, F)
