@@ -8,7 +8,7 @@ from typing import List, Optional
 import numpy as np
 import typer
 
-from breastplan import BadInputError, Primitive, read_ply, to_mm, to_model_units, write_ply
+from breastplan import PARAM_NAMES, BadInputError, Primitive, read_ply, to_mm, to_model_units, write_ply
 from breastplan.deform.conditions import CONDITIONS, find_condition
 from breastplan.deform.global_deformations import KIND_PARAMS, NEEDS_PRIMITIVE, apply_kind
 from breastplan.learn.databases import Database, build_database, grid_for
@@ -109,9 +109,8 @@ def _parse_primitive(text: Optional[str], kind: str) -> Optional[Primitive]:
                               "--primitive")
         return None
     values = _parse_pairs([text], "primitive", "--primitive")
-    names = ("a1", "a2", "a3", "a4", "a5", "eps1", "eps2")
-    missing = [n for n in names[:5] if n not in values]
-    unknown = sorted(set(values) - set(names))
+    missing = [n for n in PARAM_NAMES[:5] if n not in values]
+    unknown = sorted(set(values) - set(PARAM_NAMES))
     if missing or unknown:
         raise usage_error(f"the primitive needs a1..a5 (and optionally eps1, eps2); "
                           f"missing {missing}, unknown {unknown}", "--primitive")

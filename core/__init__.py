@@ -13,11 +13,11 @@ except PackageNotFoundError:  # running from a source tree that is not installed
 from .artefacts import load_npz, save_npz
 from .errors import ArtefactError, BadInputError, BreastplanError
 from .ply import Geometry, read_ply, write_ply
-from .primitive import Primitive, spow, uv_grid
-from .units import MM_PER_MU, cc_to_mu3, mu3_to_cc, to_mm, to_model_units
+from .primitive import PARAM_NAMES, Primitive, spow, uv_grid
+from .units import MM_PER_MU, mu3_to_cc, to_mm, to_model_units
 
 __all__ = [
     "__version__", "ArtefactError", "BadInputError", "BreastplanError", "Geometry", "MM_PER_MU",
-    "Primitive", "cc_to_mu3", "load_npz", "mu3_to_cc", "read_ply", "save_npz", "spow",
+    "PARAM_NAMES", "Primitive", "load_npz", "mu3_to_cc", "read_ply", "save_npz", "spow",
     "to_mm", "to_model_units", "uv_grid", "write_ply",
 ]

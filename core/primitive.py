@@ -114,9 +114,12 @@ class Primitive:
         return np.linalg.norm(p, axis=-1) * np.abs(1.0 - f ** (-self.eps1 / 2))
 
     def latitude(self, points) -> np.ndarray:
-        """Latitude u of arbitrary points: sin u = clip(z/a5, 0, 1)^(1/eps1) (MODEL.md §2)."""
-        z = np.asarray(points, dtype=float)[..., 2]
-        return np.arcsin(np.clip(z / self.a5, 0.0, 1.0) ** (1.0 / self.eps1))
+        """Latitude u of arbitrary points (..., 3) (MODEL.md §2)."""
+        return self.latitude_at(np.asarray(points, dtype=float)[..., 2])
+
+    def latitude_at(self, z) -> np.ndarray:
+        """Latitude u at heights z: sin u = clip(z/a5, 0, 1)^(1/eps1) (MODEL.md §2)."""
+        return np.arcsin(np.clip(np.asarray(z, dtype=float) / self.a5, 0.0, 1.0) ** (1.0 / self.eps1))
 
     # --- volume ----------------------------------------------------------------
     @property

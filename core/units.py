@@ -24,7 +24,3 @@ def mu3_to_cc(volume_mu3):
     """Volume in cubic model units → cubic centimetres (1 cc = 1000 mm³)."""
     return np.asarray(volume_mu3, dtype=float) * MM_PER_MU**3 / 1000.0
 
-
-def cc_to_mu3(volume_cc):
-    """Volume in cc → cubic model units."""
-    return np.asarray(volume_cc, dtype=float) * 1000.0 / MM_PER_MU**3

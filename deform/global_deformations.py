@@ -117,8 +117,7 @@ def top_shape_inverse(points, s0: float, s1: float, t0: float, t1: float, *,
     prim = _need(primitive, "top-shape")
 
     def forward(zz):
-        w = np.arcsin(np.clip(zz / prim.a5, 0.0, 1.0) ** (1 / prim.eps1)) * (2 / np.pi)
-        return zz * beta(w, s0, s1, t0, t1)
+        return zz * beta(prim.latitude_at(zz) * (2 / np.pi), s0, s1, t0, t1)
 
     grid = np.linspace(0.0, prim.a5, 4097)
     rising = np.diff(forward(grid)) > 0
@@ -254,5 +253,3 @@ class Deformation:
         """A record with only `kind` set."""
         return cls(**{kind.replace("-", "_"): kind_params(kind, params)})
 
-
-PARAM_VECTOR_NAMES = tuple(n for names in KIND_PARAMS.values() for n in names)
