@@ -112,7 +112,8 @@ def top_shape_inverse(points, s0: float, s1: float, t0: float, t1: float, *,
     On the upper half top-shape maps z ↦ f(z) = z·β(w(z)). Where f is increasing on
     [0, a5] this is the exact inverse. With s1 < 0 (every Table 4.1 shape) f folds back
     just below the nipple, because dw/dz is unbounded there, so no inverse exists for
-    points from that band; they are mapped to the branch [0, z*] before f's first maximum.
+    points from that band; heights in f([0, z*]) are mapped back to the branch [0, z*] before
+    f's first maximum, and higher points (untouched by top-shape) are left as they are.
     """
     prim = _need(primitive, "top-shape")
 
@@ -124,8 +125,8 @@ def top_shape_inverse(points, s0: float, s1: float, t0: float, t1: float, *,
     z_star = prim.a5 if rising.all() else grid[np.argmin(rising)]
     p = _copy(points)
     z = p[..., 2]
-    sel = (p[..., 1] > 0) & (z > 0) & ((z < prim.a5) | (z_star < prim.a5))
-    target = np.minimum(z[sel], forward(z_star))
+    sel = (p[..., 1] > 0) & (z > 0) & (z < forward(z_star))  # the branch's image; above it β = 1
+    target = z[sel]
     z[sel] = _solve_increasing(forward, target, np.zeros_like(target), np.full_like(target, z_star))
     return p
 

@@ -139,6 +139,10 @@ def test_top_shape_with_negative_s1_folds_below_the_nipple(params):
     pts = np.array([[0.0, 1.0, z_star], [0.0, 1.0, prim.a5]])
     lifted = gd.top_shape(pts, *params, primitive=prim)[:, 2]
     assert lifted[0] > lifted[1] == pytest.approx(prim.a5)
+    # far above the nipple top-shape is the identity (β(1) = 1), and so is its inverse
+    high = np.array([[0.0, 1.0, 2 * prim.a5]])
+    assert np.array_equal(gd.top_shape_inverse(gd.top_shape(high, *params, primitive=prim), *params,
+                                               primitive=prim), high)
 
 
 def test_composition_follows_model_order_and_inverts():
