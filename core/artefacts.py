@@ -24,8 +24,9 @@ Spec = Mapping[str, tuple[str, tuple]]
 
 
 def save_npz(path: str | Path, schema: str, arrays: Mapping[str, np.ndarray], *,
-             units: str = "mm", frame: str = "breast", meta: Mapping | None = None) -> Path:
-    """Write an artefact atomically; `schema` like "breastplan.database/1"."""
+             units: str = "mm", frame: str = "breast", meta: Mapping | None = None,
+             compress: bool = False) -> Path:
+    """Write an artefact atomically; `schema` like "breastplan.database/1"; deflated if `compress`."""
     from . import __version__
 
     clash = set(arrays) & set(RESERVED)
@@ -39,7 +40,7 @@ def save_npz(path: str | Path, schema: str, arrays: Mapping[str, np.ndarray], *,
                    version=np.str_(__version__), meta=np.str_(json.dumps(dict(meta or {}))))
     path = Path(path)
     with atomic_open(path) as fh:
-        np.savez(fh, **payload)
+        (np.savez_compressed if compress else np.savez)(fh, **payload)
     return path
 
 

@@ -1,0 +1,183 @@
+"""Breast isolation and the breast frame (MODEL.md §1) from a torso cloud and its chest wall.
+
+All inputs are in the viewing frame (camera convention: x to the image's right = the
+patient's left, y down, z away from the viewer; mm). A mound is a connected patch of
+coarse voxels well in front of the chest wall; the breast is the fine points in front of
+the (locally refitted) chest wall around it. The breast frame has its origin at the centre
+of the base on the chest wall, z along the chest normal (anterior), y superior.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import open3d as o3d
+from scipy.spatial import cKDTree
+
+from breastplan import BadInputError
+
+from .chest_wall import ChestWall, fit_chest_wall
+
+MOUND_MM = 10.0
+"""Coarse voxels at least this far in front of the chest wall form mounds."""
+MIN_PEAK_MM = 20.0
+"""A mound must rise at least this far: smaller bumps are not breasts."""
+CROP_MM = 2.0
+"""Breast points lie at least this far in front of the chest wall."""
+APEX_RADIUS_MM = 15.0
+"""Radius of the patch fitted around the apex to locate the nipple."""
+CAP_MM = 3.0
+"""The top cap (points this close to the highest) gives the nipple's first estimate."""
+UP_VIEW = np.array([0.0, -1.0, 0.0])
+"""Superior in the viewing frame (image up)."""
+
+
+def dbscan(points: np.ndarray, eps: float, min_points: int) -> np.ndarray:
+    """Cluster labels (−1 = noise) by open3d's DBSCAN."""
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    return np.asarray(cloud.cluster_dbscan(eps, min_points))
+
+
+@dataclass(frozen=True)
+class Mound:
+    """A breast mound found on the coarse voxels."""
+
+    side: str                  # "left" | "right" (patient's)
+    centre: np.ndarray         # (2,) height-weighted x, y, mm
+    radius: float              # mm, in x, y
+    peak_mm: float             # greatest height above the chest wall
+    voxels: np.ndarray         # (M, 3) the mound's voxel centroids
+
+
+def find_mounds(voxels: np.ndarray, wall: ChestWall, midline_x: float, size: float) -> list[Mound]:
+    """Mounds among voxel centroids (size mm), largest volume first."""
+    h = wall.height(voxels)
+    high = h > MOUND_MM
+    if high.sum() < 3:
+        return []
+    labels = dbscan(voxels[high], 1.6 * size, 3)
+    mounds = []
+    for k in range(labels.max() + 1):
+        pts, hk = voxels[high][labels == k], h[high][labels == k]
+        if len(pts) < 6 or hk.max() < MIN_PEAK_MM:
+            continue
+        centre = (pts[:, :2] * hk[:, None]).sum(0) / hk.sum()
+        radius = float(np.linalg.norm(pts[:, :2] - centre, axis=1).max() + size)
+        mounds.append((float(hk.sum()), Mound("left" if centre[0] > midline_x else "right", centre, radius,
+                                              float(hk.max()), pts)))
+    return [m for _, m in sorted(mounds, key=lambda vm: -vm[0])]
+
+
+def choose_mound(path, mounds: list[Mound], side: str, nipple: np.ndarray | None) -> Mound:
+    """The mound on `side` (the largest), or the one under a given nipple."""
+    if nipple is not None:
+        near = [m for m in mounds if np.linalg.norm(m.centre - nipple[:2]) <= m.radius]
+        if not near:
+            raise BadInputError(path, f"no breast mound lies under the given nipple {np.round(nipple, 1).tolist()} mm")
+        return near[0]
+    on_side = [m for m in mounds if m.side == side]
+    if not on_side:
+        other = f"; {len(mounds)} found on the other side" if mounds else ""
+        raise BadInputError(path, f"no breast mound found on the {side} side{other}")
+    return on_side[0]
+
+
+def local_chest_wall(voxels: np.ndarray, mound: Mound, wall: ChestWall) -> ChestWall:
+    """The chest wall refitted (quadratic) on the torso around one mound, the mound excluded."""
+    near = np.linalg.norm(voxels[:, :2] - mound.centre, axis=1) < mound.radius + 70.0
+    return fit_chest_wall(voxels, 2, mask=near & (wall.height(voxels) < MOUND_MM))
+
+
+def breast_region(points: np.ndarray, mound: Mound, wall: ChestWall, size: float) -> np.ndarray:
+    """Mask of the fine points of the breast: in front of the chest wall, near the mound's voxels."""
+    front = wall.height(points) > CROP_MM
+    idx = np.flatnonzero(front)
+    dist, _ = cKDTree(mound.voxels).query(points[idx], distance_upper_bound=2.0 * size)
+    mask = np.zeros(len(points), bool)
+    mask[idx[np.isfinite(dist)]] = True
+    return mask
+
+
+@dataclass(frozen=True)
+class BreastFrame:
+    """Breast frame in the viewing frame: origin (3,), axes (3, 3) with columns x, y, z."""
+
+    origin: np.ndarray
+    axes: np.ndarray
+
+    def to_breast(self, points) -> np.ndarray:
+        return (np.asarray(points, float) - self.origin) @ self.axes
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """(4, 4) viewing frame → breast frame."""
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = self.axes.T, -self.axes.T @ self.origin
+        return T
+
+
+def frame_at(wall: ChestWall, xy: np.ndarray) -> BreastFrame:
+    """Frame on the chest wall at (x, y): z the anterior normal, y superior, x = y × z."""
+    z = wall.normal(xy)
+    y = UP_VIEW - np.dot(UP_VIEW, z) * z
+    y /= np.linalg.norm(y)
+    return BreastFrame(wall.point(xy), np.column_stack([np.cross(y, z), y, z]))
+
+
+def breast_frame(points: np.ndarray, wall: ChestWall, start_xy: np.ndarray,
+                 nipple: np.ndarray | None = None) -> tuple[BreastFrame, np.ndarray]:
+    """The breast frame and the nipple (viewing frame).
+
+    The base outline is rarely visible all round (the lateral side is seen at grazing angles,
+    a ptotic lower pole hides its fold), so the origin is the foot of the nipple on the
+    chest wall: exact for an undeformed primitive, below the base centre by the ptosis drop
+    otherwise (the fit refines the pose). Nipple and frame are refined together.
+    """
+    frame = frame_at(wall, start_xy)
+    for _ in range(3):
+        tip = find_nipple(points, frame) if nipple is None else nipple
+        frame = frame_at(wall, foot_on_wall(wall, tip))
+    return frame, (find_nipple(points, frame) if nipple is None else nipple)
+
+
+def foot_on_wall(wall: ChestWall, point: np.ndarray, iterations: int = 4) -> np.ndarray:
+    """(x, y) of the chest-wall point whose normal passes through `point`."""
+    xy = np.asarray(point, float)[:2].copy()
+    for _ in range(iterations):
+        n = wall.normal(xy)
+        height = np.dot(point - wall.point(xy), n)
+        xy = (point - height * n)[:2]
+    return xy
+
+
+def find_nipple(points: np.ndarray, frame: BreastFrame) -> np.ndarray:
+    """The apex above the base plane: centre of the top cap, refined by quadratic patch fits."""
+    local = frame.to_breast(points)
+    cap = local[local[:, 2] > local[:, 2].max() - CAP_MM]
+    apex = np.array([*cap[:, :2].mean(0), cap[:, 2].max()])
+    for _ in range(4):
+        patch = local[np.linalg.norm(local[:, :2] - apex[:2], axis=1) < APEX_RADIUS_MM]
+        refined = _quadratic_peak(patch, apex[:2])
+        if refined is None:
+            break
+        moved = np.linalg.norm(refined[:2] - apex[:2])
+        apex = refined
+        if moved < 0.05:
+            break
+    return frame.origin + frame.axes @ apex
+
+
+def _quadratic_peak(patch: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
+    """Peak of z = quadratic(x, y) fitted to the patch, if it is a maximum inside the patch."""
+    if len(patch) < 12:
+        return None
+    x, y = (patch[:, :2] - centre).T
+    A = np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y])
+    c, *_ = np.linalg.lstsq(A, patch[:, 2], rcond=None)
+    H = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
+    if not np.all(np.linalg.eigvalsh(H) < 0):
+        return None
+    d = np.linalg.solve(H, -c[1:3])
+    if np.linalg.norm(d) > APEX_RADIUS_MM:
+        return None
+    return np.array([*(centre + d), c[0] + c[1:3] @ d + 0.5 * d @ H @ d])

@@ -1,0 +1,96 @@
+"""The chest wall: a robust polynomial height field fitted to the torso, mounds excluded.
+
+Works in a viewing frame (camera convention: z away from the viewer, y down, mm): the
+chest is z = f(x, y), a polynomial of low degree. Points well in front of the surface
+(the breast mounds) and well behind it (flanks, shoulders) are excluded iteratively, so
+the surface under the breasts is interpolated from the chest around them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+SCALE_MM = 100.0
+"""Coordinates are divided by this before the polynomial, for conditioning."""
+
+
+def _exponents(degree: int) -> np.ndarray:
+    return np.array([(i, d - i) for d in range(degree + 1) for i in range(d, -1, -1)])
+
+
+@dataclass(frozen=True)
+class ChestWall:
+    """z = Σ c_k ((x − x0)/100)^i ((y − y0)/100)^j in the viewing frame (mm)."""
+
+    coefficients: np.ndarray   # (K,)
+    degree: int
+    centre: np.ndarray         # (2,) x0, y0 mm
+    scale_mm: float            # robust σ of the inlier residuals
+
+    def _basis(self, xy: np.ndarray) -> np.ndarray:
+        uv = (np.asarray(xy, float)[..., :2] - self.centre) / SCALE_MM
+        e = _exponents(self.degree)
+        return uv[..., None, 0] ** e[:, 0] * uv[..., None, 1] ** e[:, 1]
+
+    def z(self, xy) -> np.ndarray:
+        """Chest depth under (x, y), mm."""
+        return self._basis(xy) @ self.coefficients
+
+    def height(self, points) -> np.ndarray:
+        """Height of points in front of the chest along the view axis (towards the viewer), mm."""
+        p = np.asarray(points, float)
+        return self.z(p) - p[..., 2]
+
+    def normal(self, xy) -> np.ndarray:
+        """Unit normal towards the viewer (anterior) at (x, y)."""
+        xy = np.asarray(xy, float)
+        h = 1e-3
+        gx = (self.z(xy + [h, 0]) - self.z(xy - [h, 0])) / (2 * h)
+        gy = (self.z(xy + [0, h]) - self.z(xy - [0, h])) / (2 * h)
+        n = np.stack([gx, gy, -np.ones_like(gx)], -1)
+        return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+    def point(self, xy) -> np.ndarray:
+        """The chest point under (x, y)."""
+        xy = np.asarray(xy, float)[..., :2]
+        return np.concatenate([xy, self.z(xy)[..., None]], -1)
+
+    def as_array(self) -> np.ndarray:
+        """[degree, x0, y0, scale, c_0 … c_K−1] for artefacts."""
+        return np.concatenate([[self.degree, *self.centre, self.scale_mm], self.coefficients])
+
+    @classmethod
+    def from_array(cls, values) -> "ChestWall":
+        v = np.asarray(values, float)
+        return cls(v[4:], int(v[0]), v[1:3], float(v[3]))
+
+
+def fit_chest_wall(points: np.ndarray, degree: int = 2, mask: np.ndarray | None = None,
+                   front_mm: float = 4.0, back_mm: float = 8.0, keep: float = 0.5,
+                   iterations: int = 12) -> ChestWall:
+    """Robust least-squares height field through `points` (N, 3) (only those in `mask`, if given).
+
+    The first iterations keep the fraction `keep` of points with the smallest residuals
+    (least trimmed squares: robust to any start); the later ones keep residuals within
+    max(3σ, front_mm) in front of the surface and max(3σ, back_mm) behind it, σ the MAD
+    scale of the inliers.
+    """
+    p = np.asarray(points, float)
+    allowed = np.ones(len(p), bool) if mask is None else np.asarray(mask, bool)
+    inlier = allowed.copy()
+    wall = ChestWall(np.zeros(len(_exponents(degree))), degree, np.median(p[allowed, :2], axis=0), 0.0)
+    A = wall._basis(p)
+    for it in range(iterations):
+        coef, *_ = np.linalg.lstsq(A[inlier], p[inlier, 2], rcond=None)
+        r = p[:, 2] - A @ coef  # > 0 behind the surface, < 0 in front (mounds)
+        if it < iterations // 2:
+            new = allowed & (np.abs(r) <= np.quantile(np.abs(r[allowed]), keep))
+        else:
+            sigma = max(1.4826 * float(np.median(np.abs(r[inlier]))), 0.5)
+            new = allowed & (r > -max(3 * sigma, front_mm)) & (r < max(3 * sigma, back_mm))
+            if (new == inlier).all():
+                break
+        inlier = new
+    sigma = 1.4826 * float(np.median(np.abs(r[inlier])))
+    return ChestWall(coef, degree, wall.centre, sigma)

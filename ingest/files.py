@@ -1,0 +1,241 @@
+"""Scan files (PLY, OBJ, STL, PCD, XYZ) → a point cloud in millimetres, in the file's own frame.
+
+Meshes are sampled uniformly by area (about 1 point per mm², seeded, so reads are
+deterministic) with the triangle normals; point files keep their points and normals. Units
+are detected from the extent (largest side of the axis-aligned bounding box) or declared.
+Every defect raises BadInputError naming the file: open3d reports corrupt or foreign files
+only as console warnings and hands back an empty geometry, so this module checks for that.
+"""
+from __future__ import annotations
+
+import re
+import warnings
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import open3d as o3d
+
+from breastplan import BadInputError, read_ply
+
+SUPPORTED = (".ply", ".obj", ".stl", ".pcd", ".xyz")
+POINTS_PER_MM2 = 1.0
+SAMPLE_RANGE = (20_000, 400_000)
+"""Bounds on the number of points sampled from a mesh surface."""
+SAMPLE_SEED = 0
+METRE_EXTENT = (0.05, 3.0)
+MM_EXTENT = (50.0, 3000.0)
+"""Plausible extents of a torso or breast scan in metres and in millimetres."""
+CAMERA_FRAME_TAG = "frame camera-opencv"
+_MAGIC = {b"\x89PNG": "a PNG image", b"\xff\xd8\xff": "a JPEG image", b"\x89MCAP": "an MCAP recording",
+          b"PK\x03\x04": "a ZIP or NPZ archive", b"\x93NUMPY": "a NumPy array", b"ply": "a PLY file",
+          b"%PDF": "a PDF document"}
+
+
+@dataclass(frozen=True, eq=False)
+class ScanCloud:
+    """A scan as points (N, 3) in mm, in the file's own frame, with optional unit normals (N, 3)."""
+
+    points: np.ndarray
+    normals: np.ndarray | None
+    frame_hint: str | None
+    """"camera-opencv" if a PLY comment says "frame camera-opencv", else None."""
+    description: str
+
+
+def read_scan_file(path: str | Path, units: str = "auto") -> ScanCloud:
+    """Read a PLY/OBJ/STL/PCD/XYZ scan as mm points; units "auto" (from the extent), "mm" or "m"."""
+    path = Path(path)
+    if units not in ("auto", "mm", "m"):
+        raise BadInputError(None, f"units must be auto, mm or m, not '{units}'")
+    _check_file(path)
+    points, faces, normals, comments = _READERS[path.suffix.lower()](path)
+    _check_points(path, points)
+    extent = float(np.ptp(points, axis=0).max())
+    mm_per_unit, units_text = _mm_per_unit(path, extent, units)
+    points = points * mm_per_unit
+    if faces is not None:
+        points, normals = _sample_surface(path, points, faces)
+        what = f"triangle mesh, {_count(len(faces), 'face')}, sampled to {_count(len(points), 'point')}"
+    else:
+        normals = _unit_normals(path, normals)
+        with_normals = " with normals" if normals is not None else ""
+        what = f"point cloud, {_count(len(points), 'point')}{with_normals}"
+    hint = "camera-opencv" if any(CAMERA_FRAME_TAG in c for c in comments) else None
+    return ScanCloud(points=_frozen(points), normals=None if normals is None else _frozen(normals),
+                     frame_hint=hint, description=f"{path.name}: {what}, {units_text}")
+
+
+def _check_file(path: Path) -> None:
+    """Raise BadInputError unless path is a readable, non-empty file of a supported type."""
+    if not path.exists():
+        raise BadInputError(path, "no such file")
+    if path.is_dir():
+        raise BadInputError(path, "is a folder, not a scan file")
+    if not path.is_file():
+        raise BadInputError(path, "is not a regular file")
+    if path.suffix.lower() not in SUPPORTED:
+        kind = f"has the extension '{path.suffix}'" if path.suffix else "has no file extension"
+        raise BadInputError(path, f"{kind}; supported scan files are {', '.join(SUPPORTED)}")
+    if path.stat().st_size == 0:
+        raise BadInputError(path, "is empty (0 bytes)")
+    try:
+        path.open("rb").close()
+    except OSError as exc:
+        raise BadInputError(path, f"cannot be read ({exc.strerror})") from None
+
+
+def _check_points(path: Path, points: np.ndarray) -> None:
+    """Raise BadInputError for NaN/Inf coordinates or fewer than 3 points."""
+    bad = int((~np.isfinite(points).all(axis=1)).sum())
+    if bad:
+        raise BadInputError(path, f"has {_count(bad, 'point')} with NaN or infinite coordinates")
+    if len(points) < 3:
+        raise BadInputError(path, f"has only {_count(len(points), 'point')}; a scan needs at least 3")
+
+
+def _mm_per_unit(path: Path, extent: float, units: str) -> tuple[float, str]:
+    """Millimetres per file unit and a phrase saying how the units were chosen."""
+    e = np.format_float_positional(extent, precision=3, fractional=False, trim="-")
+    if units == "mm" and extent <= METRE_EXTENT[1]:
+        raise BadInputError(path, f"is declared mm but its extent of {e} says metres")
+    if units == "m" and extent >= MM_EXTENT[0]:
+        raise BadInputError(path, f"is declared m but its extent of {e} says millimetres")
+    if units != "auto":
+        return (1000.0 if units == "m" else 1.0), f"units {units} (declared, extent {e})"
+    if METRE_EXTENT[0] <= extent <= METRE_EXTENT[1]:
+        return 1000.0, f"units m (detected from extent {e})"
+    if MM_EXTENT[0] <= extent <= MM_EXTENT[1]:
+        return 1.0, f"units mm (detected from extent {e})"
+    raise BadInputError(path, f"has an ambiguous extent of {e} (a body scan spans 0.05–3 in metres or "
+                              f"50–3000 in millimetres); pass --units mm or --units m")
+
+
+def _sample_surface(path: Path, points_mm: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sample a mesh (mm) uniformly by area, ~1 point per mm², seeded; normals from the triangles."""
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(points_mm),
+                                     o3d.utility.Vector3iVector(np.ascontiguousarray(faces, dtype=np.int32)))
+    area = mesh.get_surface_area()
+    if not area > 0:
+        raise BadInputError(path, "is a mesh whose triangles have no area")
+    n = int(np.clip(round(area * POINTS_PER_MM2), *SAMPLE_RANGE))
+    o3d.utility.random.seed(SAMPLE_SEED)
+    cloud = mesh.sample_points_uniformly(n, use_triangle_normal=True)
+    return np.asarray(cloud.points), np.asarray(cloud.normals)
+
+
+def _unit_normals(path: Path, normals: np.ndarray | None) -> np.ndarray | None:
+    """Normals scaled to unit length (zero vectors stay zero); NaN/Inf normals are bad input."""
+    if normals is None:
+        return None
+    if not np.isfinite(normals).all():
+        raise BadInputError(path, "has normals with NaN or infinite components")
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=np.float64)
+    a.flags.writeable = False
+    return a
+
+
+def _count(n: int, noun: str) -> str:
+    """'1 point', '12 034 points'."""
+    return f"{n:,}".replace(",", " ") + f" {noun}" + "s" * (n != 1)
+
+
+# --- format readers: path → (points, faces or None, normals or None, comments), file units ---
+
+def _read_ply(path: Path):
+    """PLY through breastplan's strict reader (ArtefactError, a BadInputError, on defects)."""
+    g = read_ply(path)
+    return g.points, g.faces, g.normals, g.comments
+
+
+def _read_mesh(path: Path):
+    """OBJ/STL through open3d; polygon OBJs, whose non-triangles open3d drops, through pymeshlab."""
+    with _quiet_open3d():
+        mesh = o3d.io.read_triangle_mesh(str(path))
+    points, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.triangles, dtype=np.int64)
+    if path.suffix.lower() == ".obj" and _has_polygons(path):
+        points, faces = _read_polygon_obj(path)
+    if len(faces) == 0:
+        raise _not_valid(path, "or holds no triangles")
+    return points, faces, None, []
+
+
+def _read_pcd(path: Path):
+    """PCD through open3d, NaN points kept so that they are reported."""
+    with _quiet_open3d():
+        cloud = o3d.io.read_point_cloud(str(path), format="pcd")
+    if len(cloud.points) == 0:
+        raise _not_valid(path, "or holds no points")
+    normals = np.asarray(cloud.normals, dtype=np.float64) if cloud.has_normals() else None
+    return np.asarray(cloud.points, dtype=np.float64), None, normals, []
+
+
+def _read_xyz(path: Path):
+    """Plain text 'x y z' or 'x y z nx ny nz' per line ('#' comments), parsed strictly by numpy."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
+            table = np.loadtxt(path, dtype=np.float64, ndmin=2, encoding="utf-8")
+    except UnicodeDecodeError:
+        raise _not_valid(path, "(it is not text)") from None
+    except ValueError as exc:
+        raise _not_valid(path, f"({str(exc).split(';')[0].rstrip('.')})") from None
+    if table.size == 0:
+        raise BadInputError(path, "holds no points")
+    if table.shape[1] not in (3, 6):
+        raise _not_valid(path, f"(its lines hold {table.shape[1]} numbers; expected x y z or x y z nx ny nz)")
+    normals = table[:, 3:] if table.shape[1] == 6 else None
+    if normals is not None and np.isfinite(normals).all():
+        if not np.allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-2):
+            raise BadInputError(path, "has columns 4–6 that are not unit normals; an .xyz file must hold "
+                                      "x y z or x y z nx ny nz per line")
+    return table[:, :3], None, normals, []
+
+
+_READERS = {".ply": _read_ply, ".obj": _read_mesh, ".stl": _read_mesh, ".pcd": _read_pcd, ".xyz": _read_xyz}
+
+
+def _read_polygon_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """An OBJ with quads or larger polygons, triangulated by pymeshlab."""
+    import pymeshlab
+
+    ms = pymeshlab.MeshSet()
+    try:
+        ms.load_new_mesh(str(path))
+    except pymeshlab.PyMeshLabException:
+        raise _not_valid(path, "") from None
+    mesh = ms.current_mesh()
+    return mesh.vertex_matrix().astype(np.float64), mesh.face_matrix().astype(np.int64)
+
+
+def _has_polygons(path: Path) -> bool:
+    """Whether an OBJ file has a face ('f' line) of 4 or more vertices."""
+    return re.search(rb"(?m)^[ \t]*f(?:[ \t]+[^ \t\r\n]+){4,}", path.read_bytes()) is not None
+
+
+def _not_valid(path: Path, detail: str) -> BadInputError:
+    """'is not a valid STL file …', naming the real type when its first bytes give it away."""
+    fmt = path.suffix.lower().lstrip(".").upper()
+    with path.open("rb") as fh:
+        head = fh.read(16)
+    real = next((name for magic, name in _MAGIC.items() if head.startswith(magic)), None)
+    if real:
+        return BadInputError(path, f"is not a valid {fmt} file: it is {real}")
+    return BadInputError(path, f"is not a valid {fmt} file {detail}".strip())
+
+
+@contextmanager
+def _quiet_open3d():
+    """Silence open3d's console warnings (its readers' only report of a bad file)."""
+    previous = o3d.utility.get_verbosity_level()
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    try:
+        yield
+    finally:
+        o3d.utility.set_verbosity_level(previous)

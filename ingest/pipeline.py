@@ -1,0 +1,174 @@
+"""The ingest pipeline: depth frames or a scan file → the breast of one side in the breast frame.
+
+fusion → depth to points (open3d) → background removal (depth range, largest DBSCAN
+cluster of coarse voxels) → chest wall (robust height field, mounds excluded) → mound of
+the requested side → breast crop → breast frame and nipple → outlier removal → voxel
+downsampling → outward normals → breast frame. Every step is timed.
+"""
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+import open3d as o3d
+
+from breastplan import BadInputError
+
+from . import breast as B
+from .chest_wall import ChestWall, fit_chest_wall
+from .depth import depth_range, fuse, to_points
+from .files import ScanCloud
+from .recording import DepthFrames
+
+COARSE_MM = 10.0
+"""Voxel size of the coarse cloud used for background removal, chest wall and mounds."""
+MIN_BREAST_POINTS = 500
+UP_AXES = {"+x": 0, "-x": 0, "+y": 1, "-y": 1, "+z": 2, "-z": 2}
+
+
+@dataclass
+class Ingested:
+    """The breast of one side, and how it was found."""
+
+    points: np.ndarray               # (N, 3) mm, breast frame
+    normals: np.ndarray              # (N, 3) outward unit normals, breast frame
+    camera_to_breast: np.ndarray     # (4, 4) input (camera) frame → breast frame, mm
+    side: str
+    nipple_camera: np.ndarray        # (3,) mm, input frame
+    chest_wall: ChestWall            # in the viewing frame
+    view_from_camera: np.ndarray     # (4, 4) input frame → viewing frame
+    crop: dict                       # mound centre, radius, roi, thresholds
+    torso_camera: np.ndarray         # (M, 3) the background-free torso, input frame
+    timings_ms: dict = field(default_factory=dict)
+
+
+class Clock:
+    """Milliseconds per named step."""
+
+    def __init__(self):
+        self.ms: dict[str, float] = {}
+
+    @contextmanager
+    def __call__(self, step: str):
+        start = time.perf_counter()
+        yield
+        self.ms[step] = self.ms.get(step, 0.0) + 1e3 * (time.perf_counter() - start)
+
+
+def voxel_centroids(points: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
+    """Centroids of the occupied voxels of `size` mm, and each point's voxel index."""
+    keys = np.floor(points / size).astype(np.int64)
+    keys -= keys.min(axis=0)
+    span = keys.max(axis=0) + 1
+    _, inverse, counts = np.unique((keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2],
+                                   return_inverse=True, return_counts=True)
+    sums = np.stack([np.bincount(inverse, points[:, k], len(counts)) for k in range(3)], 1)
+    return sums / counts[:, None], inverse
+
+
+def ingest_frames(frames: DepthFrames, side: str, voxel: float = 2.0, roi=None, nipple=None,
+                  path=None, clock: Clock | None = None) -> Ingested:
+    """Depth frames (camera = viewing frame) → the breast of `side`."""
+    clock = clock or Clock()
+    with clock("fuse"):
+        image = fuse(frames.depth)
+    with clock("depth to points (open3d)"):
+        near, far = depth_range(image)
+        points = to_points(image, frames.K, near, far)
+    return isolate(points, np.eye(4), side, voxel, roi, nipple, path, clock, viewer=np.zeros(3))
+
+
+def ingest_cloud(cloud: ScanCloud, side: str, voxel: float = 2.0, roi=None, nipple=None, up: str = "+y",
+                 path=None, clock: Clock | None = None) -> Ingested:
+    """A scan file's points → the breast of `side`; the viewing direction comes from the torso's shape."""
+    clock = clock or Clock()
+    with clock("viewing frame"):
+        view = np.eye(4) if cloud.frame_hint == "camera-opencv" else viewing_frame(cloud.points, up)
+        points = cloud.points @ view[:3, :3].T + view[:3, 3]
+        viewer = points.mean(0) - [0.0, 0.0, 2000.0]
+    return isolate(points, view, side, voxel, roi, nipple, path, clock, viewer=viewer)
+
+
+def viewing_frame(points: np.ndarray, up: str) -> np.ndarray:
+    """(4, 4) input → viewing frame for a frontal scan: z along the torso's thinnest axis, away
+    from the viewer (the torso bulges towards the viewer), y opposite to the input's `up` axis."""
+    centred = points - points.mean(0)
+    _, vecs = np.linalg.eigh(np.cov(centred.T))
+    normal = vecs[:, 0]
+    depth = centred @ normal
+    radial = np.sum(np.square(centred - np.outer(depth, normal)), axis=1)
+    anterior = normal if np.cov(depth, radial)[0, 1] < 0 else -normal  # flanks fall away from the viewer
+    up_vec = np.zeros(3)
+    up_vec[UP_AXES[up]] = -1.0 if up.startswith("-") else 1.0
+    up_vec -= np.dot(up_vec, anterior) * anterior
+    if np.linalg.norm(up_vec) < 0.3:
+        raise ValueError(f"the up axis {up} is nearly the viewing direction of this scan")
+    y = -up_vec / np.linalg.norm(up_vec)
+    z = -anterior
+    T = np.eye(4)
+    T[:3, :3] = np.vstack([np.cross(y, z), y, z])
+    return T
+
+
+def isolate(points: np.ndarray, view_from_camera: np.ndarray, side: str, voxel: float, roi, nipple, path,
+            clock: Clock, viewer: np.ndarray) -> Ingested:
+    """The common pipeline on points in the viewing frame."""
+    to_camera = np.linalg.inv(view_from_camera)
+    in_roi = None
+    if roi is not None:
+        lo, hi = np.asarray(roi, float).reshape(2, 3)
+        in_roi = lambda p: np.all(((p @ to_camera[:3, :3].T + to_camera[:3, 3]) >= lo)  # noqa: E731
+                                  & ((p @ to_camera[:3, :3].T + to_camera[:3, 3]) <= hi), axis=1)
+    nipple_view = None if nipple is None else np.asarray(nipple, float) @ view_from_camera[:3, :3].T + view_from_camera[:3, 3]
+
+    with clock("background: voxels + DBSCAN (open3d)"):
+        coarse, which = voxel_centroids(points, COARSE_MM)
+        labels = B.dbscan(coarse, 2.5 * COARSE_MM, 4)
+        if (labels < 0).all():
+            raise BadInputError(path, "holds no connected surface (only scattered points)")
+        torso_label = np.bincount(labels[labels >= 0]).argmax()
+        torso = points[labels[which] == torso_label]
+        coarse = coarse[labels == torso_label]
+    with clock("chest wall"):
+        wall = fit_chest_wall(coarse, 2)
+    with clock("mounds (DBSCAN, open3d)"):
+        mounds = B.find_mounds(coarse, wall, float(np.median(coarse[:, 0])), COARSE_MM)
+        if in_roi is not None:
+            mounds = [m for m in mounds if in_roi(m.voxels).any()]
+        mound = B.choose_mound(path, mounds, side, nipple_view)
+        wall = B.local_chest_wall(coarse, mound, wall)
+    with clock("crop + breast frame"):
+        region = B.breast_region(torso, mound, wall, COARSE_MM)
+        if in_roi is not None:
+            region &= in_roi(torso)
+        crop = torso[region]
+        frame, nipple_view = B.breast_frame(crop, wall, mound.centre, nipple_view)
+        crop = crop[frame.to_breast(crop)[:, 2] > 0.0]
+    _enough(path, len(crop), "cropping")
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(crop))
+    with clock("outliers (open3d)"):
+        cloud, _ = cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=2.5)
+    with clock("voxel downsampling (open3d)"):
+        cloud = cloud.voxel_down_sample(voxel)
+    _enough(path, len(cloud.points), f"{voxel:g} mm voxel downsampling")
+    with clock("normals (open3d)"):
+        cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=max(3 * voxel, 5.0), max_nn=30))
+        cloud.orient_normals_towards_camera_location(viewer)
+    with clock("to breast frame (open3d)"):
+        cloud.transform(frame.matrix)
+    camera_to_breast = frame.matrix @ view_from_camera
+    return Ingested(
+        points=np.asarray(cloud.points), normals=np.asarray(cloud.normals), camera_to_breast=camera_to_breast,
+        side=mound.side if nipple is not None or roi is not None else side,
+        nipple_camera=nipple_view @ to_camera[:3, :3].T + to_camera[:3, 3],
+        chest_wall=wall, view_from_camera=view_from_camera,
+        crop={"mound_centre_view_mm": mound.centre, "mound_radius_mm": mound.radius, "mound_peak_mm": mound.peak_mm,
+              "roi_camera_mm": None if roi is None else np.asarray(roi, float), "crop_height_mm": B.CROP_MM},
+        torso_camera=torso @ to_camera[:3, :3].T + to_camera[:3, 3], timings_ms=clock.ms)
+
+
+def _enough(path, n: int, step: str) -> None:
+    if n < MIN_BREAST_POINTS:
+        raise BadInputError(path, f"only {n} breast points are left after {step}, fewer than {MIN_BREAST_POINTS}")

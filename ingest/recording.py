@@ -1,0 +1,156 @@
+"""depthai recordings of depth frames (DESIGN.md "Known facts").
+
+A recording is an MCAP file written by `dai.node.RecordMessage` in a host-only pipeline
+(`dai.Pipeline(False)`): RAW16 `ImgFrame`s holding depth in millimetres (0 = no
+measurement), each carrying its pinhole intrinsics in its `ImgTransformation`. Replay goes
+through `dai.node.ReplayMessage`, unpaced (as fast as the host can take the frames).
+"""
+from __future__ import annotations
+
+import datetime
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from breastplan import BadInputError
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+UNPACED_FPS = 1e6
+"""Replay rate asked of ReplayMessage: far above any camera's, so replay is not paced."""
+
+
+def depthai():
+    """Import depthai quietly (it prints a USB warning on stdout otherwise)."""
+    os.environ.setdefault("DEPTHAI_LEVEL", "off")  # problems surface as our own errors
+    import depthai as dai
+    return dai
+
+
+@dataclass(frozen=True)
+class DepthFrames:
+    """A stack of depth frames from one camera: depth (N, H, W) uint16 mm, K (3, 3) px."""
+
+    depth: np.ndarray
+    K: np.ndarray
+    source: str
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) in pixels."""
+        return int(self.depth.shape[2]), int(self.depth.shape[1])
+
+
+def write_recording(path: str | Path, depth: np.ndarray, K: np.ndarray, fps: float = 30.0) -> Path:
+    """Record depth frames (N, H, W) uint16 mm with intrinsics K through RecordMessage, atomically."""
+    dai = depthai()
+    path = Path(path)
+    depth = np.ascontiguousarray(depth, dtype=np.uint16)
+    n, h, w = depth.shape
+    part = path.with_name(f".{path.stem}.part{path.suffix or '.mcap'}")
+    pipeline = dai.Pipeline(False)
+    rec = pipeline.create(dai.node.RecordMessage)
+    rec.setRecordFile(str(part))
+    queue = rec.input.createInputQueue()
+    pipeline.start()
+    try:
+        for i in range(n):
+            queue.send(_img_frame(dai, depth[i], K, i, i / fps))
+        while rec.input.has():  # the recorder drains asynchronously; stopping early loses frames
+            time.sleep(0.005)
+    finally:
+        pipeline.stop()
+        pipeline.wait()
+    os.replace(part, path)
+    return path
+
+
+def _img_frame(dai, depth: np.ndarray, K: np.ndarray, seq: int, seconds: float):
+    h, w = depth.shape
+    frame = dai.ImgFrame()
+    frame.setType(dai.ImgFrame.Type.RAW16)
+    frame.setWidth(w)
+    frame.setHeight(h)
+    frame.setFrame(depth)
+    frame.setTransformation(dai.ImgTransformation(w, h, np.asarray(K, float).tolist()))
+    frame.setSequenceNum(seq)
+    stamp = datetime.timedelta(seconds=seconds)
+    frame.setTimestamp(stamp)
+    frame.setTimestampDevice(stamp)
+    return frame
+
+
+def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFrames:
+    """Replay the RAW16 depth frames of an MCAP recording (at most `max_frames`)."""
+    path = Path(path)
+    _check_mcap(path)
+    frames, K = [], None
+    for msg in _replay(path):
+        if type(msg).__name__ != "ImgFrame" or msg.getType() != depthai().ImgFrame.Type.RAW16:
+            continue
+        depth = np.array(msg.getFrame(), dtype=np.uint16, copy=True)
+        if frames and depth.shape != frames[0].shape:
+            raise BadInputError(path, f"its depth frames change size from {frames[0].shape[1]}×{frames[0].shape[0]} "
+                                      f"to {depth.shape[1]}×{depth.shape[0]} at frame {len(frames) + 1}")
+        if K is None:
+            K = np.array(msg.getTransformation().getIntrinsicMatrix(), dtype=float)
+        frames.append(depth)
+        if max_frames is not None and len(frames) >= max_frames:
+            break
+    if not frames:
+        raise BadInputError(path, "is an MCAP recording without RAW16 depth frames")
+    depth = np.stack(frames)
+    if not depth.any():
+        raise BadInputError(path, f"its {len(frames)} depth frames are all zero (no depth measured)")
+    _check_intrinsics(path, K, depth.shape[2], depth.shape[1])
+    return DepthFrames(depth, K, f"{path.name}: depthai recording, {len(frames)} frames "
+                                 f"{depth.shape[2]}×{depth.shape[1]}")
+
+
+def _check_mcap(path: Path) -> None:
+    if not path.exists():
+        raise BadInputError(path, "no such file")
+    if not path.is_file():
+        raise BadInputError(path, "is not a file")
+    size = path.stat().st_size
+    if size == 0:
+        raise BadInputError(path, "is empty")
+    with open(path, "rb") as fh:
+        head = fh.read(len(MCAP_MAGIC))
+        fh.seek(max(0, size - len(MCAP_MAGIC)))
+        tail = fh.read(len(MCAP_MAGIC))
+    if head != MCAP_MAGIC:
+        raise BadInputError(path, "is not an MCAP recording (it lacks the MCAP magic bytes)")
+    if tail != MCAP_MAGIC:
+        raise BadInputError(path, "is a truncated MCAP recording (its end is missing)")
+
+
+def _replay(path: Path):
+    """Yield the messages of a recording through ReplayMessage, unpaced."""
+    dai = depthai()
+    pipeline = dai.Pipeline(False)
+    replay = pipeline.create(dai.node.ReplayMessage)
+    replay.setReplayFile(str(path))
+    replay.setLoop(False)
+    replay.setFps(UNPACED_FPS)
+    queue = replay.out.createOutputQueue(maxSize=8, blocking=True)
+    pipeline.start()
+    try:
+        while True:
+            try:
+                yield queue.get()
+            except dai.MessageQueue.QueueException:  # end of file: the replay stops the pipeline
+                return
+    finally:
+        pipeline.stop()
+        pipeline.wait()
+
+
+def _check_intrinsics(path: Path, K, width: int, height: int) -> None:
+    K = np.asarray(K, float)
+    ok = (K.shape == (3, 3) and np.isfinite(K).all() and K[0, 0] > 0 and K[1, 1] > 0
+          and 0 < K[0, 2] < width and 0 < K[1, 2] < height)
+    if not ok:
+        raise BadInputError(path, f"its depth frames carry no usable intrinsics (K = {K.round(2).tolist()})")
