@@ -24,9 +24,9 @@ MIN_PEAK_MM = 20.0
 """A mound must rise at least this far: smaller bumps are not breasts."""
 CROP_MM = 2.0
 """Breast points lie at least this far in front of the chest wall."""
-APEX_RADIUS_MM = 15.0
+APEX_RADIUS_MM = 5.0
 """Radius of the patch fitted around the apex to locate the nipple."""
-CAP_MM = 3.0
+CAP_MM = 2.0
 """The top cap (points this close to the highest) gives the nipple's first estimate."""
 UP_VIEW = np.array([0.0, -1.0, 0.0])
 """Superior in the viewing frame (image up)."""
@@ -90,8 +90,8 @@ def local_chest_wall(voxels: np.ndarray, mound: Mound, wall: ChestWall) -> Chest
 
 def breast_region(points: np.ndarray, mound: Mound, wall: ChestWall, size: float) -> np.ndarray:
     """Mask of the fine points of the breast: in front of the chest wall, near the mound's voxels."""
-    front = wall.height(points) > CROP_MM
-    idx = np.flatnonzero(front)
+    near = np.flatnonzero(np.sum(np.square(points[:, :2] - mound.centre), axis=1) < (mound.radius + 2 * size) ** 2)
+    idx = near[wall.height(points[near]) > CROP_MM]
     dist, _ = cKDTree(mound.voxels).query(points[idx], distance_upper_bound=2.0 * size)
     mask = np.zeros(len(points), bool)
     mask[idx[np.isfinite(dist)]] = True

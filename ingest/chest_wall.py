@@ -30,8 +30,10 @@ class ChestWall:
 
     def _basis(self, xy: np.ndarray) -> np.ndarray:
         uv = (np.asarray(xy, float)[..., :2] - self.centre) / SCALE_MM
+        px = np.cumprod(np.concatenate([np.ones_like(uv[..., :1]), np.repeat(uv[..., :1], self.degree, -1)], -1), -1)
+        py = np.cumprod(np.concatenate([np.ones_like(uv[..., 1:]), np.repeat(uv[..., 1:], self.degree, -1)], -1), -1)
         e = _exponents(self.degree)
-        return uv[..., None, 0] ** e[:, 0] * uv[..., None, 1] ** e[:, 1]
+        return px[..., e[:, 0]] * py[..., e[:, 1]]
 
     def z(self, xy) -> np.ndarray:
         """Chest depth under (x, y), mm."""

@@ -24,6 +24,8 @@ from .recording import DepthFrames
 
 COARSE_MM = 10.0
 """Voxel size of the coarse cloud used for background removal, chest wall and mounds."""
+DENSE_CELLS = 4_000_000
+"""Voxel grids up to this many cells are indexed densely (no sort)."""
 MIN_BREAST_POINTS = 500
 UP_AXES = {"+x": 0, "-x": 0, "+y": 1, "-y": 1, "+z": 2, "-z": 2}
 
@@ -62,8 +64,14 @@ def voxel_centroids(points: np.ndarray, size: float) -> tuple[np.ndarray, np.nda
     keys = np.floor(points / size).astype(np.int64)
     keys -= keys.min(axis=0)
     span = keys.max(axis=0) + 1
-    _, inverse, counts = np.unique((keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2],
-                                   return_inverse=True, return_counts=True)
+    cell = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
+    if np.prod(span) <= DENSE_CELLS:  # count per cell without sorting
+        occupied = np.bincount(cell, minlength=int(np.prod(span))) > 0
+        rank = np.cumsum(occupied) - 1
+        inverse = rank[cell]
+        counts = np.bincount(inverse)
+    else:
+        _, inverse, counts = np.unique(cell, return_inverse=True, return_counts=True)
     sums = np.stack([np.bincount(inverse, points[:, k], len(counts)) for k in range(3)], 1)
     return sums / counts[:, None], inverse
 
@@ -149,12 +157,12 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, side: str, voxel: 
     _enough(path, len(crop), "cropping")
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(crop))
     with clock("outliers (open3d)"):
-        cloud, _ = cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=2.5)
+        cloud, _ = cloud.remove_radius_outlier(nb_points=4, radius=5.0)
     with clock("voxel downsampling (open3d)"):
         cloud = cloud.voxel_down_sample(voxel)
     _enough(path, len(cloud.points), f"{voxel:g} mm voxel downsampling")
     with clock("normals (open3d)"):
-        cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=max(3 * voxel, 5.0), max_nn=30))
+        cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=max(3 * voxel, 5.0), max_nn=16))
         cloud.orient_normals_towards_camera_location(viewer)
     with clock("to breast frame (open3d)"):
         cloud.transform(frame.matrix)

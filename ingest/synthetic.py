@@ -33,27 +33,44 @@ GRAZING_DEG = 78.0
 NOISE_REF_MM = 600.0
 """Distance at which the depth noise has its nominal σ; σ grows with distance²."""
 DEFORMATION_NAMES = tuple(n for names in KIND_PARAMS.values() for n in names)
+NIPPLE_SIGMA_MM = 3.0
+"""Width (σ) of the nipple bump."""
 SURFACE_GRID = (90, 144)
 """(n_u, n_v) of the true breast surface meshes."""
 
 
 @dataclass(frozen=True)
 class Breast:
-    """A breast: primitive (model units) and deformation, in its breast frame."""
+    """A breast: primitive (model units) and deformation in its breast frame, and a nipple.
+
+    The nipple is a Gaussian bump (height `nipple_height_mm`, σ NIPPLE_SIGMA_MM) along z on
+    the deformed apex, so that the nipple is a landmark as on a patient, not the flat top of
+    a dome. Away from it (beyond ~3σ) the surface is exactly the deformed primitive.
+    """
 
     primitive: Primitive
     deformation: Deformation
+    nipple_height_mm: float = 4.0
 
     def surface(self) -> tuple[np.ndarray, np.ndarray]:
         """Outer surface mesh (V mm breast frame, F), without the base cap."""
         V, F = self.primitive.mesh(*SURFACE_GRID, closed=False)
-        return to_mm(self.deformation.apply(V, self.primitive)), F
+        V = to_mm(self.deformation.apply(V, self.primitive))
+        apex = self.apex_mm
+        d2 = np.sum(np.square(V[:, :2] - apex[:2]), axis=1)
+        V[:, 2] += self.nipple_height_mm * np.exp(-d2 / (2 * NIPPLE_SIGMA_MM**2)) * (V[:, 2] > apex[2] / 2)
+        return V, F
+
+    @property
+    def apex_mm(self) -> np.ndarray:
+        """The deformed apex (0, 0, a5) of the primitive, mm, breast frame."""
+        apex = np.array([[0.0, 0.0, self.primitive.a5]])
+        return to_mm(self.deformation.apply(apex, self.primitive))[0]
 
     @property
     def nipple_mm(self) -> np.ndarray:
-        """The deformed nipple (0, 0, a5), mm, breast frame."""
-        apex = np.array([[0.0, 0.0, self.primitive.a5]])
-        return to_mm(self.deformation.apply(apex, self.primitive))[0]
+        """The tip of the nipple, mm, breast frame (the deformations keep the apex normal along z)."""
+        return self.apex_mm + [0.0, 0.0, self.nipple_height_mm]
 
 
 @dataclass(frozen=True)
