@@ -14,12 +14,9 @@ from breastplan.deform.global_deformations import KIND_PARAMS, NEEDS_PRIMITIVE, 
 from breastplan.learn.databases import Database, build_database, grid_for
 from breastplan.learn.datasets import build_dataset
 
+from . import scan_commands  # noqa: F401  (registers scan-synth and ingest)
+from .app import JSON, app, parse_pairs
 from .output import Timer, progress, report, stderr, usage_error
-
-app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
-                  help="Plan the aesthetic result of breast surgery from a 3-D scan.")
-
-JSON = typer.Option(False, "--json", help="Print one JSON object on stdout (logs go to stderr).")
 
 
 @app.command()
@@ -53,21 +50,6 @@ def synth(
            as_json, f"database {db}")
 
 
-def _parse_pairs(items: List[str], what: str, option: str) -> dict[str, float]:
-    pairs = {}
-    for item in (p for chunk in items for p in chunk.split(",") if p.strip()):
-        name, sep, value = item.partition("=")
-        try:
-            if not sep:
-                raise ValueError
-            pairs[name.strip()] = float(value)
-        except ValueError:
-            raise usage_error(f"'{item}' is not NAME=VALUE with a number VALUE ({what})", option) from None
-        if not np.isfinite(pairs[name.strip()]):
-            raise usage_error(f"'{item}' is not a finite number ({what})", option)
-    return pairs
-
-
 @app.command()
 def deform(
     input: Path = typer.Argument(..., help="Breast PLY (points or mesh), mm, breast frame."),
@@ -83,7 +65,7 @@ def deform(
     timer = Timer()
     if kind not in KIND_PARAMS:
         raise usage_error(f"'{kind}' is not a deformation; choose one of {', '.join(KIND_PARAMS)}", "--kind")
-    params = _parse_pairs(param, f"parameters of {kind}", "--param")
+    params = parse_pairs(param, f"parameters of {kind}", "--param")
     unknown = sorted(set(params) - set(KIND_PARAMS[kind]))
     if unknown:
         raise usage_error(f"{kind} takes {', '.join(KIND_PARAMS[kind])}, not {', '.join(unknown)}", "--param")
@@ -108,7 +90,7 @@ def _parse_primitive(text: Optional[str], kind: str) -> Optional[Primitive]:
             raise usage_error(f"{kind} needs the breast primitive: --primitive a1=..,a2=..,a3=..,a4=..,a5=..",
                               "--primitive")
         return None
-    values = _parse_pairs([text], "primitive", "--primitive")
+    values = parse_pairs([text], "primitive", "--primitive")
     missing = [n for n in PARAM_NAMES[:5] if n not in values]
     unknown = sorted(set(values) - set(PARAM_NAMES))
     if missing or unknown:

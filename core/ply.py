@@ -224,7 +224,7 @@ def write_ply(path: str | Path, points, faces=None, normals=None, comments=()) -
     header.append("end_header")
     path = Path(path)
     with atomic_open(path) as fh:
-        fh.write(("\n".join(header) + "\n").encode("ascii"))
+        fh.write(("\n".join(header) + "\n").encode("ascii", errors="replace"))  # PLY headers are ASCII
         fh.write(vert.tobytes())
         fh.write(face_bytes)
     return path

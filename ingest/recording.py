@@ -53,7 +53,8 @@ def write_recording(path: str | Path, depth: np.ndarray, K: np.ndarray, fps: flo
     pipeline = dai.Pipeline(False)
     rec = pipeline.create(dai.node.RecordMessage)
     rec.setRecordFile(str(part))
-    queue = rec.input.createInputQueue()
+    rec.input.setBlocking(True)  # a non-blocking input drops frames sent faster than they are written
+    queue = rec.input.createInputQueue(maxSize=4, blocking=True)
     pipeline.start()
     try:
         for i in range(n):
@@ -106,7 +107,7 @@ def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFram
         raise BadInputError(path, f"its {len(frames)} depth frames are all zero (no depth measured)")
     _check_intrinsics(path, K, depth.shape[2], depth.shape[1])
     return DepthFrames(depth, K, f"{path.name}: depthai recording, {len(frames)} frames "
-                                 f"{depth.shape[2]}×{depth.shape[1]}")
+                                 f"{depth.shape[2]}x{depth.shape[1]}")
 
 
 def _check_mcap(path: Path) -> None:
