@@ -80,15 +80,15 @@ def ingest(
     nipple: Optional[str] = typer.Option(None, "--nipple", help="X,Y,Z: the nipple (camera mm), overriding the apex."),
     units: str = typer.Option("auto", "--units", help="Units of a scan file: auto (from its extent), mm or m."),
     up: str = typer.Option("+y", "--up", help="Superior axis of a scan file: +x, -x, +y, -y, +z or -z."),
-    device: Optional[str] = typer.Option(None, "--device", flag_value="auto", is_flag=False,
-                                         help="Capture from a live OAK device (optionally its ID) instead of INPUT."),
+    device: bool = typer.Option(False, "--device", help="Capture from a live OAK device instead of INPUT."),
+    device_id: Optional[str] = typer.Option(None, "--device-id", help="With --device: the OAK's ID (default: the first)."),
     as_json: bool = JSON,
 ):
     """Turn a depth recording or scan into the clean breast of one side, in the breast frame."""
     timer = Timer()
     if side not in SIDES:
         raise usage_error(f"'{side}' is not a side; choose left or right", "--side")
-    if (input is None) == (device is None):
+    if (input is None) != device:
         raise usage_error("give either INPUT or --device", "INPUT/--device")
     if not 0.5 <= voxel <= 20.0:
         raise usage_error(f"--voxel must be 0.5..20 mm, got {voxel}", "--voxel")
@@ -99,7 +99,7 @@ def ingest(
     box = parse_numbers(roi, 6, "--roi")
     if box is not None and not (box[:3] < box[3:]).all():
         raise usage_error("--roi needs X0<X1, Y0<Y1, Z0<Z1", "--roi")
-    result, source = run_ingest(input, side, voxel, frames, box, parse_numbers(nipple, 3, "--nipple"), units, up, device)
+    result, source = run_ingest(input, side, voxel, frames, box, parse_numbers(nipple, 3, "--nipple"), units, up, device_id)
     paths = save_case(out, result, source, voxel)
     report({"scan": str(paths["scan_ply"]), "points": len(result.points), "side": result.side,
             "nipple_camera_mm": result.nipple_camera.round(2), "frames": source.frames, "source": source.description,

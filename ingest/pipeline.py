@@ -145,7 +145,7 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, side: str, voxel: 
         mounds = B.find_mounds(coarse, wall, float(np.median(coarse[:, 0])), COARSE_MM)
         if in_roi is not None:
             mounds = [m for m in mounds if in_roi(m.voxels).any()]
-        mound = B.choose_mound(path, mounds, side, nipple_view)
+        mound = B.choose_mound(path, mounds, side if in_roi is None else None, nipple_view)
         wall = B.local_chest_wall(coarse, mound, wall)
     with clock("crop + breast frame"):
         region = B.breast_region(torso, mound, wall, COARSE_MM)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import datetime
 import os
+import struct
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +19,13 @@ import numpy as np
 from breastplan import BadInputError
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+END_OF_RECORDING = 2**31 - 1
+"""Sequence number of the end marker (a copy of the last frame) that readers skip: the
+recorder writes a message only after taking the next one, so the marker flushes the last
+real frame."""
+SETTLE_S = 0.05
+FOOTER_BYTES, OP_FOOTER, OP_STATISTICS = 29, 0x02, 0x0B
+"""MCAP footer record size and the opcodes read to count messages (MCAP specification)."""
 UNPACED_FPS = 1e6
 """Replay rate asked of ReplayMessage: far above any camera's, so replay is not paced."""
 
@@ -43,12 +51,10 @@ class DepthFrames:
         return int(self.depth.shape[2]), int(self.depth.shape[1])
 
 
-def write_recording(path: str | Path, depth: np.ndarray, K: np.ndarray, fps: float = 30.0) -> Path:
-    """Record depth frames (N, H, W) uint16 mm with intrinsics K through RecordMessage, atomically."""
+def write_recording(path: str | Path, depth, K: np.ndarray, fps: float = 30.0) -> Path:
+    """Record depth frames ((N, H, W) or a sequence of (H, W); uint16 mm) with intrinsics K, atomically."""
     dai = depthai()
     path = Path(path)
-    depth = np.ascontiguousarray(depth, dtype=np.uint16)
-    n, h, w = depth.shape
     part = path.with_name(f".{path.stem}.part{path.suffix or '.mcap'}")
     pipeline = dai.Pipeline(False)
     rec = pipeline.create(dai.node.RecordMessage)
@@ -57,10 +63,13 @@ def write_recording(path: str | Path, depth: np.ndarray, K: np.ndarray, fps: flo
     queue = rec.input.createInputQueue(maxSize=4, blocking=True)
     pipeline.start()
     try:
-        for i in range(n):
-            queue.send(_img_frame(dai, depth[i], K, i, i / fps))
+        for i, frame in enumerate(depth):
+            last = np.ascontiguousarray(frame, dtype=np.uint16)
+            queue.send(_img_frame(dai, last, K, i, i / fps))
+        queue.send(_img_frame(dai, last, K, END_OF_RECORDING, (i + 1) / fps))
         while rec.input.has():  # the recorder drains asynchronously; stopping early loses frames
             time.sleep(0.005)
+        time.sleep(SETTLE_S)
     finally:
         pipeline.stop()
         pipeline.wait()
@@ -87,9 +96,10 @@ def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFram
     """Replay the RAW16 depth frames of an MCAP recording (at most `max_frames`)."""
     path = Path(path)
     _check_mcap(path)
-    frames, K = [], None
-    for msg in _replay(path):
-        if type(msg).__name__ != "ImgFrame" or msg.getType() != depthai().ImgFrame.Type.RAW16:
+    frames, K, messages = [], None, 0
+    for messages, msg in enumerate(_replay(path), 1):
+        if (type(msg).__name__ != "ImgFrame" or msg.getType() != depthai().ImgFrame.Type.RAW16
+                or msg.getSequenceNum() == END_OF_RECORDING):
             continue
         depth = np.array(msg.getFrame(), dtype=np.uint16, copy=True)
         if frames and depth.shape != frames[0].shape:
@@ -101,7 +111,8 @@ def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFram
         if max_frames is not None and len(frames) >= max_frames:
             break
     if not frames:
-        raise BadInputError(path, "is an MCAP recording without RAW16 depth frames")
+        raise BadInputError(path, "is an MCAP recording without RAW16 depth frames" if messages else
+                            "is a corrupt MCAP recording (depthai could not replay any message)")
     depth = np.stack(frames)
     if not depth.any():
         raise BadInputError(path, f"its {len(frames)} depth frames are all zero (no depth measured)")
@@ -128,21 +139,46 @@ def _check_mcap(path: Path) -> None:
         raise BadInputError(path, "is a truncated MCAP recording (its end is missing)")
 
 
+def message_count(path: Path) -> int:
+    """Messages in an MCAP file, from the Statistics record of its summary section."""
+    with open(path, "rb") as fh:
+        data = fh.read()
+    footer_at = len(data) - len(MCAP_MAGIC) - FOOTER_BYTES
+    try:
+        opcode, _, summary_start, offsets_start, _ = struct.unpack_from("<BQQQI", data, footer_at)
+        if opcode != OP_FOOTER or summary_start == 0:
+            raise ValueError
+        pos, end = summary_start, offsets_start or footer_at
+        while pos < end:
+            opcode, length = struct.unpack_from("<BQ", data, pos)
+            if opcode == OP_STATISTICS:
+                return struct.unpack_from("<Q", data, pos + 9)[0]
+            pos += 9 + length
+    except (struct.error, ValueError):
+        pass
+    raise BadInputError(path, "is a corrupt MCAP recording (its summary holds no message count)")
+
+
 def _replay(path: Path):
-    """Yield the messages of a recording through ReplayMessage, unpaced."""
+    """Yield the messages of a recording through ReplayMessage, unpaced.
+
+    The replay loops and is stopped after the file's message count: at end of file
+    ReplayMessage closes the queue at once, and messages not yet taken would be lost.
+    """
+    count = message_count(path)
     dai = depthai()
     pipeline = dai.Pipeline(False)
     replay = pipeline.create(dai.node.ReplayMessage)
     replay.setReplayFile(str(path))
-    replay.setLoop(False)
+    replay.setLoop(True)
     replay.setFps(UNPACED_FPS)
     queue = replay.out.createOutputQueue(maxSize=8, blocking=True)
     pipeline.start()
     try:
-        while True:
+        for _ in range(count):
             try:
                 yield queue.get()
-            except dai.MessageQueue.QueueException:  # end of file: the replay stops the pipeline
+            except dai.MessageQueue.QueueException:  # the replay node failed (unreadable file)
                 return
     finally:
         pipeline.stop()

@@ -7,9 +7,7 @@ import pytest
 
 from breastplan import read_ply
 
-
-def run(cli, *args):
-    return subprocess.run([cli, *map(str, args)], capture_output=True, text=True, timeout=600)
+from clitools import assert_bad_input, run
 
 
 @pytest.fixture(scope="module")
@@ -61,13 +59,6 @@ def test_dataset_command(cli, synth_s, tmp_path):
     assert info["examples"] == 480 and sum(info["examples_per_degree"]) == 480
     assert np.all(np.diff(info["reference_extents"]) > 0)
 
-
-def assert_bad_input(res, path, folder):
-    assert res.returncode == 3, (res.returncode, res.stderr)
-    lines = res.stderr.strip().splitlines()
-    assert len(lines) == 1 and str(path) in lines[0] and "Traceback" not in res.stderr
-    assert res.stdout == ""
-    assert not any(p.name.endswith(".part") or p.name.startswith("out") for p in folder.iterdir())
 
 
 @pytest.mark.parametrize("content", [b"ply\nformat binary_little_endian 1.0\nelement vertex 100\n"

@@ -1,0 +1,191 @@
+"""Ingest: depthai recordings, fusion, chest wall, the synthetic scanner and the whole pipeline.
+
+Accuracy is measured against the synthetic scanner's truth (Ingest §5): the recorded
+frames go through depthai (RecordMessage → MCAP → ReplayMessage) as a clinic's would.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from breastplan import read_ply, write_ply
+from breastplan.ingest import synthetic
+from breastplan.ingest.chest_wall import fit_chest_wall
+from breastplan.ingest.depth import fuse
+from breastplan.ingest.pipeline import ingest_frames
+from breastplan.ingest.recording import read_recording, write_recording
+from breastplan.ingest.scan import ingest, load_scan, save_case
+
+
+@pytest.fixture(scope="module")
+def scanned(tmp_path_factory):
+    """A 10-frame synthetic recording (seed 1, 10° tilt), its truth, and the replayed frames."""
+    folder = tmp_path_factory.mktemp("scan")
+    scene = synthetic.make_scene(1, tilt_deg=10.0)
+    write_recording(folder / "rec.mcap", synthetic.depth_frames(scene, 10, 1), scene.K)
+    synthetic.save_truth(folder / "truth.npz", scene, 10)
+    return folder, scene, synthetic.load_truth(folder / "truth.npz"), read_recording(folder / "rec.mcap")
+
+
+def errors_in_camera(result, truth, side):
+    inv = np.linalg.inv(result.camera_to_breast)
+    points = result.points @ inv[:3, :3].T + inv[:3, 3]
+    return synthetic.scan_errors(points, result.nipple_camera, inv[:3, 2], truth, side)
+
+
+# --- recordings -------------------------------------------------------------------------
+def test_recording_round_trip_keeps_every_frame_and_the_intrinsics(tmp_path):
+    rng = np.random.default_rng(0)
+    depth = rng.integers(0, 3000, (12, 40, 64), dtype=np.uint16)
+    K = np.array([[450.5, 0, 31.5], [0, 449.0, 19.5], [0, 0, 1]])
+    write_recording(tmp_path / "r.mcap", depth, K)
+    back = read_recording(tmp_path / "r.mcap")
+    assert back.depth.shape == depth.shape and (back.depth == depth).all()
+    assert np.allclose(back.K, K)
+    assert read_recording(tmp_path / "r.mcap", max_frames=3).depth.shape[0] == 3
+    assert [p.name for p in tmp_path.iterdir()] == ["r.mcap"]  # no temporary file left behind
+
+
+# --- fusion -----------------------------------------------------------------------------
+def test_fusion_is_a_robust_average_of_valid_depths():
+    stack = np.zeros((5, 1, 4), np.uint16)
+    stack[:, 0, 0] = [600, 601, 602, 0, 700]   # 700 is an outlier, 0 no measurement
+    stack[:, 0, 1] = [0, 0, 0, 0, 0]           # never measured
+    stack[:, 0, 2] = [0, 0, 0, 0, 900]         # one frame of five: too few (< 5 // 3 = 1? no: kept)
+    stack[:, 0, 3] = [800, 800, 800, 800, 800]
+    fused = fuse(stack)
+    assert fused[0, 0] == pytest.approx(601.0)
+    assert fused[0, 1] == 0.0
+    assert fused[0, 2] == pytest.approx(900.0)
+    assert fused[0, 3] == pytest.approx(800.0)
+    six = np.zeros((6, 1, 1), np.uint16)
+    six[0, 0, 0] = 900                           # one of six frames: below the 6 // 3 = 2 needed
+    assert fuse(six)[0, 0] == 0.0
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.floats(450, 900), st.integers(5, 30))
+def test_fusion_beats_single_frame_noise(depth_mm, n):
+    rng = np.random.default_rng(int(depth_mm * 7 + n))
+    sigma = (depth_mm / 600) ** 2
+    frames = np.rint(depth_mm + sigma * rng.standard_normal((n, 32, 32))).astype(np.uint16)
+    single = np.sqrt(np.mean((frames[0] - depth_mm) ** 2))
+    fused = np.sqrt(np.mean((fuse(frames) - depth_mm) ** 2))
+    assert fused < single / np.sqrt(n) * 1.6 + 0.05
+
+
+# --- chest wall -------------------------------------------------------------------------
+def test_chest_wall_recovers_a_quadric_under_mounds_and_outliers():
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(-200, 200, (6000, 2))
+    true_z = 650 + 0.0012 * xy[:, 0] ** 2 + 0.0005 * xy[:, 1] ** 2 - 0.05 * xy[:, 1]
+    r2 = np.sum((np.abs(xy) - [90, 0]) ** 2, axis=1)
+    mound = 55 * np.sqrt(np.clip(1 - r2 / 65**2, 0, None))  # two half-ellipsoid breasts
+    z = true_z - mound + rng.normal(0, 0.5, len(xy))
+    z[:600] += rng.uniform(20, 80, 600)   # 10 % behind the surface (arms, background)
+    wall = fit_chest_wall(np.column_stack([xy, z]), 2)
+    grid = np.column_stack([np.linspace(-150, 150, 50), np.linspace(-100, 100, 50)])
+    expect = 650 + 0.0012 * grid[:, 0] ** 2 + 0.0005 * grid[:, 1] ** 2 - 0.05 * grid[:, 1]
+    assert np.abs(wall.z(grid) - expect).max() < 0.5
+    assert wall.height(np.array([[90.0, 0.0, 650 + 0.0012 * 8100 - 55]]))[0] == pytest.approx(55, abs=0.6)
+
+
+# --- synthetic scanner ------------------------------------------------------------------
+def test_scanner_renders_the_true_nipple_at_its_pixel(scanned):
+    _, scene, truth, frames = scanned
+    for side in synthetic.SIDES:
+        nipple = truth[f"{side}_nipple_camera_mm"]
+        u, v, _ = scene.K @ (nipple / nipple[2])
+        measured = frames.depth[:, int(round(v)), int(round(u))].astype(float)
+        measured = measured[measured > 0]
+        assert len(measured) >= 5
+        assert np.median(measured) == pytest.approx(nipple[2], abs=2.5)  # σ ≈ 1 mm, pixel ≈ 1.3 mm wide
+
+
+def test_scanner_noise_grows_with_distance_squared():
+    scene = synthetic.make_scene(0, distance_mm=600.0, noise_mm=1.0)
+    clean, ids = synthetic.render_depth(scene)
+    wall = (ids == 3) & np.isfinite(clean)            # the flat wall behind the patient
+    frames = synthetic.depth_frames(scene, 4, 0).astype(float)
+    ok = wall & (frames > 0).all(axis=0)
+    residual = (frames - clean)[:, ok]
+    expected = np.sqrt(np.mean((clean[ok] / 600.0) ** 4) + 1 / 12)  # noise plus mm quantisation
+    assert residual.std() == pytest.approx(expected, rel=0.1)
+
+
+def test_breast_frame_of_the_scene_is_on_the_chest_wall():
+    T = synthetic.body_from_breast("left")
+    assert np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3)) and np.linalg.det(T[:3, :3]) == pytest.approx(1.0)
+    o = T[:3, 3]
+    assert o[2] == pytest.approx(synthetic.chest_z(o[0], o[1]))
+    h = 1e-4  # z is the chest normal: orthogonal to the chest's tangents
+    tangent_x = np.array([h, 0, synthetic.chest_z(o[0] + h, o[1]) - o[2]])
+    assert abs(np.dot(tangent_x, T[:3, 2])) < 1e-9
+
+
+# --- the pipeline against the truth -----------------------------------------------------
+@pytest.mark.parametrize("side", synthetic.SIDES)
+def test_ingest_meets_the_accuracy_targets(scanned, side):
+    _, _, truth, frames = scanned
+    result = ingest_frames(frames, side)
+    e = errors_in_camera(result, truth, side)
+    assert e["rms_mm"] <= 0.8
+    assert e["nipple_mm"] <= 2.0
+    assert e["z_axis_deg"] <= 3.0
+    assert e["coverage"] >= 0.95
+    assert result.side == side
+    assert (result.points[:, 2] > 0).all()                         # above the chest wall
+    assert np.mean(np.sum(result.normals * [0, 0, 1], axis=1) > 0) > 0.9  # outward (anterior)
+
+
+def test_fusion_improves_on_one_frame(scanned):
+    _, _, truth, frames = scanned
+    one = type(frames)(frames.depth[:1], frames.K, frames.source)
+    fused_rms = errors_in_camera(ingest_frames(frames, "left"), truth, "left")["rms_mm"]
+    single_rms = errors_in_camera(ingest_frames(one, "left"), truth, "left")["rms_mm"]
+    assert fused_rms < 0.7 * single_rms
+
+
+def test_a_scan_file_in_metres_with_its_own_axes_gives_the_same_breast(scanned, tmp_path):
+    folder, scene, truth, frames = scanned
+    result = ingest_frames(frames, "right")
+    body_from_camera = np.linalg.inv(scene.camera_from_body)
+    a = np.radians(15)  # the scanner's frame: y up, turned 15° about it, metres
+    yaw = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    to_file = np.eye(4)
+    to_file[:3, :3] = yaw @ body_from_camera[:3, :3]
+    to_file[:3, 3] = yaw @ body_from_camera[:3, 3]
+    torso_file = (result.torso_camera @ to_file[:3, :3].T + to_file[:3, 3]) / 1000.0
+    write_ply(tmp_path / "torso.ply", torso_file)
+    from_file, source = ingest(tmp_path / "torso.ply", "right")
+    assert source.kind == "file" and "units m" in source.description
+    nipple_camera = np.linalg.solve(to_file[:3, :3], from_file.nipple_camera - to_file[:3, 3])
+    assert np.linalg.norm(nipple_camera - truth["right_nipple_camera_mm"]) <= 2.0
+
+
+def test_manual_nipple_and_roi_override_the_automatic_choice(scanned):
+    _, _, truth, frames = scanned
+    nipple = truth["left_nipple_camera_mm"] + [1.0, -1.0, 0.5]
+    result = ingest_frames(frames, "right", nipple=nipple)   # the nipple wins over --side
+    assert result.side == "left" and np.allclose(result.nipple_camera, nipple)
+    box = np.concatenate([truth["left_nipple_camera_mm"] - 120, truth["left_nipple_camera_mm"] + 120])
+    assert ingest_frames(frames, "right", roi=box).side == "left"
+
+
+def test_case_folder_artefacts(scanned, tmp_path):
+    folder, _, truth, _ = scanned
+    result, source = ingest(folder / "rec.mcap", "left", voxel=3.0)
+    paths = save_case(tmp_path / "case", result, source, 3.0)
+    scan = load_scan(paths["scan_npz"])
+    ply = read_ply(paths["scan_ply"])
+    assert np.allclose(ply.points, result.points) and ply.normals is not None
+    assert str(scan["side"]) == "left" and int(scan["frames"]) == 10 and float(scan["voxel_mm"]) == 3.0
+    T = scan["transform_camera_to_breast"]
+    assert np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3)) and np.linalg.det(T[:3, :3]) == pytest.approx(1.0)
+    assert np.allclose(T[:3, :3] @ scan["nipple_camera_mm"] + T[:3, 3], scan["nipple_breast_mm"])
+    assert np.allclose(scan["intrinsics"], truth["K"])
+    camera = read_ply(paths["camera_ply"])
+    assert any("camera-opencv" in c for c in camera.comments) and len(camera.points) > 10 * len(ply.points)
+    # voxel downsampling: no two points closer than the voxel's own diagonal spacing allows
+    assert len(result.points) < len(result.torso_camera) / 10
