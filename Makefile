@@ -31,6 +31,8 @@ demo: $(STAMP)
 	$(BIN)/breastplan synth --db S --out $(DEMO)/database-S --ply
 	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind ptosis --param b0=1.125 --param b1=0.25 --out $(DEMO)/S-shape1-00-ptosis.ply
 	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind turn --param c0=1.1 --param c1=0.5 --out $(DEMO)/S-shape1-00-turn.ply
+	$(BIN)/breastplan ingest examples/sample.mcap --side left --out $(DEMO)/case-left
+	$(BIN)/breastplan ingest examples/sample.mcap --side right --out $(DEMO)/case-right
 	@echo "demo written to $(abspath $(DEMO))"
 
 test: $(STAMP)
@@ -38,6 +40,7 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_model.py
+	$(BIN)/python benchmarks/bench_ingest.py
 
 clean:
 	rm -rf $(VENV) out
