@@ -12,6 +12,7 @@ except PackageNotFoundError:  # running from a source tree that is not installed
 
 from .artefacts import load_npz, save_npz
 from .errors import ArtefactError, BadInputError, BreastplanError
+from .frames import transform_points
 from .ply import Geometry, read_ply, write_ply
 from .primitive import PARAM_NAMES, Primitive, spow, uv_grid
 from .units import MM_PER_MU, mu3_to_cc, to_mm, to_model_units
@@ -19,5 +20,5 @@ from .units import MM_PER_MU, mu3_to_cc, to_mm, to_model_units
 __all__ = [
     "__version__", "ArtefactError", "BadInputError", "BreastplanError", "Geometry", "MM_PER_MU",
     "PARAM_NAMES", "Primitive", "load_npz", "mu3_to_cc", "read_ply", "save_npz", "spow",
-    "to_mm", "to_model_units", "uv_grid", "write_ply",
+    "to_mm", "to_model_units", "transform_points", "uv_grid", "write_ply",
 ]

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import open3d as o3d
 
-from breastplan import BadInputError
+from breastplan import BadInputError, transform_points
 
 from . import breast as B
 from .chest_wall import ChestWall, fit_chest_wall
@@ -94,7 +94,7 @@ def ingest_cloud(cloud: ScanCloud, side: str, voxel: float = 2.0, roi=None, nipp
     clock = clock or Clock()
     with clock("viewing frame"):
         view = np.eye(4) if cloud.frame_hint == "camera-opencv" else viewing_frame(cloud.points, up)
-        points = cloud.points @ view[:3, :3].T + view[:3, 3]
+        points = transform_points(view, cloud.points)
         viewer = points.mean(0) - [0.0, 0.0, 2000.0]
     return isolate(points, view, side, voxel, roi, nipple, path, clock, viewer=viewer)
 
@@ -122,23 +122,12 @@ def viewing_frame(points: np.ndarray, up: str) -> np.ndarray:
 
 def isolate(points: np.ndarray, view_from_camera: np.ndarray, side: str, voxel: float, roi, nipple, path,
             clock: Clock, viewer: np.ndarray) -> Ingested:
-    """The common pipeline on points in the viewing frame."""
+    """The common pipeline on points in the viewing frame (`viewer`: where the camera is)."""
     to_camera = np.linalg.inv(view_from_camera)
-    in_roi = None
-    if roi is not None:
-        lo, hi = np.asarray(roi, float).reshape(2, 3)
-        in_roi = lambda p: np.all(((p @ to_camera[:3, :3].T + to_camera[:3, 3]) >= lo)  # noqa: E731
-                                  & ((p @ to_camera[:3, :3].T + to_camera[:3, 3]) <= hi), axis=1)
-    nipple_view = None if nipple is None else np.asarray(nipple, float) @ view_from_camera[:3, :3].T + view_from_camera[:3, 3]
-
+    in_roi = _roi_test(roi, to_camera)
+    nipple_view = None if nipple is None else transform_points(view_from_camera, nipple)
     with clock("background: voxels + DBSCAN (open3d)"):
-        coarse, which = voxel_centroids(points, COARSE_MM)
-        labels = B.dbscan(coarse, 2.5 * COARSE_MM, 4)
-        if (labels < 0).all():
-            raise BadInputError(path, "holds no connected surface (only scattered points)")
-        torso_label = np.bincount(labels[labels >= 0]).argmax()
-        torso = points[labels[which] == torso_label]
-        coarse = coarse[labels == torso_label]
+        torso, coarse = largest_cluster(points, path)
     with clock("chest wall"):
         wall = fit_chest_wall(coarse, 2)
     with clock("mounds (DBSCAN, open3d)"):
@@ -149,9 +138,7 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, side: str, voxel: 
         wall = B.local_chest_wall(coarse, mound, wall)
     with clock("crop + breast frame"):
         region = B.breast_region(torso, mound, wall, COARSE_MM)
-        if in_roi is not None:
-            region &= in_roi(torso)
-        crop = torso[region]
+        crop = torso[region & in_roi(torso)] if in_roi is not None else torso[region]
         frame, nipple_view = B.breast_frame(crop, wall, mound.centre, nipple_view)
         crop = crop[frame.to_breast(crop)[:, 2] > 0.0]
     _enough(path, len(crop), "cropping")
@@ -166,15 +153,36 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, side: str, voxel: 
         cloud.orient_normals_towards_camera_location(viewer)
     with clock("to breast frame (open3d)"):
         cloud.transform(frame.matrix)
-    camera_to_breast = frame.matrix @ view_from_camera
     return Ingested(
-        points=np.asarray(cloud.points), normals=np.asarray(cloud.normals), camera_to_breast=camera_to_breast,
+        points=np.asarray(cloud.points), normals=np.asarray(cloud.normals),
+        camera_to_breast=frame.matrix @ view_from_camera,
         side=mound.side if nipple is not None or roi is not None else side,
-        nipple_camera=nipple_view @ to_camera[:3, :3].T + to_camera[:3, 3],
-        chest_wall=wall, view_from_camera=view_from_camera,
+        nipple_camera=transform_points(to_camera, nipple_view), chest_wall=wall, view_from_camera=view_from_camera,
         crop={"mound_centre_view_mm": mound.centre, "mound_radius_mm": mound.radius, "mound_peak_mm": mound.peak_mm,
               "roi_camera_mm": None if roi is None else np.asarray(roi, float), "crop_height_mm": B.CROP_MM},
-        torso_camera=torso @ to_camera[:3, :3].T + to_camera[:3, 3], timings_ms=clock.ms)
+        torso_camera=transform_points(to_camera, torso), timings_ms=clock.ms)
+
+
+def largest_cluster(points: np.ndarray, path) -> tuple[np.ndarray, np.ndarray]:
+    """The points of the largest connected cluster (DBSCAN on coarse voxels), and its voxel centroids."""
+    coarse, which = voxel_centroids(points, COARSE_MM)
+    labels = B.dbscan(coarse, 2.5 * COARSE_MM, 4)
+    if (labels < 0).all():
+        raise BadInputError(path, "holds no connected surface (only scattered points)")
+    biggest = np.bincount(labels[labels >= 0]).argmax()
+    return points[labels[which] == biggest], coarse[labels == biggest]
+
+
+def _roi_test(roi, to_camera: np.ndarray):
+    """A test 'inside the camera-frame box' for viewing-frame points, or None without a box."""
+    if roi is None:
+        return None
+    lo, hi = np.asarray(roi, float).reshape(2, 3)
+
+    def inside(points: np.ndarray) -> np.ndarray:
+        camera = transform_points(to_camera, points)
+        return np.all((camera >= lo) & (camera <= hi), axis=1)
+    return inside
 
 
 def _enough(path, n: int, step: str) -> None:

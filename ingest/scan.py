@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from breastplan import BadInputError, load_npz, save_npz, write_ply
+from breastplan import BadInputError, load_npz, save_npz, transform_points, write_ply
 
 from .files import read_scan_file
 from .pipeline import Clock, Ingested, ingest_cloud, ingest_frames
@@ -70,7 +70,7 @@ def _depth_source(depth: DepthFrames, kind: str) -> Source:
 def save_case(case_dir: str | Path, result: Ingested, source: Source, voxel: float) -> dict[str, Path]:
     """Write scan.ply, scan.npz and camera.ply into `case_dir`."""
     case = Path(case_dir)
-    nipple_breast = result.camera_to_breast[:3, :3] @ result.nipple_camera + result.camera_to_breast[:3, 3]
+    nipple_breast = transform_points(result.camera_to_breast, result.nipple_camera)
     header = [f"breastplan ingest: {result.side} breast, mm, breast frame", f"source {source.description}"]
     paths = {"scan_ply": write_ply(case / "scan.ply", result.points, normals=result.normals, comments=header)}
     torso_frame = CAMERA_FRAME_COMMENT if source.kind != "file" else "frame input (the scan file's own frame; mm)"

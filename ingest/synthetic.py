@@ -18,7 +18,7 @@ import open3d as o3d
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from breastplan import PARAM_NAMES, Primitive, load_npz, save_npz, to_mm
+from breastplan import PARAM_NAMES, Primitive, load_npz, save_npz, to_mm, transform_points
 from breastplan.deform.global_deformations import KIND_PARAMS, Deformation
 
 TRUTH_SCHEMA = "breastplan.scan-truth/1"
@@ -188,18 +188,14 @@ def background_meshes() -> list[tuple[np.ndarray, np.ndarray]]:
     return [(wall, np.array([[0, 1, 2], [0, 2, 3]])), (np.asarray(box.vertices), np.asarray(box.triangles))]
 
 
-def _transform(T: np.ndarray, points: np.ndarray) -> np.ndarray:
-    return points @ T[:3, :3].T + T[:3, 3]
-
-
 def raycasting_scene(scene: Scene) -> o3d.t.geometry.RaycastingScene:
     """All surfaces in camera coordinates; geometry ids 0 torso, 1 left, 2 right breast, then background."""
     rc = o3d.t.geometry.RaycastingScene()
-    meshes = [(_transform(scene.camera_from_body, V), F) for V, F in [torso_mesh()]]
+    meshes = [(transform_points(scene.camera_from_body, V), F) for V, F in [torso_mesh()]]
     for side in SIDES:
         V, F = breast_render_mesh(scene.breasts[side])
-        meshes.append((_transform(scene.camera_from_breast(side), V), F))
-    meshes += [(_transform(scene.camera_from_body, V), F) for V, F in background_meshes()]
+        meshes.append((transform_points(scene.camera_from_breast(side), V), F))
+    meshes += [(transform_points(scene.camera_from_body, V), F) for V, F in background_meshes()]
     for V, F in meshes:
         rc.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(F.astype(np.uint32)))
     return rc
@@ -251,8 +247,8 @@ def save_truth(path: str | Path, scene: Scene, frames: int) -> Path:
         arrays.update({f"{side}_primitive": breast.primitive.as_array(),
                        f"{side}_deformation": breast.deformation.as_vector(),
                        f"{side}_camera_from_breast": T,
-                       f"{side}_nipple_camera_mm": _transform(T, breast.nipple_mm[None])[0],
-                       f"{side}_vertices": _transform(T, V).astype(np.float32), f"{side}_faces": F.astype(np.int32)})
+                       f"{side}_nipple_camera_mm": transform_points(T, breast.nipple_mm[None])[0],
+                       f"{side}_vertices": transform_points(T, V).astype(np.float32), f"{side}_faces": F.astype(np.int32)})
     meta = dict(scene.meta, frames=frames, deformation_order=list(DEFORMATION_NAMES), primitive_order=list(PARAM_NAMES),
                 body_frame="X patient's left, Y superior, Z anterior; origin sternum at base-centre height")
     return save_npz(path, TRUTH_SCHEMA, arrays, units="mm", frame="camera", meta=meta, compress=True)
