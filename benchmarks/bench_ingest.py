@@ -43,6 +43,8 @@ from breastplan.ingest.pipeline import ingest_frames
 from breastplan.ingest.recording import DepthFrames, read_recording, write_recording
 from breastplan.ingest.scan import ingest
 
+from timing import median_times, timed
+
 SEEDS = (0, 1, 2)
 TILTS_DEG = (0.0, 10.0)
 ACCURACY_FRAMES = 10
@@ -55,19 +57,6 @@ BASELINE_NOTE = (
     "of the same recording alone (read_recording(max_frames=1)); one frame — open3d "
     "create_from_depth_image + voxel_down_sample(2 mm) of the same whole 640×400 frame; 30 frames — "
     "read_recording(path) alone (the depthai replay).")
-
-
-def timed(fn) -> float:
-    t0 = time.perf_counter()
-    fn()
-    return time.perf_counter() - t0
-
-
-def median_times(fn, baseline, repeats: int) -> tuple[float, float]:
-    """Median seconds of fn() and of baseline() over `repeats` calls each after one warm-up of each;
-    the calls alternate, so that both see the same load of the (shared, noisy) machine."""
-    times = [(timed(fn), timed(baseline)) for _ in range(repeats + 1)][1:]
-    return statistics.median(t[0] for t in times), statistics.median(t[1] for t in times)
 
 
 def to_camera(result) -> tuple[np.ndarray, np.ndarray]:

@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
-import time
 
 import numpy as np
 from rich.console import Console
@@ -33,6 +32,8 @@ from breastplan.deform.global_deformations import (Deformation, flatten_side, pt
                                                    turn, turn_top)
 from breastplan.learn.databases import build_database
 from breastplan.learn.datasets import build_dataset
+
+from timing import median_time, timed
 
 P00 = Primitive()
 P_EPS = Primitive(9, 11, 10, 8, 12, 0.8, 1.2)
@@ -55,22 +56,6 @@ BASELINE_NOTE = (
     "same (N, 3) float64 points; database/dataset rows (points = per breast) — 'minimum numpy work': P00.sample(100, 100) "
     "60 times (database S) and/or one such norm of a 10 000×3 array per deformed breast "
     "(60 for database S, 60·8·8 = 3840 for the datasets; the total row is 60 samples + 3840 norms).")
-
-
-def timed(fn) -> float:
-    t0 = time.perf_counter()
-    fn()
-    return time.perf_counter() - t0
-
-
-def median_time(fn, repeats: int, before=None) -> float:
-    """Median seconds of fn() over `repeats` calls after one warm-up; `before()` runs untimed first."""
-    times = []
-    for _ in range(repeats + 1):
-        if before:
-            before()
-        times.append(timed(fn))
-    return statistics.median(times[1:])
 
 
 def row(case: str, points: int, median_s: float, baseline_s: float, target_s: float | None = None) -> dict:

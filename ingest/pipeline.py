@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import open3d as o3d
+from threadpoolctl import threadpool_limits
 
 from breastplan import BadInputError, transform_points
 
@@ -123,6 +124,11 @@ def viewing_frame(points: np.ndarray, up: str) -> np.ndarray:
 def isolate(points: np.ndarray, view_from_camera: np.ndarray, side: str, voxel: float, roi, nipple, path,
             clock: Clock, viewer: np.ndarray) -> Ingested:
     """The common pipeline on points in the viewing frame (`viewer`: where the camera is)."""
+    with threadpool_limits(1, "blas"):  # small least squares: threads only add contention
+        return _isolate(points, view_from_camera, side, voxel, roi, nipple, path, clock, viewer)
+
+
+def _isolate(points, view_from_camera, side, voxel, roi, nipple, path, clock, viewer) -> Ingested:
     to_camera = np.linalg.inv(view_from_camera)
     in_roi = _roi_test(roi, to_camera)
     nipple_view = None if nipple is None else transform_points(view_from_camera, nipple)

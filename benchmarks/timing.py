@@ -1,0 +1,29 @@
+"""Timing helpers shared by the benchmarks: wall-clock seconds and medians after a warm-up."""
+from __future__ import annotations
+
+import statistics
+import time
+
+
+def timed(fn) -> float:
+    """Seconds one call of fn() takes."""
+    t0 = time.perf_counter()
+    fn()
+    return time.perf_counter() - t0
+
+
+def median_time(fn, repeats: int, before=None) -> float:
+    """Median seconds of fn() over `repeats` calls after one warm-up; `before()` runs untimed first."""
+    times = []
+    for _ in range(repeats + 1):
+        if before:
+            before()
+        times.append(timed(fn))
+    return statistics.median(times[1:])
+
+
+def median_times(fn, baseline, repeats: int) -> tuple[float, float]:
+    """Median seconds of fn() and of baseline() over `repeats` calls each after one warm-up of each;
+    the calls alternate, so that both see the same load of the (shared, noisy) machine."""
+    times = [(timed(fn), timed(baseline)) for _ in range(repeats + 1)][1:]
+    return statistics.median(t[0] for t in times), statistics.median(t[1] for t in times)
