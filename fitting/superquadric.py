@@ -1,0 +1,105 @@
+"""Fit the breast primitive (MODEL.md §2) and a rigid pose to a breast point cloud.
+
+Least squares on the radial (geometric) distance of MODEL.md §2 with a robust loss
+(`scipy.optimize.least_squares`). Data are in the breast frame (mm): the base of the
+breast lies on the chest wall z = 0, which a prior holds the model's base to (a scanner
+sees only the front of the breast, so without it the hidden half is unconstrained).
+Parameters (model units): log a1..a5, eps1, eps2, rotation vector (rad), translation.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from breastplan import BadInputError, Primitive, to_mm, to_model_units
+
+EPS_BOUNDS = (0.3, 2.0)
+CHEST_PRIOR_WEIGHT = 30.0
+"""Weight of the prior residuals (tilt of the base, rad; height of the base, mu) per √point."""
+
+
+@dataclass(frozen=True)
+class SuperquadricFit:
+    """The fitted primitive (model units) and pose (4×4, primitive frame → data frame, mm)."""
+
+    primitive: Primitive
+    pose: np.ndarray
+    residuals_mm: np.ndarray      # radial distance of each point, mm
+    iterations: int
+    seconds: float
+
+    def summary(self) -> dict[str, float]:
+        r = np.abs(self.residuals_mm)
+        return {"mean_mm": float(r.mean()), "rms_mm": float(np.sqrt(np.mean(r * r))),
+                "p95_mm": float(np.percentile(r, 95)), "max_mm": float(r.max())}
+
+
+def _unpack(x: np.ndarray) -> tuple[np.ndarray, float, float, np.ndarray, np.ndarray]:
+    return np.exp(x[:5]), x[5], x[6], x[7:10], x[10:13]
+
+
+def _radial(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Radial distance (mu) of points p (mu, data frame) to the posed primitive x."""
+    a, e1, e2, rot, t = _unpack(x)
+    q = Rotation.from_rotvec(rot).inv().apply(p - t)
+    ax = np.where(q[:, 0] >= 0, a[0], a[1])
+    ay = np.where(q[:, 1] >= 0, a[2], a[3])
+    xy = (np.abs(q[:, 0] / ax) ** (2 / e2) + np.abs(q[:, 1] / ay) ** (2 / e2)) ** (e2 / e1)
+    f = np.maximum(xy + np.abs(q[:, 2] / a[4]) ** (2 / e1), 1e-12)
+    return np.linalg.norm(q, axis=1) * (1.0 - f ** (-e1 / 2))
+
+
+def initial_guess(p: np.ndarray) -> np.ndarray:
+    """Parameters from the cloud's extents in the breast frame (base on z = 0, nipple along z)."""
+    lo, hi = np.percentile(p, [1, 99], axis=0)
+    centre = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, 0.0])
+    half = np.maximum((hi - lo)[:2] / 2, 1e-3)
+    a = np.array([half[0], half[0], half[1], half[1], max(hi[2], 1e-3)])
+    return np.concatenate([np.log(a), [1.0, 1.0], np.zeros(3), centre])
+
+
+def fit_superquadric(points_mm, *, chest_prior: bool = True, loss: str = "soft_l1", f_scale_mm: float = 1.0,
+                     x0: np.ndarray | None = None, path=None) -> SuperquadricFit:
+    """Fit primitive + pose to (N, 3) points (mm, breast frame)."""
+    start = time.perf_counter()
+    p = to_model_units(_checked(points_mm, path))
+    x0 = initial_guess(p) if x0 is None else x0
+    weight = CHEST_PRIOR_WEIGHT * np.sqrt(len(p)) if chest_prior else 0.0
+
+    def residuals(x):
+        r = _radial(x, p)
+        if not chest_prior:
+            return r
+        base_normal = Rotation.from_rotvec(x[7:10]).apply([0.0, 0.0, 1.0])
+        return np.concatenate([r, weight * np.array([base_normal[0], base_normal[1], x[12]])])
+
+    lower = np.full(13, -np.inf)
+    upper = np.full(13, np.inf)
+    lower[5:7], upper[5:7] = EPS_BOUNDS
+    x0 = np.clip(x0, lower + 1e-9, upper - 1e-9)
+    sol = least_squares(residuals, x0, bounds=(lower, upper), loss=loss, f_scale=float(to_model_units(f_scale_mm)),
+                        x_scale="jac", max_nfev=200)
+    a, e1, e2, rot, t = _unpack(sol.x)
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.from_rotvec(rot).as_matrix()
+    pose[:3, 3] = to_mm(t)
+    return SuperquadricFit(Primitive(*map(float, a), float(e1), float(e2)), pose,
+                           to_mm(_radial(sol.x, p)), int(sol.nfev), time.perf_counter() - start)
+
+
+def _checked(points_mm, path) -> np.ndarray:
+    p = np.asarray(points_mm, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise BadInputError(path, f"holds points of shape {p.shape}, not (N, 3)")
+    if not np.isfinite(p).all():
+        raise BadInputError(path, "has NaN or infinite coordinates")
+    if len(p) < 50:
+        raise BadInputError(path, f"has only {len(p)} points; a fit needs at least 50")
+    s = np.linalg.svd(p - p.mean(0), compute_uv=False)
+    if s[2] < 1e-6 * s[0]:
+        raise BadInputError(path, "has coplanar or collinear points: no surface to fit")
+    return p
