@@ -16,6 +16,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from breastplan import BadInputError, Primitive, to_mm, to_model_units
+from breastplan.deform.global_deformations import KIND_PARAMS, Deformation
 
 EPS_BOUNDS = (0.3, 2.0)
 FIT_POINTS = 3000
@@ -31,6 +32,7 @@ class SuperquadricFit:
 
     primitive: Primitive
     pose: np.ndarray
+    deformation: Deformation      # the fitted global deformations (zero for kinds not fitted)
     residuals_mm: np.ndarray      # radial distance of each point, mm
     iterations: int
     seconds: float
@@ -45,10 +47,24 @@ def _unpack(x: np.ndarray) -> tuple[np.ndarray, float, float, np.ndarray, np.nda
     return np.exp(x[:5]), x[5], x[6], x[7:10], x[10:13]
 
 
-def _radial(x: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Radial distance (mu) of points p (mu, data frame) to the posed primitive x."""
+def _deformation(x: np.ndarray, kinds: tuple[str, ...]) -> Deformation:
+    values, i = {}, 13
+    for kind in kinds:
+        n = len(KIND_PARAMS[kind])
+        values[kind.replace("-", "_")] = tuple(x[i: i + n])
+        i += n
+    return Deformation(**values)
+
+
+def _radial(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...] = ()) -> np.ndarray:
+    """Radial distance (mu) of points p (mu, data frame) to the posed, deformed primitive x.
+
+    Points are taken back through the inverse deformations (MODEL.md §3) to the primitive.
+    """
     a, e1, e2, rot, t = _unpack(x)
     q = Rotation.from_rotvec(rot).inv().apply(p - t)
+    if kinds:
+        q = _deformation(x, kinds).inverse(q, Primitive(*a, e1, e2))
     ax = np.where(q[:, 0] >= 0, a[0], a[1])
     ay = np.where(q[:, 1] >= 0, a[2], a[3])
     xy = (np.abs(q[:, 0] / ax) ** (2 / e2) + np.abs(q[:, 1] / ay) ** (2 / e2)) ** (e2 / e1)
@@ -65,26 +81,32 @@ def initial_guess(p: np.ndarray) -> np.ndarray:
     return np.concatenate([np.log(a), [1.0, 1.0], np.zeros(3), centre])
 
 
-def fit_superquadric(points_mm, *, chest_prior: bool = True, loss: str = "soft_l1", f_scale_mm: float = 1.0,
-                     x0: np.ndarray | None = None, path=None) -> SuperquadricFit:
-    """Fit primitive + pose to (N, 3) points (mm, breast frame)."""
+def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, loss: str = "soft_l1",
+                     f_scale_mm: float = 1.0, x0: np.ndarray | None = None, path=None) -> SuperquadricFit:
+    """Fit primitive + pose (+ the global `deformations`, e.g. ("ptosis", "turn")) to (N, 3) points
+    (mm, breast frame)."""
+    kinds = tuple(k for k in KIND_PARAMS if k in set(deformations))  # MODEL.md §3 order
+    unknown = set(deformations) - set(KIND_PARAMS)
+    if unknown:
+        raise ValueError(f"unknown deformations {sorted(unknown)}; choose from {', '.join(KIND_PARAMS)}")
     start = time.perf_counter()
     everything = to_model_units(_checked(points_mm, path))
     p = everything
     if len(p) > FIT_POINTS:
         p = p[np.random.default_rng(0).choice(len(p), FIT_POINTS, replace=False)]
-    x0 = initial_guess(p) if x0 is None else x0
+    n_deform = sum(len(KIND_PARAMS[k]) for k in kinds)
+    x0 = np.concatenate([initial_guess(p), np.zeros(n_deform)]) if x0 is None else x0
     weight = CHEST_PRIOR_WEIGHT * np.sqrt(len(p)) if chest_prior else 0.0
 
     def residuals(x):
-        r = _radial(x, p)
+        r = _radial(x, p, kinds)
         if not chest_prior:
             return r
         base_normal = Rotation.from_rotvec(x[7:10]).apply([0.0, 0.0, 1.0])
         return np.concatenate([r, weight * np.array([base_normal[0], base_normal[1], x[12]])])
 
-    lower = np.full(13, -np.inf)
-    upper = np.full(13, np.inf)
+    lower = np.full(len(x0), -np.inf)
+    upper = np.full(len(x0), np.inf)
     lower[5:7], upper[5:7] = EPS_BOUNDS
     x0 = np.clip(x0, lower + 1e-9, upper - 1e-9)
     sol = least_squares(residuals, x0, bounds=(lower, upper), loss=loss, f_scale=float(to_model_units(f_scale_mm)),
@@ -93,8 +115,8 @@ def fit_superquadric(points_mm, *, chest_prior: bool = True, loss: str = "soft_l
     pose = np.eye(4)
     pose[:3, :3] = Rotation.from_rotvec(rot).as_matrix()
     pose[:3, 3] = to_mm(t)
-    return SuperquadricFit(Primitive(*map(float, a), float(e1), float(e2)), pose,
-                           to_mm(_radial(sol.x, everything)), int(sol.nfev), time.perf_counter() - start)
+    return SuperquadricFit(Primitive(*map(float, a), float(e1), float(e2)), pose, _deformation(sol.x, kinds),
+                           to_mm(_radial(sol.x, everything, kinds)), int(sol.nfev), time.perf_counter() - start)
 
 
 def _checked(points_mm, path) -> np.ndarray:

@@ -49,3 +49,15 @@ def test_front_only_with_noise_and_outliers_keeps_volume():
 def test_bad_clouds_are_bad_input(points, problem):
     with pytest.raises(BadInputError, match=problem):
         fit_superquadric(points, path="cloud.ply")
+
+
+def test_ptotic_breast_recovers_ptosis_parameters():
+    from breastplan.deform.global_deformations import Deformation
+    P = Primitive(10, 11, 9.5, 10.5, 9, 0.9, 1.0)
+    truth = Deformation(ptosis=(1.0, 0.3))
+    data = to_mm(truth.apply(P.sample(80, 80), P))
+    fit = fit_superquadric(data, deformations=("ptosis",))
+    assert np.allclose(fit.deformation.ptosis, (1.0, 0.3), atol=0.02)
+    assert np.allclose(fit.primitive.as_array()[:5], P.as_array()[:5], rtol=0.005)
+    plain = fit_superquadric(data)
+    assert np.sqrt(np.mean(fit.residuals_mm ** 2)) < 0.1 * np.sqrt(np.mean(plain.residuals_mm ** 2))
