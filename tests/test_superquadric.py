@@ -61,3 +61,27 @@ def test_ptotic_breast_recovers_ptosis_parameters():
     assert np.allclose(fit.primitive.as_array()[:5], P.as_array()[:5], rtol=0.005)
     plain = fit_superquadric(data)
     assert np.sqrt(np.mean(fit.residuals_mm ** 2)) < 0.1 * np.sqrt(np.mean(plain.residuals_mm ** 2))
+
+
+def test_fit_of_an_ingested_synthetic_scan_matches_the_true_breast():
+    import open3d as o3d
+    from breastplan import transform_points
+    from breastplan.ingest import synthetic
+    from breastplan.ingest.pipeline import ingest_frames
+    from breastplan.ingest.recording import DepthFrames
+
+    scene = synthetic.make_scene(2, tilt_deg=10.0)
+    frames = DepthFrames(synthetic.depth_frames(scene, 10, 2), scene.K, "synthetic")
+    for side in synthetic.SIDES:
+        scan = ingest_frames(frames, side)
+        fit = fit_superquadric(scan.points, deformations=("turn-top", "ptosis", "turn"))
+        model = to_mm(fit.deformation.apply(fit.primitive.sample(60, 96), fit.primitive))
+        camera = transform_points(np.linalg.inv(scan.camera_to_breast), transform_points(fit.pose, model))
+        breast = scene.breasts[side]
+        V, F = breast.surface()
+        truth = o3d.t.geometry.RaycastingScene()
+        truth.add_triangles(o3d.core.Tensor(transform_points(scene.camera_from_breast(side), V).astype(np.float32)),
+                            o3d.core.Tensor(F.astype(np.uint32)))
+        d = truth.compute_distance(o3d.core.Tensor(camera.astype(np.float32))).numpy()
+        assert np.sqrt(np.mean(d ** 2)) <= 1.0                          # Fitting §5: within 1 mm RMS
+        assert abs(fit.primitive.volume_cc / breast.primitive.volume_cc - 1) <= 0.03  # shears keep volume
