@@ -1,0 +1,35 @@
+"""FFD lattice (MODEL.md §6): Bernstein basis properties and an exactly representable fit."""
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from breastplan import Primitive, to_mm
+from breastplan.fitting.ffd import Lattice, STOP_RESIDUAL, bernstein, fit_ffd
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(1, 6), st.floats(0, 1))
+def test_bernstein_partition_of_unity_and_end_values(n, s):
+    b = bernstein(n, np.array([s, 0.0, 1.0]))
+    assert np.allclose(b.sum(axis=1), 1.0)
+    assert b[1, 0] == 1.0 and b[2, -1] == 1.0
+
+
+def test_rest_lattice_reproduces_points_and_affine_maps():
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-50, 50, (500, 3))
+    lattice = Lattice.around(pts, 5)
+    B = lattice.basis(pts)
+    assert np.allclose(B @ lattice.rest, pts)                      # linear precision
+    A = np.array([[1.2, 0.1, 0], [0, 0.9, 0], [0, 0.2, 1.1]])
+    assert np.allclose(B @ (lattice.rest @ A.T), pts @ A.T)        # affine maps are exact
+    L = lattice.laplacian()
+    assert np.allclose(L.sum(axis=1), 0) and np.allclose(L, L.T)   # constants cost nothing
+
+
+def test_fit_of_a_stretched_breast_meets_the_thesis_stopping_rule():
+    P = Primitive(10, 10, 10, 10, 10, 1.0, 1.0)
+    V, F = P.mesh(40, 64, closed=True)
+    V = to_mm(V)
+    data = to_mm(Primitive(11, 11, 9, 9, 12, 1.0, 1.0).sample(60, 60))   # an affine image of the model
+    fit = fit_ffd(data, V, F, n=3, smoothness=0.0, max_iterations=200)
+    assert fit.converged and fit.residual < STOP_RESIDUAL
