@@ -15,7 +15,7 @@ from typing import Mapping
 import numpy as np
 
 from .atomic import atomic_open
-from .errors import ArtefactError
+from .errors import ArtefactError, require_file
 
 RESERVED = ("schema", "units", "frame", "version", "meta")
 
@@ -56,11 +56,7 @@ class Artefact(dict):
 
 def load_npz(path: str | Path, schema: str, spec: Spec | None = None) -> Artefact:
     """Load and validate an artefact of `schema` ("breastplan.<name>/<version>")."""
-    path = Path(path)
-    if not path.is_file():
-        raise ArtefactError(path, "no such file" if not path.exists() else "is not a file")
-    if path.stat().st_size == 0:
-        raise ArtefactError(path, "is empty")
+    path = require_file(path, f"{schema} artefact", ArtefactError)
     if not zipfile.is_zipfile(path):
         raise ArtefactError(path, f"is not an NPZ file (expected a {schema} artefact)")
     try:

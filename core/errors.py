@@ -20,3 +20,17 @@ class BadInputError(BreastplanError):
 
 class ArtefactError(BadInputError):
     """An artefact file (PLY or NPZ) that is missing, corrupt or of the wrong schema."""
+
+
+def require_file(path: str | Path, kind: str, error: type[BadInputError] = BadInputError) -> Path:
+    """`path` as a Path if it is an existing, non-empty regular file; else `error` saying why."""
+    path = Path(path)
+    if not path.exists():
+        raise error(path, "no such file")
+    if path.is_dir():
+        raise error(path, f"is a folder, not a {kind}")
+    if not path.is_file():
+        raise error(path, "is not a regular file")
+    if path.stat().st_size == 0:
+        raise error(path, "is empty (0 bytes)")
+    return path

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import atomic_open
-from .errors import ArtefactError
+from .errors import ArtefactError, require_file
 
 _TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
@@ -44,17 +44,11 @@ class _Element:
 
 def read_ply(path: str | Path) -> Geometry:
     """Read a PLY file; raise ArtefactError naming the file and the defect."""
-    path = Path(path)
+    path = require_file(path, "PLY file", ArtefactError)
     try:
         data = path.read_bytes()
-    except FileNotFoundError:
-        raise ArtefactError(path, "no such file") from None
-    except IsADirectoryError:
-        raise ArtefactError(path, "is a folder, not a PLY file") from None
     except OSError as exc:
         raise ArtefactError(path, f"cannot be read ({exc.strerror})") from None
-    if not data:
-        raise ArtefactError(path, "is empty")
     fmt, elements, comments, body = _parse_header(path, data)
     if fmt is None:
         arrays = _read_ascii(path, elements, body)

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
-from breastplan import BadInputError, read_ply
+from breastplan import BadInputError, read_ply, require_file
 
 SUPPORTED = (".ply", ".obj", ".stl", ".pcd", ".xyz")
 POINTS_PER_MM2 = 1.0
@@ -69,17 +69,10 @@ def read_scan_file(path: str | Path, units: str = "auto") -> ScanCloud:
 
 def _check_file(path: Path) -> None:
     """Raise BadInputError unless path is a readable, non-empty file of a supported type."""
-    if not path.exists():
-        raise BadInputError(path, "no such file")
-    if path.is_dir():
-        raise BadInputError(path, "is a folder, not a scan file")
-    if not path.is_file():
-        raise BadInputError(path, "is not a regular file")
-    if path.suffix.lower() not in SUPPORTED:
+    if path.suffix.lower() not in SUPPORTED and path.is_file():
         kind = f"has the extension '{path.suffix}'" if path.suffix else "has no file extension"
         raise BadInputError(path, f"{kind}; supported scan files are {', '.join(SUPPORTED)}")
-    if path.stat().st_size == 0:
-        raise BadInputError(path, "is empty (0 bytes)")
+    require_file(path, "scan file")
     try:
         path.open("rb").close()
     except OSError as exc:
