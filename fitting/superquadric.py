@@ -60,15 +60,15 @@ def _radial(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...] = ()) -> np.nda
     """Radial distance (mu) of points p (mu, data frame) to the posed, deformed primitive x.
 
     Points are taken back through the inverse deformations (MODEL.md §3) to the primitive.
+    Signed (negative inside), unlike `Primitive.radial_distance`, so that least squares sees
+    a smooth residual through the surface.
     """
     a, e1, e2, rot, t = _unpack(x)
+    primitive = Primitive(*a, e1, e2)
     q = Rotation.from_rotvec(rot).inv().apply(p - t)
     if kinds:
-        q = _deformation(x, kinds).inverse(q, Primitive(*a, e1, e2))
-    ax = np.where(q[:, 0] >= 0, a[0], a[1])
-    ay = np.where(q[:, 1] >= 0, a[2], a[3])
-    xy = (np.abs(q[:, 0] / ax) ** (2 / e2) + np.abs(q[:, 1] / ay) ** (2 / e2)) ** (e2 / e1)
-    f = np.maximum(xy + np.abs(q[:, 2] / a[4]) ** (2 / e1), 1e-12)
+        q = _deformation(x, kinds).inverse(q, primitive)
+    f = np.maximum(primitive.inside_outside(q), 1e-12)
     return np.linalg.norm(q, axis=1) * (1.0 - f ** (-e1 / 2))
 
 

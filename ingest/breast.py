@@ -3,8 +3,9 @@
 All inputs are in the viewing frame (camera convention: x to the image's right = the
 patient's left, y down, z away from the viewer; mm). A mound is a connected patch of
 coarse voxels well in front of the chest wall; the breast is the fine points in front of
-the (locally refitted) chest wall around it. The breast frame has its origin at the centre
-of the base on the chest wall, z along the chest normal (anterior), y superior.
+the (locally refitted) chest wall around it. The breast frame has its origin at the foot of
+the nipple on the chest wall (see `breast_frame`), z along the chest normal (anterior), y
+superior.
 """
 from __future__ import annotations
 

@@ -62,11 +62,6 @@ class ChestWall:
         """[degree, x0, y0, scale, c_0 … c_K−1] for artefacts."""
         return np.concatenate([[self.degree, *self.centre, self.scale_mm], self.coefficients])
 
-    @classmethod
-    def from_array(cls, values) -> "ChestWall":
-        v = np.asarray(values, float)
-        return cls(v[4:], int(v[0]), v[1:3], float(v[3]))
-
 
 def fit_chest_wall(points: np.ndarray, degree: int = 2, mask: np.ndarray | None = None,
                    front_mm: float = 4.0, back_mm: float = 8.0, keep: float = 0.5,

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from breastplan import BadInputError
+from breastplan import BadInputError, require_file
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 END_OF_RECORDING = 2**31 - 1
@@ -55,6 +55,9 @@ def write_recording(path: str | Path, depth, K: np.ndarray, fps: float = 30.0) -
     """Record depth frames ((N, H, W) or a sequence of (H, W); uint16 mm) with intrinsics K, atomically."""
     dai = depthai()
     path = Path(path)
+    frames = [np.ascontiguousarray(frame, dtype=np.uint16) for frame in depth]
+    if not frames:
+        raise ValueError("a recording needs at least one depth frame")
     part = path.with_name(f".{path.stem}.part{path.suffix or '.mcap'}")
     pipeline = dai.Pipeline(False)
     rec = pipeline.create(dai.node.RecordMessage)
@@ -63,17 +66,16 @@ def write_recording(path: str | Path, depth, K: np.ndarray, fps: float = 30.0) -
     queue = rec.input.createInputQueue(maxSize=4, blocking=True)
     pipeline.start()
     try:
-        for i, frame in enumerate(depth):
-            last = np.ascontiguousarray(frame, dtype=np.uint16)
-            queue.send(_img_frame(dai, last, K, i, i / fps))
-        queue.send(_img_frame(dai, last, K, END_OF_RECORDING, (i + 1) / fps))
+        for i, frame in enumerate(frames + frames[-1:]):  # the last frame again, as the end marker
+            seq = i if i < len(frames) else END_OF_RECORDING
+            queue.send(_img_frame(dai, frame, K, seq, i / fps))
         while rec.input.has():  # the recorder drains asynchronously; stopping early loses frames
             time.sleep(0.005)
         time.sleep(SETTLE_S)
     finally:
         pipeline.stop()
         pipeline.wait()
-    os.replace(part, path)
+    os.replace(part, path)  # only a whole recording gets its name
     return path
 
 
@@ -96,9 +98,10 @@ def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFram
     """Replay the RAW16 depth frames of an MCAP recording (at most `max_frames`)."""
     path = Path(path)
     _check_mcap(path)
+    raw16 = depthai().ImgFrame.Type.RAW16
     frames, K, messages = [], None, 0
     for messages, msg in enumerate(_replay(path), 1):
-        if (type(msg).__name__ != "ImgFrame" or msg.getType() != depthai().ImgFrame.Type.RAW16
+        if (type(msg).__name__ != "ImgFrame" or msg.getType() != raw16
                 or msg.getSequenceNum() == END_OF_RECORDING):
             continue
         depth = np.array(msg.getFrame(), dtype=np.uint16, copy=True)
@@ -122,13 +125,7 @@ def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFram
 
 
 def _check_mcap(path: Path) -> None:
-    if not path.exists():
-        raise BadInputError(path, "no such file")
-    if not path.is_file():
-        raise BadInputError(path, "is not a file")
-    size = path.stat().st_size
-    if size == 0:
-        raise BadInputError(path, "is empty")
+    size = require_file(path, "recording").stat().st_size
     with open(path, "rb") as fh:
         head = fh.read(len(MCAP_MAGIC))
         fh.seek(max(0, size - len(MCAP_MAGIC)))
