@@ -94,13 +94,13 @@ def ingest_cloud(cloud: ScanCloud, side: str, voxel: float = 2.0, roi=None, nipp
     """A scan file's points → the breast of `side`; the viewing direction comes from the torso's shape."""
     clock = clock or Clock()
     with clock("viewing frame"):
-        view = np.eye(4) if cloud.frame_hint == "camera-opencv" else viewing_frame(cloud.points, up)
+        view = np.eye(4) if cloud.frame_hint == "camera-opencv" else viewing_frame(cloud.points, up, path)
         points = transform_points(view, cloud.points)
         viewer = points.mean(0) - [0.0, 0.0, 2000.0]
     return isolate(points, view, side, voxel, roi, nipple, path, clock, viewer=viewer)
 
 
-def viewing_frame(points: np.ndarray, up: str) -> np.ndarray:
+def viewing_frame(points: np.ndarray, up: str, path=None) -> np.ndarray:
     """(4, 4) input → viewing frame for a frontal scan: z along the torso's thinnest axis, away
     from the viewer (the torso bulges towards the viewer), y opposite to the input's `up` axis."""
     centred = points - points.mean(0)
@@ -113,7 +113,7 @@ def viewing_frame(points: np.ndarray, up: str) -> np.ndarray:
     up_vec[UP_AXES[up]] = -1.0 if up.startswith("-") else 1.0
     up_vec -= np.dot(up_vec, anterior) * anterior
     if np.linalg.norm(up_vec) < 0.3:
-        raise ValueError(f"the up axis {up} is nearly the viewing direction of this scan")
+        raise BadInputError(path, f"its up axis {up} is nearly its viewing direction; pass another --up")
     y = -up_vec / np.linalg.norm(up_vec)
     z = -anterior
     T = np.eye(4)

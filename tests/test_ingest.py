@@ -189,3 +189,12 @@ def test_case_folder_artefacts(scanned, tmp_path):
     assert any("camera-opencv" in c for c in camera.comments) and len(camera.points) > 10 * len(ply.points)
     # voxel downsampling: no two points closer than the voxel's own diagonal spacing allows
     assert len(result.points) < len(result.torso_camera) / 10
+
+
+def test_an_up_axis_along_the_viewing_direction_is_bad_input():
+    from breastplan import BadInputError
+    from breastplan.ingest.pipeline import viewing_frame
+    rng = np.random.default_rng(0)
+    slab = np.column_stack([rng.uniform(-150, 150, 2000), rng.uniform(-250, 250, 2000), rng.normal(0, 5, 2000)])
+    with pytest.raises(BadInputError, match="scan.ply: its up axis"):
+        viewing_frame(slab, "+z", "scan.ply")
