@@ -54,22 +54,33 @@ class DepthFrames:
 def write_recording(path: str | Path, depth, K: np.ndarray, fps: float = 30.0) -> Path:
     """Record depth frames ((N, H, W) or a sequence of (H, W); uint16 mm) with intrinsics K, atomically."""
     dai = depthai()
-    path = Path(path)
     frames = [np.ascontiguousarray(frame, dtype=np.uint16) for frame in depth]
     if not frames:
         raise ValueError("a recording needs at least one depth frame")
+    messages = [_img_frame(dai, frame, K, i, i / fps) for i, frame in enumerate(frames)]
+    marker = _img_frame(dai, frames[-1], K, END_OF_RECORDING, len(frames) / fps)  # the last frame again
+    return record_messages(path, messages + [marker])
+
+
+def record_messages(path: str | Path, messages) -> Path:
+    """Record depthai messages through RecordMessage into an MCAP file, atomically.
+
+    The recorder writes a message only once it has taken the next, so the caller ends with
+    a marker message (readers skip it) to have every real message written.
+    """
+    dai = depthai()
+    path = Path(path)
     part = path.with_name(f".{path.stem}.part{path.suffix or '.mcap'}")
     pipeline = dai.Pipeline(False)
     rec = pipeline.create(dai.node.RecordMessage)
     rec.setRecordFile(str(part))
-    rec.input.setBlocking(True)  # a non-blocking input drops frames sent faster than they are written
+    rec.input.setBlocking(True)  # a non-blocking input drops messages sent faster than they are written
     queue = rec.input.createInputQueue(maxSize=4, blocking=True)
     pipeline.start()
     try:
-        for i, frame in enumerate(frames + frames[-1:]):  # the last frame again, as the end marker
-            seq = i if i < len(frames) else END_OF_RECORDING
-            queue.send(_img_frame(dai, frame, K, seq, i / fps))
-        while rec.input.has():  # the recorder drains asynchronously; stopping early loses frames
+        for message in messages:
+            queue.send(message)
+        while rec.input.has():  # the recorder drains asynchronously; stopping early loses messages
             time.sleep(0.005)
         time.sleep(SETTLE_S)
     finally:

@@ -6,7 +6,7 @@ import pytest
 
 from breastplan import read_ply, write_ply
 from breastplan.ingest import synthetic
-from breastplan.ingest.recording import depthai, write_recording
+from breastplan.ingest.recording import END_OF_RECORDING, depthai, record_messages, write_recording
 
 from clitools import assert_bad_input, run
 
@@ -45,22 +45,16 @@ def test_ingest_writes_the_case_folder(cli, recording, tmp_path):
 def write_gray8_recording(path):
     """An MCAP of 8-bit images: a recording, but without depth frames."""
     dai = depthai()
-    pipeline = dai.Pipeline(False)
-    rec = pipeline.create(dai.node.RecordMessage)
-    rec.setRecordFile(str(path))
-    rec.input.setBlocking(True)
-    queue = rec.input.createInputQueue(maxSize=4, blocking=True)
-    pipeline.start()
-    frame = dai.ImgFrame()
-    frame.setType(dai.ImgFrame.Type.GRAY8)
-    frame.setWidth(64)
-    frame.setHeight(40)
-    frame.setFrame(np.full((40, 64), 128, np.uint8))
-    queue.send(frame)
-    while rec.input.has():
-        pass
-    pipeline.stop()
-    pipeline.wait()
+    frames = []
+    for seq in (0, END_OF_RECORDING):
+        frame = dai.ImgFrame()
+        frame.setType(dai.ImgFrame.Type.GRAY8)
+        frame.setWidth(64)
+        frame.setHeight(40)
+        frame.setFrame(np.full((40, 64), 128, np.uint8))
+        frame.setSequenceNum(seq)
+        frames.append(frame)
+    record_messages(path, frames)
 
 
 @pytest.fixture(scope="module")
@@ -97,14 +91,22 @@ def bad_inputs(recording, tmp_path_factory):
     return folder, cases
 
 
-@pytest.mark.parametrize("case", [
-    "missing file", "empty file", "truncated PLY", "NaN coordinates", "not an MCAP", "MCAP without depth frames",
-    "all-zero depth", "frames change size", "fewer than 500 points after cropping", "no mound on the requested side"])
+SENTENCES = {
+    "missing file": "no such file", "empty file": "is empty", "truncated PLY": "truncated",
+    "NaN coordinates": "NaN", "not an MCAP": "is not an MCAP recording",
+    "MCAP without depth frames": "without RAW16 depth frames", "all-zero depth": "are all zero",
+    "frames change size": "change size", "fewer than 500 points after cropping": "fewer than 500",
+    "no mound on the requested side": "no breast mound found on the right side"}
+
+
+@pytest.mark.parametrize("case", list(SENTENCES))
 def test_bad_input_exits_3_and_writes_nothing(cli, bad_inputs, case):
     folder, cases = bad_inputs
     path, extra = cases[case]
     args = ["ingest", path, "--out", folder / "out"] + (extra if "--side" in extra else ["--side", "left"] + extra)
-    assert_bad_input(run(cli, *args), path, folder)
+    res = run(cli, *args)
+    assert_bad_input(res, path, folder)
+    assert SENTENCES[case] in res.stderr
 
 
 def test_scan_declared_mm_whose_extent_says_metres(cli, recording, tmp_path):
