@@ -1,12 +1,17 @@
 """Free-form deformation lattice fitted to a breast cloud (MODEL.md §6, Bardinet et al. 1998).
 
-The model surface (a triangle mesh, mm) sits in a box of n×n×n control points; each vertex
-has fixed lattice coordinates and a row of the trivariate Bernstein basis, precomputed once,
-so the deformed surface is B·P. Fitting alternates *match* (each data point ↔ its closest
-point on the current surface, as barycentric weights of a triangle's vertices) and *solve*
-(P = argmin ‖W B P − D‖² + λ‖L (P − P0)‖², L the lattice Laplacian), until the mean
-normalised residual ‖d − m‖/‖d‖ is below 0.0015 (thesis stopping rule) or the iterations or
-time run out.
+The model surface (a closed triangle mesh, mm, breast frame) sits in a box of n×n×n control
+points; each vertex has fixed lattice coordinates and a row of the trivariate Bernstein basis,
+precomputed once, so the deformed surface is B·P. Fitting alternates *match* (each data point
+↔ its closest point on the current surface) and *solve* (a damped Gauss–Newton step on the
+control points: the distance along the surface normal, a small weight on the tangential
+offset, and λ‖L(P − P0)‖² with L the lattice Laplacian) until the mean normalised residual
+‖d − m‖/‖d‖ (MODEL.md §7's normalisation by ‖o‖) is below 0.0015 (thesis stopping rule), the
+residual stops improving, or the iterations or time run out.
+
+Matching on the *closed* mesh holds the base cap to the data's base ring on the chest wall;
+the tangential weight is the Levenberg–Marquardt damping: raised after a step that made the
+fit worse (the step is undone), lowered after a good one.
 """
 from __future__ import annotations
 
@@ -19,6 +24,12 @@ from scipy.special import comb
 
 STOP_RESIDUAL = 0.0015
 MAX_ITERATIONS = 1000
+STALL = 1e-3
+"""Relative improvement below which a step counts as no progress (the fit has converged)."""
+FIT_POINTS = 2000
+"""Data points per solve (a seeded subset): 2000 surface points pin 375 lattice coordinates."""
+DAMPING = (0.01, 0.03, 1.0)
+"""Tangential weight: floor, start, ceiling."""
 
 
 def bernstein(n: int, s: np.ndarray) -> np.ndarray:
@@ -72,45 +83,94 @@ class Lattice:
 class FFDFit:
     lattice: Lattice
     vertices: np.ndarray       # (V, 3) fitted surface, mm
-    residual: float            # mean normalised residual at the end
+    residual: float            # mean normalised residual of every data point at the end
     residuals_mm: np.ndarray   # data ↔ surface distances at the end, mm
     iterations: int
     seconds: float
-    converged: bool
+    converged: bool            # met the stopping rule or stopped improving (not cut by a limit)
 
 
-def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 5, smoothness: float = 1e-3,
-            max_iterations: int = MAX_ITERATIONS, max_seconds: float = 30.0) -> FFDFit:
-    """Deform the surface (vertices, faces; mm) by an n³ lattice to fit data (N, 3) mm."""
+def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 5, smoothness: float = 1e-9,
+            max_iterations: int = MAX_ITERATIONS, max_seconds: float = 20.0) -> FFDFit:
+    """Deform the closed surface (vertices, faces; mm) by an n³ lattice to fit data (N, 3) mm."""
     start = time.perf_counter()
+    sub = data
+    if len(sub) > FIT_POINTS:
+        sub = sub[np.random.default_rng(0).choice(len(sub), FIT_POINTS, replace=False)]
     lattice = Lattice.around(np.vstack([data, vertices]), n)
     B = lattice.basis(vertices)
-    L = lattice.laplacian()
-    LtL = L.T @ L
-    norm = np.maximum(np.linalg.norm(data, axis=1), 1e-9)
+    K = n**3
+    LL = np.kron(np.eye(3), (lambda L: L.T @ L)(lattice.laplacian())) * smoothness * len(sub)
+    rest = lattice.rest.T.reshape(-1)                      # coordinate-major: x of every CP, then y, z
     faces32 = np.ascontiguousarray(faces, dtype=np.uint32)
-    current = vertices.copy()
-    residual, it = np.inf, 0
-    for it in range(1, max_iterations + 1):
-        tri, bary, dist = _closest(current, faces32, data)
-        residual = float(np.mean(dist / norm))
-        if residual < STOP_RESIDUAL or time.perf_counter() - start > max_seconds:
-            break
-        rows = np.einsum("nk,nkc->nc", bary, B[faces[tri]])        # basis rows of the matched surface points
-        A = rows.T @ rows + smoothness * len(data) * LtL
-        rhs = rows.T @ data + smoothness * len(data) * LtL @ lattice.rest
-        lattice.points = np.linalg.solve(A, rhs)
-        current = B @ lattice.points
-    return FFDFit(lattice, current, residual, dist, it, time.perf_counter() - start, residual < STOP_RESIDUAL)
+    norm = np.maximum(np.linalg.norm(sub, axis=1), 1e-9)
+    P, current, damping = rest.copy(), vertices.copy(), DAMPING[1]
+    match = _match(current, faces32, sub, B)
+    residual, it, stalled = np.mean(match[3] / norm), 0, False
+    while residual >= STOP_RESIDUAL and not stalled and it < max_iterations \
+            and time.perf_counter() - start < max_seconds:
+        it += 1
+        step = P + _step(match, sub, damping, LL, P - rest, K)
+        trial = B @ step.reshape(3, K).T
+        trial_match = _match(trial, faces32, sub, B)
+        trial_residual = np.mean(trial_match[3] / norm)
+        if trial_residual < residual:
+            stalled = trial_residual > (1 - STALL) * residual
+            P, current, match, residual = step, trial, trial_match, trial_residual
+            damping = max(damping / 2, DAMPING[0])
+        else:
+            stalled = damping >= DAMPING[2]
+            damping = min(damping * 4, DAMPING[2])
+    lattice.points = P.reshape(3, K).T
+    dist = _closest(current, faces32, data)[1]
+    final = float(np.mean(dist / np.maximum(np.linalg.norm(data, axis=1), 1e-9)))
+    converged = residual < STOP_RESIDUAL or stalled
+    return FFDFit(lattice, current, final, dist, it, time.perf_counter() - start, converged)
 
 
-def _closest(vertices: np.ndarray, faces: np.ndarray, data: np.ndarray):
-    """Closest surface point of each data point: triangle ids, barycentric weights (N, 3), distances."""
+def _step(match, data, damping, LL, offset, K):
+    """Gauss–Newton step ΔP (3K,) for the matched rows, normals and closest points."""
+    rows, normals, points, _ = match
+    W = (1 - damping**2) * normals[:, :, None] * normals[:, None, :] + damping**2 * np.eye(3)
+    M = np.empty((3 * K, 3 * K))
+    for c in range(3):
+        for e in range(c, 3):
+            G = (rows * W[:, c, e, None]).T @ rows
+            M[c * K:(c + 1) * K, e * K:(e + 1) * K] = G
+            M[e * K:(e + 1) * K, c * K:(c + 1) * K] = G.T
+    g = np.einsum("nce,ne->nc", W, data - points)
+    rhs = (rows.T @ g).T.reshape(-1) - LL @ offset
+    return np.linalg.solve(M + LL, rhs)
+
+
+def _match(vertices, faces, data, B):
+    """Closest points of data on the mesh: their basis rows, unit normals, points and distances."""
+    tri, dist, points, bary = _closest(vertices, faces, data, detail=True)
+    corners = faces[tri].astype(np.int64)
+    rows = np.einsum("nk,nkc->nc", bary, B[corners])
+    normals = np.einsum("nk,nkc->nc", bary, _vertex_normals(vertices, faces)[corners])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    return rows, normals, points, dist
+
+
+def _closest(vertices, faces, data, detail: bool = False):
+    """open3d closest points: triangle ids and distances (and points, barycentric weights)."""
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(faces))
     hit = scene.compute_closest_points(o3d.core.Tensor(data.astype(np.float32)))
     tri = hit["primitive_ids"].numpy().astype(np.int64)
+    points = hit["points"].numpy().astype(float)
+    dist = np.linalg.norm(points - data, axis=1)
+    if not detail:
+        return tri, dist
     uv = hit["primitive_uvs"].numpy().astype(float)
-    bary = np.column_stack([1 - uv.sum(1), uv[:, 0], uv[:, 1]])
-    dist = np.linalg.norm(hit["points"].numpy() - data, axis=1)
-    return tri, bary, dist
+    return tri, dist, points, np.column_stack([1 - uv.sum(1), uv[:, 0], uv[:, 1]])
+
+
+def _vertex_normals(vertices, faces) -> np.ndarray:
+    """(V, 3) area-weighted vertex normals of an outward-oriented mesh."""
+    v = vertices[faces.astype(np.int64)]
+    fn = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    out = np.stack([sum(np.bincount(faces[:, k], fn[:, c], minlength=len(vertices)) for k in range(3))
+                    for c in range(3)], axis=1)
+    return out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)

@@ -22,6 +22,9 @@ EPS_BOUNDS = (0.3, 2.0)
 FIT_POINTS = 3000
 """Larger clouds are fitted on a seeded random subset of this size (the residuals of all
 points are reported): 3000 surface points pin 7 shape and 6 pose parameters to ≈ 0.1 %."""
+MAX_TURN_RAD = 0.5
+"""Bound on each rotation-vector component (≈ 29°): the breast frame already fixes the axes, and
+a free turn about z would let the fit trade ptosis for turn on a near-round breast."""
 CHEST_PRIOR_WEIGHT = 30.0
 """Weight of the prior residuals (tilt of the base, rad; height of the base, mu) per √point."""
 
@@ -108,6 +111,7 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
     lower = np.full(len(x0), -np.inf)
     upper = np.full(len(x0), np.inf)
     lower[5:7], upper[5:7] = EPS_BOUNDS
+    lower[7:10], upper[7:10] = -MAX_TURN_RAD, MAX_TURN_RAD
     x0 = np.clip(x0, lower + 1e-9, upper - 1e-9)
     sol = least_squares(residuals, x0, bounds=(lower, upper), loss=loss, f_scale=float(to_model_units(f_scale_mm)),
                         x_scale="jac", max_nfev=200)
