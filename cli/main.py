@@ -14,7 +14,7 @@ from breastplan.deform.global_deformations import KIND_PARAMS, NEEDS_PRIMITIVE, 
 from breastplan.learn.databases import Database, build_database, grid_for
 from breastplan.learn.datasets import build_dataset
 
-from . import scan_commands  # noqa: F401  (registers scan-synth and ingest)
+from . import fit_command, scan_commands  # noqa: F401  (register fit, scan-synth and ingest)
 from .app import JSON, app, parse_pairs
 from .output import Timer, progress, report, stderr, usage_error
 

@@ -28,6 +28,8 @@ STALL = 1e-3
 """Relative improvement below which a step counts as no progress (the fit has converged)."""
 FIT_POINTS = 2000
 """Data points per solve (a seeded subset): 2000 surface points pin 375 lattice coordinates."""
+BASE_WEIGHT = 0.1
+"""Weight of the base cap's heights, as a share of the data's weight."""
 DAMPING = (0.01, 0.03, 1.0)
 """Tangential weight: floor, start, ceiling."""
 
@@ -91,8 +93,12 @@ class FFDFit:
 
 
 def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 5, smoothness: float = 1e-9,
-            max_iterations: int = MAX_ITERATIONS, max_seconds: float = 20.0) -> FFDFit:
-    """Deform the closed surface (vertices, faces; mm) by an n³ lattice to fit data (N, 3) mm."""
+            base: np.ndarray | None = None, max_iterations: int = MAX_ITERATIONS, max_seconds: float = 20.0) -> FFDFit:
+    """Deform the closed surface (vertices, faces; mm) by an n³ lattice to fit data (N, 3) mm.
+
+    `base`: indices of vertices held to their height (z) — the base cap on the chest wall, which
+    no data point sees inside its rim.
+    """
     start = time.perf_counter()
     sub = data
     if len(sub) > FIT_POINTS:
@@ -101,30 +107,43 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
     B = lattice.basis(vertices)
     K = n**3
     LL = np.kron(np.eye(3), (lambda L: L.T @ L)(lattice.laplacian())) * smoothness * len(sub)
+    if base is not None:                                   # BASE_WEIGHT·‖z(B_base P) − z_rest‖² on the z block
+        Bb = B[base]
+        LL[2 * K:, 2 * K:] += BASE_WEIGHT * len(sub) / len(base) * Bb.T @ Bb
     rest = lattice.rest.T.reshape(-1)                      # coordinate-major: x of every CP, then y, z
+    # both penalties are quadratic in P − rest (B·rest = vertices), so LL @ (P − rest) is their gradient
     faces32 = np.ascontiguousarray(faces, dtype=np.uint32)
     norm = np.maximum(np.linalg.norm(sub, axis=1), 1e-9)
     P, current, damping = rest.copy(), vertices.copy(), DAMPING[1]
     match = _match(current, faces32, sub, B)
     residual, it, stalled = np.mean(match[3] / norm), 0, False
-    while residual >= STOP_RESIDUAL and not stalled and it < max_iterations \
-            and time.perf_counter() - start < max_seconds:
-        it += 1
-        step = P + _step(match, sub, damping, LL, P - rest, K)
-        trial = B @ step.reshape(3, K).T
-        trial_match = _match(trial, faces32, sub, B)
-        trial_residual = np.mean(trial_match[3] / norm)
-        if trial_residual < residual:
-            stalled = trial_residual > (1 - STALL) * residual
-            P, current, match, residual = step, trial, trial_match, trial_residual
-            damping = max(damping / 2, DAMPING[0])
-        else:
-            stalled = damping >= DAMPING[2]
-            damping = min(damping * 4, DAMPING[2])
+    target = STOP_RESIDUAL                                 # on the subset; tightened if the whole cloud misses it
+    data_norm = np.maximum(np.linalg.norm(data, axis=1), 1e-9)
+
+    def budget() -> bool:
+        return it < max_iterations and time.perf_counter() - start < max_seconds
+
+    while True:
+        while residual >= target and not stalled and budget():
+            it += 1
+            step = P + _step(match, sub, damping, LL, P - rest, K)
+            trial = B @ step.reshape(3, K).T
+            trial_match = _match(trial, faces32, sub, B)
+            trial_residual = np.mean(trial_match[3] / norm)
+            if trial_residual < residual:
+                stalled = trial_residual > (1 - STALL) * residual
+                P, current, match, residual = step, trial, trial_match, trial_residual
+                damping = max(damping / 2, DAMPING[0])
+            else:
+                stalled = damping >= DAMPING[2]
+                damping = min(damping * 4, DAMPING[2])
+        dist = _closest(current, faces32, data)[1]
+        final = float(np.mean(dist / data_norm))
+        if final < STOP_RESIDUAL or residual >= target or stalled or not budget():
+            break
+        target *= 0.9
     lattice.points = P.reshape(3, K).T
-    dist = _closest(current, faces32, data)[1]
-    final = float(np.mean(dist / np.maximum(np.linalg.norm(data, axis=1), 1e-9)))
-    converged = residual < STOP_RESIDUAL or stalled
+    converged = final < STOP_RESIDUAL or stalled
     return FFDFit(lattice, current, final, dist, it, time.perf_counter() - start, converged)
 
 

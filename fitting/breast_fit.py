@@ -1,0 +1,123 @@
+"""The breast model fitted to a breast-frame cloud: superquadric (+ global deformations), then FFD.
+
+`fit_breast` runs the two stages of MODEL.md §2–§3 and §6; `BreastFit.save` writes `fit.npz`
+(`breastplan.fit/1`) and `fit.ply` (the fitted closed surface: mm, breast frame, base cap on
+the chest wall); `load_fit` reads the NPZ back.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from breastplan import BadInputError, PARAM_NAMES, load_npz, save_npz, to_mm, write_ply
+from breastplan.meshes import mesh_volume
+from breastplan.deform.global_deformations import KIND_PARAMS
+
+from .ffd import STOP_RESIDUAL, FFDFit, fit_ffd
+from .superquadric import SuperquadricFit, fit_superquadric
+
+SCHEMA = "breastplan.fit/1"
+MESH_GRID = (40, 96)
+"""(n_u, n_v) of the model mesh: 3 841 vertices, about 2 mm apart on a 450 cc breast."""
+MAX_RESIDUAL = 0.05
+"""A fit whose mean normalised residual stays above 5 % describes no breast surface."""
+
+_SPEC = {"primitive": ("f", (7,)), "pose": ("f", (4, 4)), "deformation": ("f", (12,)),
+         "lattice_shape": ("iu", (3,)), "lattice_box_mm": ("f", (2, 3)),
+         "control_rest_mm": ("f", ("cp", 3)), "control_fitted_mm": ("f", ("cp", 3)),
+         "residuals_mm": ("f", (4,)), "normalised_residual": ("f", ()),
+         "volume_cc_primitive": ("f", ()), "volume_cc_mesh": ("f", ()),
+         "iterations": ("iu", (2,)), "seconds": ("f", (2,))}
+RESIDUAL_STATS = ("mean", "rms", "p95", "max")
+
+
+@dataclass
+class BreastFit:
+    """A fitted breast model: the superquadric stage, the FFD stage and the closed mesh (mm)."""
+
+    superquadric: SuperquadricFit
+    ffd: FFDFit
+    faces: np.ndarray              # (F, 3) of the closed mesh; vertices are ffd.vertices
+
+    @property
+    def vertices(self) -> np.ndarray:
+        return self.ffd.vertices
+
+    def residual_stats(self) -> dict[str, float]:
+        """Data ↔ fitted-surface distances, mm."""
+        r = self.ffd.residuals_mm
+        return dict(zip(RESIDUAL_STATS, map(float, (r.mean(), np.sqrt(np.mean(r * r)), np.percentile(r, 95), r.max()))))
+
+    @property
+    def volume_cc(self) -> float:
+        """Volume enclosed by the fitted closed surface (cc)."""
+        return mesh_volume(self.vertices, self.faces) / 1000.0
+
+    @property
+    def seconds(self) -> float:
+        return self.superquadric.seconds + self.ffd.seconds
+
+    def params(self) -> dict[str, float]:
+        """Primitive parameters (model units) and the fitted deformation parameters."""
+        out = self.superquadric.primitive.as_dict()
+        names = [n for kind in KIND_PARAMS.values() for n in kind]
+        out.update({n: float(v) for n, v in zip(names, self.superquadric.deformation.as_vector()) if v != 0.0})
+        return out
+
+    def save(self, folder: str | Path) -> dict[str, Path]:
+        """Write fit.npz and fit.ply into `folder`."""
+        folder = Path(folder)
+        lattice, sq = self.ffd.lattice, self.superquadric
+        arrays = {
+            "primitive": sq.primitive.as_array(), "pose": sq.pose, "deformation": sq.deformation.as_vector(),
+            "lattice_shape": np.full(3, lattice.n, dtype=np.int64), "lattice_box_mm": np.stack([lattice.lo, lattice.hi]),
+            "control_rest_mm": lattice.rest, "control_fitted_mm": lattice.points,
+            "residuals_mm": np.array(list(self.residual_stats().values())),
+            "normalised_residual": np.float64(self.ffd.residual),
+            "volume_cc_primitive": np.float64(sq.primitive.volume_cc), "volume_cc_mesh": np.float64(self.volume_cc),
+            "iterations": np.array([sq.iterations, self.ffd.iterations], dtype=np.int64),
+            "seconds": np.array([sq.seconds, self.ffd.seconds]),
+        }
+        meta = {"primitive": list(PARAM_NAMES), "residuals_mm": list(RESIDUAL_STATS), "iterations": ["superquadric", "ffd"],
+                "pose": "primitive frame → breast frame, mm", "stopping_rule": STOP_RESIDUAL}
+        stats = self.residual_stats()
+        comments = ["breastplan fit: fitted breast surface, mm, breast frame",
+                    f"volume_cc {self.volume_cc:.2f} rms_mm {stats['rms']:.3f} lattice {lattice.n}^3"]
+        return {"fit_npz": save_npz(folder / "fit.npz", SCHEMA, arrays, meta=meta),
+                "fit_ply": write_ply(folder / "fit.ply", self.vertices, faces=self.faces, comments=comments)}
+
+
+def fit_breast(points_mm: np.ndarray, lattice: int = 5, deformations: tuple[str, ...] = (), *, path=None,
+               max_iterations: int = 1000, max_seconds: float = 20.0) -> BreastFit:
+    """Fit the breast model to (N, 3) points (mm, breast frame, base on z = 0).
+
+    Raises BadInputError naming `path` for unusable points or a fit that does not converge.
+    """
+    sq = fit_superquadric(points_mm, deformations=deformations, path=path)
+    vertices, faces = model_mesh(sq)
+    base = np.r_[np.arange(MESH_GRID[1]), len(vertices) - 1]   # the rim ring and the base centre
+    ffd = fit_ffd(np.asarray(points_mm, float), vertices, faces, n=lattice, base=base,
+                  max_iterations=max_iterations, max_seconds=max_seconds)
+    if not ffd.converged or not ffd.residual < MAX_RESIDUAL:
+        why = "did not converge" if not ffd.converged else "found no breast surface"
+        raise BadInputError(path, f"gives a fit that {why}: mean normalised residual {ffd.residual:.4f} after "
+                                  f"{ffd.iterations} FFD iterations (stopping rule {STOP_RESIDUAL})")
+    return BreastFit(sq, ffd, faces)
+
+
+def model_mesh(sq: SuperquadricFit, grid: tuple[int, int] = MESH_GRID) -> tuple[np.ndarray, np.ndarray]:
+    """Closed mesh (mm, breast frame) of the fitted primitive, deformed and posed."""
+    vertices, faces = sq.primitive.mesh(*grid, closed=True)
+    vertices = to_mm(sq.deformation.apply(vertices, sq.primitive))
+    return vertices @ sq.pose[:3, :3].T + sq.pose[:3, 3], faces
+
+
+def load_fit(path: str | Path):
+    """Load and validate fit.npz (an Artefact: arrays by name plus .meta)."""
+    art = load_npz(path, SCHEMA, _SPEC)
+    n = art["lattice_shape"]
+    if len(set(n.tolist())) != 1 or art["control_rest_mm"].shape[0] != int(np.prod(n)):
+        raise BadInputError(path, "has a lattice whose control points do not match its shape")
+    return art
