@@ -28,8 +28,6 @@ STALL = 1e-3
 """Relative improvement below which a step counts as no progress (the fit has converged)."""
 FIT_POINTS = 2000
 """Data points per solve (a seeded subset): 2000 surface points pin 375 lattice coordinates."""
-BASE_WEIGHT = 0.1
-"""Weight of the base cap's heights, as a share of the data's weight."""
 DAMPING = (0.01, 0.03, 1.0)
 """Tangential weight: floor, start, ceiling."""
 
@@ -93,11 +91,12 @@ class FFDFit:
 
 
 def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 5, smoothness: float = 1e-9,
-            base: np.ndarray | None = None, max_iterations: int = MAX_ITERATIONS, max_seconds: float = 20.0) -> FFDFit:
+            held: np.ndarray | None = None, max_iterations: int = MAX_ITERATIONS,
+            max_seconds: float = 20.0) -> FFDFit:
     """Deform the closed surface (vertices, faces; mm) by an n³ lattice to fit data (N, 3) mm.
 
-    `base`: indices of vertices held to their height (z) — the base cap on the chest wall, which
-    no data point sees inside its rim.
+    `held` (V, 3): weight, as a share of the data's total weight, that holds each vertex
+    coordinate where it starts — for the parts of the surface no data point sees.
     """
     start = time.perf_counter()
     sub = data
@@ -107,9 +106,8 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
     B = lattice.basis(vertices)
     K = n**3
     LL = np.kron(np.eye(3), (lambda L: L.T @ L)(lattice.laplacian())) * smoothness * len(sub)
-    if base is not None:                                   # BASE_WEIGHT·‖z(B_base P) − z_rest‖² on the z block
-        Bb = B[base]
-        LL[2 * K:, 2 * K:] += BASE_WEIGHT * len(sub) / len(base) * Bb.T @ Bb
+    for c in range(3 if held is not None else 0):          # Σ_v held_vc·(B_v (P_c − rest_c))², per coordinate
+        LL[c * K:(c + 1) * K, c * K:(c + 1) * K] += len(sub) * (B * held[:, c, None]).T @ B
     rest = lattice.rest.T.reshape(-1)                      # coordinate-major: x of every CP, then y, z
     # both penalties are quadratic in P − rest (B·rest = vertices), so LL @ (P − rest) is their gradient
     faces32 = np.ascontiguousarray(faces, dtype=np.uint32)

@@ -25,6 +25,9 @@ points are reported): 3000 surface points pin 7 shape and 6 pose parameters to �
 MAX_TURN_RAD = 0.5
 """Bound on each rotation-vector component (≈ 29°): the breast frame already fixes the axes, and
 a free turn about z would let the fit trade ptosis for turn on a near-round breast."""
+SEMI_AXIS_RANGE = (0.2, 1.5)
+"""Semi-axes bounded to this range × the largest initial one: a side the scanner did not see
+(the medial side, cropped between the breasts) would otherwise let its semi-axis run away."""
 CHEST_PRIOR_WEIGHT = 30.0
 """Weight of the prior residuals (tilt of the base, rad; height of the base, mu) per √point."""
 
@@ -112,6 +115,8 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
     upper = np.full(len(x0), np.inf)
     lower[5:7], upper[5:7] = EPS_BOUNDS
     lower[7:10], upper[7:10] = -MAX_TURN_RAD, MAX_TURN_RAD
+    size = np.log(np.exp(x0[:5]).max())
+    lower[:5], upper[:5] = size + np.log(SEMI_AXIS_RANGE[0]), size + np.log(SEMI_AXIS_RANGE[1])
     x0 = np.clip(x0, lower + 1e-9, upper - 1e-9)
     sol = least_squares(residuals, x0, bounds=(lower, upper), loss=loss, f_scale=float(to_model_units(f_scale_mm)),
                         x_scale="jac", max_nfev=200)

@@ -1,0 +1,147 @@
+"""The whole fit (Fitting §2–§4): superquadric + FFD lattice, fit.npz / fit.ply and the `fit` command.
+
+Truths: the thesis stopping rule on database breasts, the closed-form volume of shear-deformed
+primitives (ptosis, turn and turn-top keep it), the synthetic scanner's true breasts.
+"""
+import json
+
+import numpy as np
+import open3d as o3d
+import pytest
+
+from breastplan import Primitive, read_ply, to_mm, transform_points, write_ply
+from breastplan.deform.global_deformations import Deformation
+from breastplan.fitting.breast_fit import MESH_GRID, fit_breast, load_fit
+from breastplan.fitting.ffd import STOP_RESIDUAL
+from breastplan.meshes import mesh_volume
+
+from clitools import assert_bad_input, run
+
+
+@pytest.fixture(scope="module")
+def database():
+    from breastplan.learn.databases import build_database
+    return build_database("S")
+
+
+@pytest.mark.parametrize("condition,breast", [("ptosis b0>b1", 3), ("turn c1>c0", 40), ("ptosis b1>=b0", 57)])
+def test_ffd_of_a_degree_8_database_breast_meets_the_thesis_stopping_rule(database, condition, breast):
+    from breastplan.learn.datasets import build_dataset
+    ds = build_dataset(database, condition, 8)
+    k = int(np.flatnonzero((ds.row == 7) & (ds.breast == breast))[0])
+    fit = fit_breast(ds.deformed_points(k))
+    assert fit.ffd.converged and fit.ffd.residual < STOP_RESIDUAL
+    assert fit.ffd.lattice.points.shape == (125, 3)
+
+
+@pytest.mark.parametrize("deformation", [Deformation(ptosis=(1.2, 0.3)), Deformation(turn=(0.6, 0.2)),
+                                         Deformation(turn_top=(0.5, 0.2))])
+def test_fitted_volume_is_the_closed_form_volume_of_a_shear_deformed_primitive(deformation):
+    P = Primitive(10, 11, 9.5, 10.5, 9, 0.9, 1.0)
+    fit = fit_breast(to_mm(deformation.apply(P.sample(100, 100), P)))
+    assert abs(fit.volume_cc / P.volume_cc - 1) <= 0.01
+    assert fit.residual_stats()["rms"] < 0.3
+
+
+def _edges_shared_twice(faces):
+    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    return np.all(np.unique(e, axis=0, return_counts=True)[1] == 2)
+
+
+def test_fit_of_ingested_synthetic_scans_is_within_1_mm_of_the_true_breast_and_3_percent_in_volume():
+    from breastplan.ingest import synthetic
+    from breastplan.ingest.pipeline import ingest_frames
+    from breastplan.ingest.recording import DepthFrames
+
+    scene = synthetic.make_scene(2, tilt_deg=10.0)
+    frames = DepthFrames(synthetic.depth_frames(scene, 10, 2), scene.K, "synthetic")
+    for side in synthetic.SIDES:
+        scan = ingest_frames(frames, side)
+        fit = fit_breast(scan.points)
+        breast = scene.breasts[side]
+        V, F = breast.surface()
+        truth = o3d.t.geometry.RaycastingScene()
+        truth.add_triangles(o3d.core.Tensor(transform_points(scene.camera_from_breast(side), V).astype(np.float32)),
+                            o3d.core.Tensor(F.astype(np.uint32)))
+        side_vertices = fit.vertices[MESH_GRID[1]:-1]                     # all but the base cap
+        camera = transform_points(np.linalg.inv(scan.camera_to_breast), side_vertices)
+        d = truth.compute_distance(o3d.core.Tensor(camera.astype(np.float32))).numpy()
+        assert np.sqrt(np.mean(d ** 2)) <= 1.0                            # Fitting §5
+        assert abs(fit.volume_cc / breast.primitive.volume_cc - 1) <= 0.03  # its deformations are shears
+        assert _edges_shared_twice(fit.faces)                             # closed, watertight
+
+
+@pytest.fixture(scope="module")
+def case(tmp_path_factory, cli):
+    folder = tmp_path_factory.mktemp("case")
+    res = run(cli, "ingest", "examples/sample.mcap", "--side", "left", "--out", folder)
+    assert res.returncode == 0, res.stderr
+    return folder
+
+
+def test_fit_command_writes_the_artefacts_it_reports(cli, case):
+    res = run(cli, "fit", case, "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert {"volume_cc", "rms_mm", "params", "seconds"} <= set(out)
+    mesh = read_ply(case / "fit.ply")
+    assert _edges_shared_twice(mesh.faces)
+    assert mesh_volume(mesh.points, mesh.faces) / 1000 == pytest.approx(out["volume_cc"], abs=0.01)
+    art = load_fit(case / "fit.npz")
+    assert art["control_fitted_mm"].shape == art["control_rest_mm"].shape == (125, 3)
+    assert art["residuals_mm"][1] == pytest.approx(out["rms_mm"], abs=1e-4)
+    assert art["volume_cc_mesh"] == pytest.approx(out["volume_cc"], abs=0.01)
+    assert Primitive.from_array(art["primitive"]).a1 == pytest.approx(out["params"]["a1"], abs=1e-5)
+    points = read_ply(case / "scan.ply").points
+    assert np.sqrt(np.mean(np.square(_distances(mesh, points)))) == pytest.approx(out["rms_mm"], rel=0.02)
+
+
+def _distances(mesh, points):
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(mesh.points.astype(np.float32)), o3d.core.Tensor(mesh.faces.astype(np.uint32)))
+    return scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy()
+
+
+def test_fit_command_on_a_ply_writes_next_to_it_and_fits_deformations(cli, tmp_path):
+    P = Primitive(10, 11, 9.5, 10.5, 9, 0.9, 1.0)
+    write_ply(tmp_path / "breast.ply", to_mm(Deformation(ptosis=(1.0, 0.3)).apply(P.sample(80, 80), P)))
+    res = run(cli, "fit", tmp_path / "breast.ply", "--deformations", "ptosis", "--lattice", "4", "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert out["params"]["b0"] == pytest.approx(1.0, abs=0.03) and out["params"]["b1"] == pytest.approx(0.3, abs=0.03)
+    assert load_fit(tmp_path / "fit.npz")["control_rest_mm"].shape == (64, 3)
+
+
+def _cloud(tmp_path, points):
+    write_ply(tmp_path / "in.ply", points)
+    return tmp_path / "in.ply"
+
+
+SENTENCES = {"missing": "no such file", "not a PLY": "neither a PLY file nor a case folder",
+             "few": "at least 50", "collinear": "coplanar or collinear", "metres": "is it in metres",
+             "no convergence": "did not converge: mean normalised residual"}
+
+
+@pytest.mark.parametrize("problem", list(SENTENCES))
+def test_bad_input_exits_3_naming_the_file_and_writes_nothing(cli, tmp_path, problem):
+    P = Primitive(10, 11, 9.5, 10.5, 9, 0.9, 1.0)
+    args = []
+    if problem == "missing":
+        path = tmp_path / "absent.ply"
+    elif problem == "not a PLY":
+        path = tmp_path / "scan.txt"
+        path.write_text("1 2 3\n")
+    elif problem == "few":
+        path = _cloud(tmp_path, to_mm(P.sample(5, 8)))
+    elif problem == "collinear":
+        path = _cloud(tmp_path, np.column_stack([np.arange(100.0), np.zeros(100), np.zeros(100)]))
+    elif problem == "metres":
+        path = _cloud(tmp_path, to_mm(P.sample(40, 40)) / 1000)
+    else:
+        noisy = to_mm(Deformation(ptosis=(2.0, 0.5)).apply(P.sample(60, 60), P))
+        path = _cloud(tmp_path, noisy + np.random.default_rng(0).normal(0, 1.0, noisy.shape))
+        args = ["--max-iterations", "1"]                      # 1 mm noise: one step cannot settle
+    res = run(cli, "fit", path, *args)
+    assert_bad_input(res, path, tmp_path)
+    assert SENTENCES[problem] in res.stderr
+    assert not (tmp_path / "fit.npz").exists() and not (tmp_path / "fit.ply").exists()
