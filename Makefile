@@ -33,6 +33,9 @@ demo: $(STAMP)
 	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind turn --param c0=1.1 --param c1=0.5 --out $(DEMO)/S-shape1-00-turn.ply
 	$(BIN)/breastplan ingest examples/sample.mcap --side left --out $(DEMO)/case-left
 	$(BIN)/breastplan ingest examples/sample.mcap --side right --out $(DEMO)/case-right
+	$(BIN)/breastplan fit $(DEMO)/case-left
+	$(BIN)/breastplan fit $(DEMO)/case-right
+	$(BIN)/breastplan fit $(DEMO)/S-shape1-00-ptosis.ply --out $(DEMO)/fit-S-shape1-00-ptosis
 	@echo "demo written to $(abspath $(DEMO))"
 
 test: $(STAMP)
@@ -41,6 +44,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_model.py
 	$(BIN)/python benchmarks/bench_ingest.py
+	$(BIN)/python benchmarks/bench_fit.py
 
 clean:
 	rm -rf $(VENV) out

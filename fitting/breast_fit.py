@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
+from threadpoolctl import threadpool_limits
 
 from breastplan import BadInputError, PARAM_NAMES, load_npz, save_npz, to_mm, write_ply
 from breastplan.meshes import mesh_volume
@@ -104,11 +105,12 @@ def fit_breast(points_mm: np.ndarray, lattice: int = 5, deformations: tuple[str,
 
     Raises BadInputError naming `path` for unusable points or a fit that does not converge.
     """
-    sq = fit_superquadric(points_mm, deformations=deformations, path=path)
-    vertices, faces = model_mesh(sq)
-    points = np.asarray(points_mm, float)
-    ffd = fit_ffd(points, vertices, faces, n=lattice, smoothness=smoothness(vertices, points), held=held_weights(vertices),
-                  max_iterations=max_iterations, max_seconds=max_seconds)
+    with threadpool_limits(1, "blas"):          # small dense solves: threads only add overhead
+        sq = fit_superquadric(points_mm, deformations=deformations, path=path)
+        vertices, faces = model_mesh(sq)
+        points = np.asarray(points_mm, float)
+        ffd = fit_ffd(points, vertices, faces, n=lattice, smoothness=smoothness(vertices, points),
+                      held=held_weights(vertices), max_iterations=max_iterations, max_seconds=max_seconds)
     if not ffd.converged or not ffd.residual < MAX_RESIDUAL:
         why = "did not converge" if not ffd.converged else "found no breast surface"
         raise BadInputError(path, f"gives a fit that {why}: mean normalised residual {ffd.residual:.4f} after "
