@@ -105,7 +105,8 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
     lattice = Lattice.around(np.vstack([data, vertices]), n)
     B = lattice.basis(vertices)
     K = n**3
-    LL = np.kron(np.eye(3), (lambda L: L.T @ L)(lattice.laplacian())) * smoothness * len(sub)
+    L = lattice.laplacian()
+    LL = np.kron(np.eye(3), L.T @ L) * smoothness * len(sub)   # λ‖L(P − P0)‖², all three coordinates
     for c in range(3 if held is not None else 0):          # Σ_v held_vc·(B_v (P_c − rest_c))², per coordinate
         LL[c * K:(c + 1) * K, c * K:(c + 1) * K] += len(sub) * (B * held[:, c, None]).T @ B
     rest = lattice.rest.T.reshape(-1)                      # coordinate-major: x of every CP, then y, z
