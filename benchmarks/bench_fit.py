@@ -59,7 +59,7 @@ from breastplan.fitting.superquadric import fit_superquadric
 from breastplan.learn.databases import build_database
 from breastplan.learn.datasets import build_dataset
 
-from timing import median_times, timed
+from timing import fmt, median_times, timed
 
 CLOUD_GRIDS = {1_000: (25, 40), 10_000: (100, 100), 100_000: (250, 400)}
 """(n_u, n_v) sampling grid of each cloud size; (100, 100) is database S's own grid."""
@@ -87,9 +87,6 @@ def rounded(x, digits: int = 5):
         return [rounded(v, digits) for v in x]
     return x
 
-
-def fmt(seconds: float) -> str:
-    return f"{seconds * 1e3:.1f} ms" if seconds < 1 else f"{seconds:.2f} s"
 
 
 def yes_no(flag: bool) -> str:

@@ -43,7 +43,7 @@ from breastplan.ingest.pipeline import ingest_frames
 from breastplan.ingest.recording import DepthFrames, read_recording, write_recording
 from breastplan.ingest.scan import ingest
 
-from timing import median_times, timed
+from timing import fmt, median_times, timed
 
 SEEDS = (0, 1, 2)
 TILTS_DEG = (0.0, 10.0)
@@ -179,9 +179,6 @@ def speed_recording(path: Path, repeats: int) -> dict:
             "target_s": TARGETS["recording_30_s"], "met": bool(median <= TARGETS["recording_30_s"]),
             "steps_ms": step_medians(timings[1:]), "frames": frames[1:], "baseline_frames": replayed[1:]}
 
-
-def fmt(seconds: float) -> str:
-    return f"{seconds * 1e3:.1f} ms" if seconds < 1 else f"{seconds:.2f} s"
 
 
 def print_speed(rows: list[dict], console: Console) -> None:

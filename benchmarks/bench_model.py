@@ -33,7 +33,7 @@ from breastplan.deform.global_deformations import (Deformation, flatten_side, pt
 from breastplan.learn.databases import build_database
 from breastplan.learn.datasets import build_dataset
 
-from timing import median_time, timed
+from timing import fmt, median_time, timed
 
 P00 = Primitive()
 P_EPS = Primitive(9, 11, 10, 8, 12, 0.8, 1.2)
@@ -108,9 +108,6 @@ def database_rows(repeats: int) -> list[dict]:
                 TARGET_DB_DATASETS_S)]
 
 
-def fmt(seconds: float) -> str:
-    return f"{seconds * 1e3:.2f} ms" if seconds < 1 else f"{seconds:.2f} s"
-
 
 def print_table(rows: list[dict], repeats: int, db_repeats: int) -> None:
     table = Table(title=f"bench_model — medians of {repeats} (per-point) / {db_repeats} (database) repeats",
@@ -119,8 +116,8 @@ def print_table(rows: list[dict], repeats: int, db_repeats: int) -> None:
         table.add_column(col, justify="left" if col == "case" else "right")
     for r in rows:
         met = "" if r["met"] is None else ("yes" if r["met"] else "no")
-        target = "" if r["target_s"] is None else f"≤ {fmt(r['target_s'])}"
-        table.add_row(r["case"], f"{r['points']:,}", fmt(r["median_s"]), fmt(r["baseline_s"]),
+        target = "" if r["target_s"] is None else f"≤ {fmt(r['target_s'], 2)}"
+        table.add_row(r["case"], f"{r['points']:,}", fmt(r["median_s"], 2), fmt(r["baseline_s"], 2),
                       f"{r['ratio']:.1f}", target, met)
     Console(width=140).print(table)
 

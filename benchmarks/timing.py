@@ -5,6 +5,11 @@ import statistics
 import time
 
 
+def fmt(seconds: float, ms_digits: int = 1) -> str:
+    """Seconds as 'x.x ms' below one second, else 'x.xx s'."""
+    return f"{seconds * 1e3:.{ms_digits}f} ms" if seconds < 1 else f"{seconds:.2f} s"
+
+
 def timed(fn) -> float:
     """Seconds one call of fn() takes."""
     t0 = time.perf_counter()

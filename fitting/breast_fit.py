@@ -7,18 +7,19 @@ the chest wall); `load_fit` reads the NPZ back.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
 from threadpoolctl import threadpool_limits
 
-from breastplan import BadInputError, PARAM_NAMES, load_npz, save_npz, to_mm, write_ply
+from breastplan import BadInputError, PARAM_NAMES, load_npz, save_npz, to_mm, transform_points, write_ply
 from breastplan.meshes import mesh_volume
 from breastplan.deform.global_deformations import KIND_PARAMS
 
 from .ffd import STOP_RESIDUAL, FFDFit, fit_ffd
-from .superquadric import SuperquadricFit, fit_superquadric
+from .superquadric import SuperquadricFit, distance_stats, fit_superquadric
 
 SCHEMA = "breastplan.fit/1"
 MESH_GRID = (40, 96)
@@ -56,11 +57,10 @@ class BreastFit:
         return self.ffd.vertices
 
     def residual_stats(self) -> dict[str, float]:
-        """Data ↔ fitted-surface distances, mm."""
-        r = self.ffd.residuals_mm
-        return dict(zip(RESIDUAL_STATS, map(float, (r.mean(), np.sqrt(np.mean(r * r)), np.percentile(r, 95), r.max()))))
+        """Data ↔ fitted-surface distances, mm: mean, rms, p95, max."""
+        return distance_stats(self.ffd.residuals_mm)
 
-    @property
+    @cached_property
     def volume_cc(self) -> float:
         """Volume enclosed by the fitted closed surface (cc)."""
         return mesh_volume(self.vertices, self.faces) / 1000.0
@@ -79,12 +79,12 @@ class BreastFit:
     def save(self, folder: str | Path) -> dict[str, Path]:
         """Write fit.npz and fit.ply into `folder`."""
         folder = Path(folder)
-        lattice, sq = self.ffd.lattice, self.superquadric
+        lattice, sq, stats = self.ffd.lattice, self.superquadric, self.residual_stats()
         arrays = {
             "primitive": sq.primitive.as_array(), "pose": sq.pose, "deformation": sq.deformation.as_vector(),
             "lattice_shape": np.full(3, lattice.n, dtype=np.int64), "lattice_box_mm": np.stack([lattice.lo, lattice.hi]),
             "control_rest_mm": lattice.rest, "control_fitted_mm": lattice.points,
-            "residuals_mm": np.array(list(self.residual_stats().values())),
+            "residuals_mm": np.array([stats[k] for k in RESIDUAL_STATS]),
             "normalised_residual": np.float64(self.ffd.residual),
             "volume_cc_primitive": np.float64(sq.primitive.volume_cc), "volume_cc_mesh": np.float64(self.volume_cc),
             "iterations": np.array([sq.iterations, self.ffd.iterations], dtype=np.int64),
@@ -92,7 +92,6 @@ class BreastFit:
         }
         meta = {"primitive": list(PARAM_NAMES), "residuals_mm": list(RESIDUAL_STATS), "iterations": ["superquadric", "ffd"],
                 "pose": "primitive frame → breast frame, mm", "stopping_rule": STOP_RESIDUAL}
-        stats = self.residual_stats()
         comments = ["breastplan fit: fitted breast surface, mm, breast frame",
                     f"volume_cc {self.volume_cc:.2f} rms_mm {stats['rms']:.3f} lattice {lattice.n}^3"]
         return {"fit_npz": save_npz(folder / "fit.npz", SCHEMA, arrays, meta=meta),
@@ -137,8 +136,7 @@ def smoothness(vertices: np.ndarray, points: np.ndarray) -> float:
 def model_mesh(sq: SuperquadricFit, grid: tuple[int, int] = MESH_GRID) -> tuple[np.ndarray, np.ndarray]:
     """Closed mesh (mm, breast frame) of the fitted primitive, deformed and posed."""
     vertices, faces = sq.primitive.mesh(*grid, closed=True)
-    vertices = to_mm(sq.deformation.apply(vertices, sq.primitive))
-    return vertices @ sq.pose[:3, :3].T + sq.pose[:3, 3], faces
+    return transform_points(sq.pose, to_mm(sq.deformation.apply(vertices, sq.primitive))), faces
 
 
 def load_fit(path: str | Path):

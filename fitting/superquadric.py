@@ -44,9 +44,14 @@ class SuperquadricFit:
     seconds: float
 
     def summary(self) -> dict[str, float]:
-        r = np.abs(self.residuals_mm)
-        return {"mean_mm": float(r.mean()), "rms_mm": float(np.sqrt(np.mean(r * r))),
-                "p95_mm": float(np.percentile(r, 95)), "max_mm": float(r.max())}
+        return {f"{k}_mm": v for k, v in distance_stats(self.residuals_mm).items()}
+
+
+def distance_stats(distances_mm) -> dict[str, float]:
+    """mean, rms, p95 and max of |distances| (mm)."""
+    r = np.abs(distances_mm)
+    return {"mean": float(r.mean()), "rms": float(np.sqrt(np.mean(r * r))),
+            "p95": float(np.percentile(r, 95)), "max": float(r.max())}
 
 
 def _unpack(x: np.ndarray) -> tuple[np.ndarray, float, float, np.ndarray, np.ndarray]:
