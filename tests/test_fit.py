@@ -119,6 +119,7 @@ def _cloud(tmp_path, points):
 
 SENTENCES = {"missing": "no such file", "not a PLY": "neither a PLY file nor a case folder",
              "few": "at least 50", "collinear": "coplanar or collinear", "metres": "is it in metres",
+             "NaN": "NaN or infinite coordinates",
              "no convergence": "did not converge: mean normalised residual"}
 
 
@@ -131,6 +132,10 @@ def test_bad_input_exits_3_naming_the_file_and_writes_nothing(cli, tmp_path, pro
     elif problem == "not a PLY":
         path = tmp_path / "scan.txt"
         path.write_text("1 2 3\n")
+    elif problem == "NaN":
+        path = tmp_path / "in.ply"
+        header = "ply\nformat ascii 1.0\nelement vertex 3\n" + "".join(f"property float {c}\n" for c in "xyz")
+        path.write_text(header + "end_header\n0 0 0\nnan 1 2\n1 2 3\n")
     elif problem == "few":
         path = _cloud(tmp_path, to_mm(P.sample(5, 8)))
     elif problem == "collinear":
