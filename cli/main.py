@@ -9,12 +9,13 @@ import numpy as np
 import typer
 
 from breastplan import PARAM_NAMES, BadInputError, Primitive, read_ply, to_mm, to_model_units, write_ply
+from breastplan.deform.by_degree import DD, DEFAULT_CONDITION, deform_by_degree
 from breastplan.deform.conditions import CONDITIONS, find_condition
 from breastplan.deform.global_deformations import KIND_PARAMS, NEEDS_PRIMITIVE, apply_kind
 from breastplan.learn.databases import Database, build_database, grid_for
 from breastplan.learn.datasets import build_dataset
 
-from . import fit_command, scan_commands  # noqa: F401  (register fit, scan-synth and ingest)
+from . import fit_command, learn_commands, scan_commands  # noqa: F401  (register fit, evaluate, train, scan-synth, ingest)
 from .app import JSON, app, parse_pairs
 from .output import Timer, progress, report, stderr, usage_error
 
@@ -56,30 +57,47 @@ def deform(
     kind: str = typer.Option(..., "--kind", help=f"Deformation: {', '.join(KIND_PARAMS)}."),
     param: List[str] = typer.Option([], "--param", help="NAME=VALUE, model units (MODEL.md §3); "
                                     "repeat or comma-separate; unnamed parameters are 0."),
+    degree: Optional[float] = typer.Option(None, "--degree", help=f"Degree of deformation in [1, {DD}] "
+                                           "(instead of --param): ptosis, turn or top-shape."),
+    condition: Optional[str] = typer.Option(None, "--condition", help="Condition of --degree, e.g. \"b0>b1\" "
+                                            f"(defaults: {', '.join(DEFAULT_CONDITION.values())})."),
+    method: str = typer.Option("exact", "--method", help="How --degree finds the parameters: exact (the inverse "
+                               "solver) or learnt (the shipped regression models)."),
     primitive: Optional[str] = typer.Option(None, "--primitive", help="a1=..,a2=..,a3=..,a4=..,a5=..[,eps1=..,eps2=..] "
                                             "in model units (1 mu = 6 mm); needed by top-shape, flatten-side, turn-top."),
     out: Path = typer.Option(..., "--out", help="Output PLY, mm, breast frame, same point order."),
     as_json: bool = JSON,
 ):
-    """Apply one deformation with explicit parameters to a breast PLY."""
+    """Apply one deformation to a breast PLY, by explicit parameters or by degree."""
     timer = Timer()
     if kind not in KIND_PARAMS:
         raise usage_error(f"'{kind}' is not a deformation; choose one of {', '.join(KIND_PARAMS)}", "--kind")
-    params = parse_pairs(param, f"parameters of {kind}", "--param")
-    unknown = sorted(set(params) - set(KIND_PARAMS[kind]))
-    if unknown:
-        raise usage_error(f"{kind} takes {', '.join(KIND_PARAMS[kind])}, not {', '.join(unknown)}", "--param")
+    if degree is not None and param:
+        raise usage_error("give either --param or --degree, not both", "--degree")
     prim = _parse_primitive(primitive, kind)
     geometry = read_ply(input)
-    before = to_model_units(geometry.points)
-    after = to_mm(apply_kind(before, kind, params, prim))
+    if degree is None:
+        params = parse_pairs(param, f"parameters of {kind}", "--param")
+        unknown = sorted(set(params) - set(KIND_PARAMS[kind]))
+        if unknown:
+            raise usage_error(f"{kind} takes {', '.join(KIND_PARAMS[kind])}, not {', '.join(unknown)}", "--param")
+        after = to_mm(apply_kind(to_model_units(geometry.points), kind, params, prim))
+        extra = {"params": {n: params.get(n, 0.0) for n in KIND_PARAMS[kind]}}
+    else:
+        try:
+            result = deform_by_degree(geometry.points, kind, degree, condition=condition, method=method, primitive=prim)
+        except ValueError as exc:
+            raise usage_error(str(exc), "--degree") from None
+        after, params = result.points_mm, dict(zip(KIND_PARAMS[kind], result.params))
+        extra = {"condition": result.condition.name, "method": method, "degree": degree,
+                 "degree_reached": round(result.degree_reached, 4), "t": round(result.t, 6),
+                 "params": {k: round(float(v), 6) for k, v in params.items()}}
     if not np.isfinite(after).all():
         raise BadInputError(input, f"{kind} with these parameters sends points to infinity")
     write_ply(out, after, faces=geometry.faces,
               comments=[f"breastplan deform {kind} " + " ".join(f"{k}={v:g}" for k, v in params.items())])
     moved = np.linalg.norm(after - geometry.points, axis=1)
-    report({"output": str(out), "points": len(after), "kind": kind,
-            "params": {n: params.get(n, 0.0) for n in KIND_PARAMS[kind]},
+    report({"output": str(out), "points": len(after), "kind": kind, **extra,
             "mean_displacement_mm": float(moved.mean()), "max_displacement_mm": float(moved.max()),
             "seconds": timer.seconds}, as_json, f"{kind} → {out}")
 

@@ -81,6 +81,11 @@ class Database:
     def arrays(self) -> dict[str, np.ndarray]:
         return {k: np.asarray(getattr(self, k)) for k in _SPEC}
 
+    def subset(self, indices) -> "Database":
+        """The breasts at `indices`, in that order."""
+        arrays = {k: (v if k == "grid" else v[indices]) for k, v in self.arrays().items()}
+        return Database.from_arrays(arrays, {"name": self.name, "seed": self.seed})
+
     def save(self, path: str | Path) -> Path:
         meta = {"name": self.name, "seed": self.seed}
         return save_npz(path, SCHEMA, self.arrays(), meta=meta)

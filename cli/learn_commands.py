@@ -1,0 +1,60 @@
+"""`breastplan evaluate` (the thesis study and its report) and `breastplan train` (shipped models)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from breastplan.learn.report import write_report
+from breastplan.learn.study import STUDIES, configurations, load_dataset, run_condition
+from breastplan.learn.train import DEPLOYED, train_all
+
+from .app import JSON, app
+from .output import Timer, progress, report, usage_error
+
+
+@app.command()
+def evaluate(
+    study: str = typer.Option(..., "--study", help=f"{' | '.join(STUDIES)} | all."),
+    dd: int = typer.Option(8, "--dd", help="Number of degrees of deformation: 4 or 8 (thesis)."),
+    quick: bool = typer.Option(False, "--quick", help="Small grid, 4 breasts per shape and split, 2500 points."),
+    out: Path = typer.Option(..., "--out", help="Folder for report.md, report.json and figures/."),
+    as_json: bool = JSON,
+):
+    """Run the thesis study of deformation-parameter regressions; write its report."""
+    timer = Timer()
+    names = list(STUDIES) if study == "all" else [study]
+    if any(n not in STUDIES for n in names):
+        raise usage_error(f"'{study}' is not a study; choose one of {', '.join(STUDIES)} or all", "--study")
+    if dd not in (4, 8):
+        raise usage_error(f"--dd must be 4 or 8 (thesis), got {dd}", "--dd")
+    total = sum(len(STUDIES[n].conditions) * configurations(STUDIES[n]) for n in names)
+    results, cache = [], {}
+    with progress(f"study {study}", total) as advance:
+        for name in names:
+            for cond in STUDIES[name].conditions:
+                ds = load_dataset(STUDIES[name], cond, dd, quick, cache)
+                results += run_condition(name, STUDIES[name], ds, quick, advance)
+    meta = {"study": study, "dd": dd, "quick": quick, "seconds": timer.seconds}
+    written = write_report(out, results, meta)
+    best = {f"{h['study']} {h['condition']}": {"best": h["best"],
+                                               "euclidean_mean_pct": round(h["best_learnt"]["euclidean"], 4),
+                                               "hausdorff_mean_pct": round(h["best_learnt"]["hausdorff"], 4),
+                                               "exact_euclidean_mean_pct": round(h["exact_continuous"]["euclidean"], 4)}
+            for h in written["best"]}
+    report({"report": str(out / "report.md"), "rows": len(written["rows"]), "best": best,
+            "seconds": timer.seconds}, as_json, f"study {study}")
+
+
+@app.command()
+def train(
+    out: Path = typer.Option(Path("models"), "--out", help="Folder for one breastplan.model/1 NPZ per condition."),
+    quick: bool = typer.Option(False, "--quick", help="Small grid and 2500 points (for tests)."),
+    as_json: bool = JSON,
+):
+    """Train the best model of each condition on database S's training split (issue 5 §4)."""
+    timer = Timer()
+    with progress("training", len(DEPLOYED)) as advance:
+        written = train_all(out, quick=quick, n_points=2500 if quick else 10_000, advance=advance)
+    report({"models": {w["condition"]: w for w in written}, "folder": str(out), "seconds": timer.seconds},
+           as_json, "trained models")

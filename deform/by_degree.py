@@ -1,0 +1,87 @@
+"""Deform a breast by type and degree: the surgeon's request turned into deformation parameters.
+
+`exact` solves the condition's line for the degree (`deform.inverse`, the upper bound);
+`learnt` runs the shipped regression of the condition (`deform/models/*.npz`, trained by
+`breastplan train` on database S, `breastplan.model/1`) on the breast's FS5 descriptors
+(`deform.descriptors`). Either way the parameters lie on the condition's line (MODEL.md §4).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from breastplan import Primitive, to_mm, to_model_units
+from breastplan.model_file import ModelFile, load_model
+
+from .conditions import CONDITIONS, Condition, find_condition
+from .degree import condition_extent, continuous_degree, reference_extents
+from .descriptors import breast_scalars
+from .global_deformations import apply_kind
+from .inverse import solve_degree
+
+MODELS = Path(__file__).parent / "models"
+"""The shipped models, one `<slug>.npz` per condition."""
+DD = 8
+"""Degrees of the shipped models and of `deform --degree` (thesis: 8)."""
+DEFAULT_CONDITION = {"ptosis": "ptosis b0>b1", "turn": "turn c0>c1", "top-shape": "top-shape s1->s0+"}
+METHODS = ("exact", "learnt")
+
+
+@dataclass(frozen=True)
+class ByDegree:
+    """The deformed breast (mm) and how it was obtained."""
+
+    points_mm: np.ndarray
+    condition: Condition
+    method: str
+    t: float                    # position on the condition's line
+    params: np.ndarray          # the condition's kind's parameters, model units
+    degree_reached: float       # continuous degree of the result (MODEL.md §5)
+
+
+def slug(condition: Condition) -> str:
+    """File-name form of a condition: "ptosis b0>b1" → "ptosis-b0-gt-b1", "top-shape s0->s1+" →
+    "top-shape-s0-to-s1-plus"."""
+    name = condition.name
+    for a, b in (("->", " to "), (">=", " ge "), (">", " gt "), ("+", " plus"), (" ", "-")):
+        name = name.replace(a, b)
+    return "-".join(part for part in name.split("-") if part)
+
+
+def pick_condition(kind: str, condition: str | None = None) -> Condition:
+    """The named condition of `kind`, or its default; ValueError for kinds without conditions."""
+    kinds = sorted({c.kind for c in CONDITIONS.values()})
+    if kind not in kinds:
+        raise ValueError(f"{kind} has no degrees of deformation; choose one of {', '.join(kinds)}")
+    cond = find_condition(condition or DEFAULT_CONDITION[kind], kind)
+    if cond.kind != kind:
+        raise ValueError(f"'{cond.name}' is a {cond.kind} condition, not a {kind} one")
+    return cond
+
+
+def learnt_position(model: ModelFile, points_mm, kind: str, degree: float) -> float:
+    """The model's position t on its condition's line for this breast and degree, clipped to [0, 1]."""
+    features = np.concatenate([[degree], breast_scalars(points_mm, kind, model.meta["feature_set"])])
+    return float(np.clip(model.predict(features[None, :])[0], 0.0, 1.0))
+
+
+def deform_by_degree(points_mm, kind: str, degree: float, *, condition: str | None = None,
+                     method: str = "exact", primitive: Primitive | None = None,
+                     models: Path = MODELS) -> ByDegree:
+    """Deform a breast (mm, breast frame) to `degree` ∈ [1, 8] of `kind` along `condition`."""
+    cond = pick_condition(kind, condition)
+    if not 1.0 <= degree <= DD:
+        raise ValueError(f"the degree must lie in [1, {DD}], got {degree:g}")
+    p_mu = to_model_units(np.asarray(points_mm, dtype=float))
+    if method == "exact":
+        t = solve_degree(p_mu, cond, DD, degree, primitive).t
+    elif method == "learnt":
+        t = learnt_position(load_model(models / f"{slug(cond)}.npz"), points_mm, kind, degree)
+    else:
+        raise ValueError(f"unknown method '{method}'; choose one of {', '.join(METHODS)}")
+    params = cond.at(t)
+    moved = apply_kind(p_mu, kind, params, primitive)
+    reached = continuous_degree(condition_extent(cond, p_mu, moved, primitive), reference_extents(cond, DD))
+    return ByDegree(to_mm(moved), cond, method, t, params, float(reached))

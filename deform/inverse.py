@@ -1,0 +1,65 @@
+"""Exact inverse solver: where on a condition's line a breast reaches a target degree.
+
+A condition is a line t ∈ [0, 1] in its kind's parameter space (MODEL.md §4). On that line
+the breast's extent (MODEL.md §5; signed for top-shape) is monotone, so the position whose
+extent equals the reference extent of the target degree is a 1-D root (`scipy.optimize.brentq`).
+A continuous degree d ∈ [1, #dd] targets the piecewise-linear reference extent at d, so the
+degree of an example recovers its row exactly; a discrete degree targets E_0d itself. This is the
+upper bound no learnt model can pass, and what `plan` uses when the deformation is known.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import brentq
+
+from breastplan import Primitive
+
+from .conditions import Condition
+from .degree import condition_extent, reference_extents
+from .global_deformations import apply_kind
+
+XTOL = 1e-12
+"""Tolerance on the line position t (dimensionless)."""
+
+
+@dataclass(frozen=True)
+class InverseSolution:
+    """The position t on the condition's line, its parameters (model units) and its extent."""
+
+    t: float
+    params: np.ndarray
+    extent: float
+    target_extent: float
+    reached: bool       # False when the target lies beyond the line's ends (t clipped to 0 or 1)
+
+
+def target_extent(condition: Condition, dd: int, degree: float, grid: tuple[int, int] = (100, 100)) -> float:
+    """The reference extent of a (continuous) degree in [1, dd]: E_0 interpolated (MODEL.md §5)."""
+    if not 1.0 <= degree <= dd:
+        raise ValueError(f"a degree of {condition.name} with {dd} degrees lies in [1, {dd}], got {degree:g}")
+    ref = reference_extents(condition, dd, *grid)
+    return float(np.interp(degree, np.arange(1, dd + 1), ref))
+
+
+def solve_degree(points_mu, condition: Condition, dd: int, degree: float, primitive: Primitive | None = None,
+                 grid: tuple[int, int] = (100, 100)) -> InverseSolution:
+    """The parameters of `condition` that give the breast `points_mu` (model units, breast frame) the
+    extent of `degree`; `grid` is the (n_u, n_v) sampling of the reference breast P00."""
+    p = np.asarray(points_mu, dtype=float)
+    goal = target_extent(condition, dd, degree, grid)
+
+    def excess(t: float) -> float:
+        moved = apply_kind(p, condition.kind, condition.at(t), primitive)
+        return float(condition_extent(condition, p, moved, primitive)) - goal
+
+    ends = excess(0.0), excess(1.0)
+    if np.sign(ends[0]) == np.sign(ends[1]) and ends[0] != 0.0:
+        t = float(np.argmin(np.abs(ends)))  # the target lies beyond the line: its nearer end
+        reached = False
+    else:
+        t = brentq(excess, 0.0, 1.0, xtol=XTOL, rtol=4 * np.finfo(float).eps)
+        reached = True
+    return InverseSolution(t=t, params=condition.at(t), extent=excess(t) + goal, target_extent=goal,
+                           reached=reached)
