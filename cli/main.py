@@ -9,7 +9,7 @@ import numpy as np
 import typer
 
 from breastplan import PARAM_NAMES, BadInputError, Primitive, read_ply, to_mm, to_model_units, write_ply
-from breastplan.deform.by_degree import DD, DEFAULT_CONDITION, deform_by_degree
+from breastplan.deform.by_degree import DD, DEFAULT_CONDITION, METHODS, deform_by_degree
 from breastplan.deform.conditions import CONDITIONS, find_condition
 from breastplan.deform.global_deformations import KIND_PARAMS, NEEDS_PRIMITIVE, apply_kind
 from breastplan.learn.databases import Database, build_database, grid_for
@@ -75,12 +75,14 @@ def deform(
     if degree is not None and param:
         raise usage_error("give either --param or --degree, not both", "--degree")
     prim = _parse_primitive(primitive, kind)
+    params = parse_pairs(param, f"parameters of {kind}", "--param")
+    unknown = sorted(set(params) - set(KIND_PARAMS[kind]))
+    if unknown:
+        raise usage_error(f"{kind} takes {', '.join(KIND_PARAMS[kind])}, not {', '.join(unknown)}", "--param")
+    if degree is not None and method not in METHODS:
+        raise usage_error(f"'{method}' is not a method; choose one of {', '.join(METHODS)}", "--method")
     geometry = read_ply(input)
     if degree is None:
-        params = parse_pairs(param, f"parameters of {kind}", "--param")
-        unknown = sorted(set(params) - set(KIND_PARAMS[kind]))
-        if unknown:
-            raise usage_error(f"{kind} takes {', '.join(KIND_PARAMS[kind])}, not {', '.join(unknown)}", "--param")
         after = to_mm(apply_kind(to_model_units(geometry.points), kind, params, prim))
         extra = {"params": {n: params.get(n, 0.0) for n in KIND_PARAMS[kind]}}
     else:
