@@ -10,6 +10,7 @@ import typer
 from breastplan import BadInputError, read_ply
 from breastplan.deform.global_deformations import KIND_PARAMS
 from breastplan.fitting.breast_fit import fit_breast
+from breastplan.learn.databases import SHAPES
 from breastplan.ingest.scan import load_scan
 
 from .app import JSON, app
@@ -39,7 +40,9 @@ def fit(
     if max_iterations < 1 or not max_seconds > 0:
         raise usage_error("--max-iterations must be at least 1 and --max-seconds positive", "--max-iterations")
     points, source, folder = _breast_points(input)
-    result = fit_breast(points, lattice, kinds, path=source, max_iterations=max_iterations, max_seconds=max_seconds)
+    starts = tuple(SHAPES.values()) if kinds else ()   # the Table 4.1 shapes seed the full Chen model
+    result = fit_breast(points, lattice, kinds, starts=starts, path=source, max_iterations=max_iterations,
+                        max_seconds=max_seconds)
     paths = result.save(out or folder)
     stats = result.residual_stats()
     report({"fit": str(paths["fit_npz"]), "mesh": str(paths["fit_ply"]), "points": len(points),

@@ -98,14 +98,15 @@ class BreastFit:
                 "fit_ply": write_ply(folder / "fit.ply", self.vertices, faces=self.faces, comments=comments)}
 
 
-def fit_breast(points_mm: np.ndarray, lattice: int = 5, deformations: tuple[str, ...] = (), *, path=None,
-               max_iterations: int = 1000, max_seconds: float = 20.0) -> BreastFit:
+def fit_breast(points_mm: np.ndarray, lattice: int = 5, deformations: tuple[str, ...] = (), *, starts=(),
+               path=None, max_iterations: int = 1000, max_seconds: float = 20.0) -> BreastFit:
     """Fit the breast model to (N, 3) points (mm, breast frame, base on z = 0).
 
+    `starts` (Deformation records) seed the fitted `deformations` (see `fit_superquadric`).
     Raises BadInputError naming `path` for unusable points or a fit that does not converge.
     """
     with threadpool_limits(1, "blas"):          # small dense solves: threads only add overhead
-        sq = fit_superquadric(points_mm, deformations=deformations, path=path)
+        sq = fit_superquadric(points_mm, deformations=deformations, starts=starts, path=path)
         vertices, faces = model_mesh(sq)
         points = np.asarray(points_mm, float)
         ffd = fit_ffd(points, vertices, faces, n=lattice, smoothness=smoothness(vertices, points),

@@ -14,9 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
+from threadpoolctl import threadpool_limits
 
 from breastplan import BadInputError, Primitive, to_mm, to_model_units
-from breastplan.deform.global_deformations import KIND_PARAMS, Deformation
+from breastplan.deform.global_deformations import REFERENCE_AXIS, KIND_PARAMS, Deformation, beta, gamma
 
 EPS_BOUNDS = (0.3, 2.0)
 FIT_POINTS = 3000
@@ -28,6 +29,9 @@ a free turn about z would let the fit trade ptosis for turn on a near-round brea
 SEMI_AXIS_RANGE = (0.2, 1.5)
 """Semi-axes bounded to this range × the largest initial one: a side the scanner did not see
 (the medial side, cropped between the breasts) would otherwise let its semi-axis run away."""
+START_POINTS, START_NFEV, DEFORMED_FIT_POINTS = 200, 5, 600
+"""Each start is refined briefly (START_NFEV evaluations on START_POINTS points) and the best one
+finished on DEFORMED_FIT_POINTS points (deformations: finite-difference Jacobian)."""
 CHEST_PRIOR_WEIGHT = 30.0
 """Weight of the prior residuals (tilt of the base, rad; height of the base, mu) per √point."""
 
@@ -42,6 +46,7 @@ class SuperquadricFit:
     residuals_mm: np.ndarray      # radial distance of each point, mm
     iterations: int
     seconds: float
+    x: np.ndarray                 # the fitted parameter vector (log a1..a5, eps, rotation vector, t, deformations)
 
     def summary(self) -> dict[str, float]:
         return {f"{k}_mm": v for k, v in distance_stats(self.residuals_mm).items()}
@@ -62,7 +67,7 @@ def _deformation(x: np.ndarray, kinds: tuple[str, ...]) -> Deformation:
     values, i = {}, 13
     for kind in kinds:
         n = len(KIND_PARAMS[kind])
-        values[kind.replace("-", "_")] = tuple(x[i: i + n])
+        values[kind.replace("-", "_")] = tuple(map(float, x[i: i + n]))
         i += n
     return Deformation(**values)
 
@@ -78,9 +83,153 @@ def _radial(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...] = ()) -> np.nda
     primitive = Primitive(*a, e1, e2)
     q = Rotation.from_rotvec(rot).inv().apply(p - t)
     if kinds:
-        q = _deformation(x, kinds).inverse(q, primitive)
+        q = _inverse(q, _deformation(x, kinds), primitive)
     f = np.maximum(primitive.inside_outside(q), 1e-12)
     return np.linalg.norm(q, axis=1) * (1.0 - f ** (-e1 / 2))
+
+
+TABLE_SIZE = 512
+"""Nodes of the lookup tables that invert top-shape and flatten-side while fitting."""
+
+
+def _inverse(q: np.ndarray, deformation: Deformation, primitive: Primitive) -> np.ndarray:
+    """`Deformation.inverse` (MODEL.md §3), fast enough for a fit that calls it hundreds of times:
+    the shears are undone in place, top-shape and flatten-side by interpolating a table of their
+    1-D forward maps instead of a root solve per point."""
+    q = np.array(q, dtype=float)
+    for kind in reversed(deformation.active()):
+        k0, k1, *more = deformation.params(kind)
+        if kind == "top-shape":
+            q = _top_shape_inverse(q, (k0, k1, *more), primitive)
+        elif kind == "flatten-side":
+            q = _flatten_side_inverse(q, (k0, k1), primitive)
+        elif kind == "turn-top":
+            w = np.maximum(q[:, 1] / primitive.a3, 0.0)
+            q[:, 0] += w * (k0 + k1 * w)
+        else:                                                  # ptosis (y) or turn (x) by ζ = z/10
+            zeta = q[:, 2] / REFERENCE_AXIS
+            q[:, 1 if kind == "ptosis" else 0] += zeta * (k0 + k1 * zeta)
+    return q
+
+
+def _top_shape_inverse(q: np.ndarray, params, primitive: Primitive) -> np.ndarray:
+    """Upper half: z ↦ z·β(w) tabulated over latitudes u (where the map is smooth) and inverted.
+
+    With s1 < 0 the map rises to a maximum and folds back to the nipple (MODEL.md §3), so a
+    height has two preimages; each point takes the branch of the primitive's own height at its
+    (x, y), which is where a surface point comes from. Heights beyond a branch's image clip to it.
+    """
+    u = np.linspace(0.0, np.pi / 2, TABLE_SIZE)
+    z = primitive.a5 * np.sin(u) ** primitive.eps1
+    image = z * beta(2 * u / np.pi, *params)
+    falling = np.flatnonzero(np.diff(image) <= 0)
+    top = falling[0] if len(falling) else TABLE_SIZE - 1      # the first maximum of the map
+    out = q.copy()
+    upper = (q[:, 1] > 0) & (q[:, 2] > 0)
+    h = q[upper, 2]
+    rising = np.interp(h, image[:top + 1], z[:top + 1])
+    if top < TABLE_SIZE - 1:
+        fold = np.interp(h, image[top:][::-1], z[top:][::-1])
+        rising = np.where(_height(q[upper], primitive) > z[top], fold, rising)
+    out[upper, 2] = np.where(h < image[top], rising, np.where(rising > 0, rising, h))
+    return out
+
+
+def _height(q: np.ndarray, primitive: Primitive) -> np.ndarray:
+    """Height of the primitive's surface above (x, y) (MODEL.md §2: F = 1 solved for z; 0 outside)."""
+    flat = primitive.inside_outside(q * [1.0, 1.0, 0.0])
+    return primitive.a5 * np.maximum(1.0 - flat, 0.0) ** (primitive.eps1 / 2)
+
+
+def _flatten_side_inverse(q: np.ndarray, params, primitive: Primitive) -> np.ndarray:
+    """Lateral half: w ↦ w·γ(w), w = |x|/a2, tabulated far enough to hold every point, inverted."""
+    w_max = max(1.0, 1.5 * float(np.max(-q[:, 0], initial=0.0)) / primitive.a2)
+    w = np.linspace(0.0, w_max, TABLE_SIZE)
+    out = q.copy()
+    sel = q[:, 0] < 0
+    out[sel, 0] = -primitive.a2 * np.interp(-q[sel, 0] / primitive.a2, w * gamma(w, *params), w)
+    return out
+
+
+def _radial_jacobian(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """(N, 13) analytic Jacobian of `_radial` for the plain posed primitive (no deformations).
+
+    r = |q|(1 − F^(−eps1/2)), q = Rᵀ(p − t), F the inside–outside function of MODEL.md §2; each
+    point sees the semi-axes of its half (a1/a2 by the sign of x, a3/a4 by that of y), so the
+    derivative w.r.t. each log semi-axis is masked by that sign. The rotation-vector part uses
+    d(Rᵀv)/dw = Rᵀ[v]ₓ J_l(w) (J_l the left Jacobian of SO(3)).
+    """
+    a, e1, e2, rot, t = _unpack(x)
+    R = Rotation.from_rotvec(rot).as_matrix()
+    v = p - t
+    q = v @ R
+    pos = q >= 0
+    ax, ay = np.where(pos[:, 0], a[0], a[1]), np.where(pos[:, 1], a[2], a[3])
+    X, Y, Z = np.abs(q[:, 0]) / ax, np.abs(q[:, 1]) / ay, np.abs(q[:, 2]) / a[4]
+    s1, s2 = 2 / e1, 2 / e2
+    Xp, Yp, Zp = X**s2, Y**s2, Z**s1
+    G = Xp + Yp
+    on_axis = G <= 1e-300
+    G = np.where(on_axis, 1.0, G)
+    Gk = np.where(on_axis, 0.0, G ** (e2 / e1))
+    Gk1 = Gk / G                                           # G^(eps2/eps1 − 1), 0 on the z axis
+    F = np.maximum(Gk + Zp, 1e-12)
+    h = F ** (-e1 / 2)
+    n = np.linalg.norm(q, axis=1)
+    A = n * h * e1 / (2 * F)                               # ∂r/∂F
+    J = np.empty((len(p), 13))
+    dx, dy = -s1 * A * Gk1 * Xp, -s1 * A * Gk1 * Yp        # ∂r/∂log(semi-axis the point sees)
+    J[:, 0], J[:, 1] = np.where(pos[:, 0], dx, 0.0), np.where(pos[:, 0], 0.0, dx)
+    J[:, 2], J[:, 3] = np.where(pos[:, 1], dy, 0.0), np.where(pos[:, 1], 0.0, dy)
+    J[:, 4] = -s1 * A * Zp
+    lX, lY, lZ = (np.log(np.where(c > 0, c, 1.0)) for c in (X, Y, Z))   # c^s·log c → 0 at c = 0
+    lG = np.log(G)
+    J[:, 5] = n * h * np.log(F) / 2 - A * (e2 * lG * Gk + 2 * lZ * Zp) / e1**2
+    J[:, 6] = A * Gk / e1 * (lG - s2 * (Xp * lX + Yp * lY) / G)
+    grad_F = np.column_stack([s1 * Gk1 * X ** (s2 - 1) * np.sign(q[:, 0]) / ax,
+                              s1 * Gk1 * Y ** (s2 - 1) * np.sign(q[:, 1]) / ay,
+                              s1 * Z ** (s1 - 1) * np.sign(q[:, 2]) / a[4]])
+    grad_q = (1 - h)[:, None] * q / np.maximum(n, 1e-300)[:, None] + A[:, None] * grad_F
+    u = grad_q @ R.T                                       # ∂r/∂v
+    J[:, 7:10] = np.cross(u, v) @ _left_jacobian(rot)
+    J[:, 10:13] = -u
+    return J
+
+
+def _left_jacobian(w: np.ndarray) -> np.ndarray:
+    """J_l(w) = I + (1 − cos θ)/θ²·[w]ₓ + (θ − sin θ)/θ³·[w]ₓ² (series near θ = 0)."""
+    th2 = float(w @ w)
+    th = np.sqrt(th2)
+    if th < 1e-4:
+        c1, c2 = 0.5 - th2 / 24, 1 / 6 - th2 / 120
+    else:
+        c1, c2 = (1 - np.cos(th)) / th2, (th - np.sin(th)) / (th2 * th)
+    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    return np.eye(3) + c1 * K + c2 * K @ K
+
+
+def _chest_prior(x: np.ndarray) -> np.ndarray:
+    """The base's tilt off the chest wall (x, y of its normal R·e_z) and its height t_z."""
+    normal = Rotation.from_rotvec(x[7:10]).apply([0.0, 0.0, 1.0])
+    return np.array([normal[0], normal[1], x[12]])
+
+
+def _chest_prior_jacobian(x: np.ndarray) -> np.ndarray:
+    """(3, len(x)) Jacobian of `_chest_prior`: d(R·e_z)/dw = −R[e_z]ₓ J_l(−w)."""
+    R = Rotation.from_rotvec(x[7:10]).as_matrix()
+    ez = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])   # [e_z]ₓ
+    J = np.zeros((3, len(x)))
+    J[:2, 7:10] = -(R @ ez @ _left_jacobian(-x[7:10]))[:2]
+    J[2, 12] = 1.0
+    return J
+
+
+def _base_centre(p: np.ndarray) -> np.ndarray:
+    """Centre of the extents of the lowest tenth of the points (the base ring, which ptosis and turn,
+    shears by z, leave in place; MODEL.md §3), on the chest wall z = 0."""
+    ring = p[p[:, 2] <= np.percentile(p[:, 2], 10)]
+    lo, hi = ring.min(0), ring.max(0)
+    return np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, 0.0])
 
 
 def initial_guess(p: np.ndarray) -> np.ndarray:
@@ -92,45 +241,100 @@ def initial_guess(p: np.ndarray) -> np.ndarray:
     return np.concatenate([np.log(a), [1.0, 1.0], np.zeros(3), centre])
 
 
-def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, loss: str = "soft_l1",
+def fit_superquadric(points_mm, *, deformations=(), starts=(), chest_prior: bool = True, loss: str = "soft_l1",
                      f_scale_mm: float = 1.0, x0: np.ndarray | None = None, path=None) -> SuperquadricFit:
     """Fit primitive + pose (+ the global `deformations`, e.g. ("ptosis", "turn")) to (N, 3) points
-    (mm, breast frame)."""
+    (mm, breast frame).
+
+    `starts` (Deformation records, e.g. a catalogue of typical breast shapes): the deformation
+    parameters start from each, on the plainly fitted primitive (`x0`, else fitted here) set upright
+    in the breast frame; each start is refined briefly on a small subset and the best one finished.
+    Without starts they start from zero, or from `x0`.
+    """
     kinds = tuple(k for k in KIND_PARAMS if k in set(deformations))  # MODEL.md §3 order
     unknown = set(deformations) - set(KIND_PARAMS)
     if unknown:
         raise ValueError(f"unknown deformations {sorted(unknown)}; choose from {', '.join(KIND_PARAMS)}")
     start = time.perf_counter()
     everything = to_model_units(_checked(points_mm, path))
-    p = everything
-    if len(p) > FIT_POINTS:
-        p = p[np.random.default_rng(0).choice(len(p), FIT_POINTS, replace=False)]
+    p = _subset(everything, FIT_POINTS)
+    solve = _Solver(chest_prior, loss, float(to_model_units(f_scale_mm)))
     n_deform = sum(len(KIND_PARAMS[k]) for k in kinds)
-    x0 = np.concatenate([initial_guess(p), np.zeros(n_deform)]) if x0 is None else x0
-    weight = CHEST_PRIOR_WEIGHT * np.sqrt(len(p)) if chest_prior else 0.0
-
-    def residuals(x):
-        r = _radial(x, p, kinds)
-        if not chest_prior:
-            return r
-        base_normal = Rotation.from_rotvec(x[7:10]).apply([0.0, 0.0, 1.0])
-        return np.concatenate([r, weight * np.array([base_normal[0], base_normal[1], x[12]])])
-
-    lower = np.full(len(x0), -np.inf)
-    upper = np.full(len(x0), np.inf)
-    lower[5:7], upper[5:7] = EPS_BOUNDS
-    lower[7:10], upper[7:10] = -MAX_TURN_RAD, MAX_TURN_RAD
-    size = np.log(np.exp(x0[:5]).max())
-    lower[:5], upper[:5] = size + np.log(SEMI_AXIS_RANGE[0]), size + np.log(SEMI_AXIS_RANGE[1])
-    x0 = np.clip(x0, lower + 1e-9, upper - 1e-9)
-    sol = least_squares(residuals, x0, bounds=(lower, upper), loss=loss, f_scale=float(to_model_units(f_scale_mm)),
-                        x_scale="jac", max_nfev=200)
+    nfev = 0
+    with threadpool_limits(1, "blas"):          # small dense solves: threads only add overhead
+        if kinds and starts:
+            if x0 is None:
+                plain = solve(p, (), initial_guess(p))
+                x0, nfev = plain.x, plain.nfev
+            upright = np.concatenate([x0[:7], np.zeros(3), _base_centre(p)])
+            trials = [solve(_subset(p, START_POINTS), kinds, np.concatenate([upright, _params(d, kinds)]),
+                            max_nfev=START_NFEV) for d in starts]
+            nfev += sum(t.nfev for t in trials)
+            x0 = min(trials, key=lambda t: t.cost).x
+        elif x0 is None:
+            x0 = np.concatenate([initial_guess(p), np.zeros(n_deform)])
+        sol = solve(_subset(p, DEFORMED_FIT_POINTS) if kinds else p, kinds, x0)
     a, e1, e2, rot, t = _unpack(sol.x)
     pose = np.eye(4)
     pose[:3, :3] = Rotation.from_rotvec(rot).as_matrix()
     pose[:3, 3] = to_mm(t)
     return SuperquadricFit(Primitive(*map(float, a), float(e1), float(e2)), pose, _deformation(sol.x, kinds),
-                           to_mm(_radial(sol.x, everything, kinds)), int(sol.nfev), time.perf_counter() - start)
+                           to_mm(_radial(sol.x, everything, kinds)), int(nfev + sol.nfev), time.perf_counter() - start,
+                           sol.x)
+
+
+def _subset(p: np.ndarray, n: int) -> np.ndarray:
+    """A seeded random subset of n points (all of them if there are fewer)."""
+    return p[np.random.default_rng(0).choice(len(p), n, replace=False)] if len(p) > n else p
+
+
+def _params(deformation: Deformation, kinds: tuple[str, ...]) -> np.ndarray:
+    """The parameters of `kinds` (in order) from a Deformation record."""
+    return np.concatenate([deformation.params(k) for k in kinds])
+
+
+@dataclass(frozen=True)
+class _Solver:
+    """Robust least squares of the radial residual (+ the chest-wall prior) on a point set."""
+
+    chest_prior: bool
+    loss: str
+    f_scale: float              # model units
+
+    def residuals(self, x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
+        r = _radial(x, p, kinds)
+        return np.concatenate([r, self.weight(p) * _chest_prior(x)]) if self.chest_prior else r
+
+    def jacobian(self, x: np.ndarray, p: np.ndarray) -> np.ndarray:
+        J = _radial_jacobian(x, p)
+        return np.vstack([J, self.weight(p) * _chest_prior_jacobian(x)]) if self.chest_prior else J
+
+    def weight(self, p: np.ndarray) -> float:
+        return CHEST_PRIOR_WEIGHT * np.sqrt(len(p))
+
+    def cost(self, x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> float:
+        """The robust (soft-L1) cost least squares minimises."""
+        z = (self.residuals(x, p, kinds) / self.f_scale) ** 2
+        return float(np.sum(2 * (np.sqrt(1 + z) - 1)))
+
+    def __call__(self, p: np.ndarray, kinds: tuple[str, ...], x0: np.ndarray, max_nfev: int = 200):
+        """least_squares from x0: analytic Jacobian for the plain primitive, 2-point with deformations."""
+        lower, upper = _bounds(x0)
+        x0 = np.clip(x0, lower + 1e-9, upper - 1e-9)
+        jac = "2-point" if kinds else (lambda x: self.jacobian(x, p))
+        return least_squares(lambda x: self.residuals(x, p, kinds), x0, jac=jac, bounds=(lower, upper),
+                             loss=self.loss, f_scale=self.f_scale, x_scale="jac", max_nfev=max_nfev)
+
+
+def _bounds(x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """eps in EPS_BOUNDS, each rotation-vector component within ±MAX_TURN_RAD, semi-axes within
+    SEMI_AXIS_RANGE × the largest initial one; the rest free."""
+    lower, upper = np.full(len(x0), -np.inf), np.full(len(x0), np.inf)
+    lower[5:7], upper[5:7] = EPS_BOUNDS
+    lower[7:10], upper[7:10] = -MAX_TURN_RAD, MAX_TURN_RAD
+    size = np.log(np.exp(x0[:5]).max())
+    lower[:5], upper[:5] = size + np.log(SEMI_AXIS_RANGE[0]), size + np.log(SEMI_AXIS_RANGE[1])
+    return lower, upper
 
 
 def _checked(points_mm, path) -> np.ndarray:

@@ -1,10 +1,12 @@
 """Superquadric fit (Fitting §1): known primitives are recovered (independent truth: the sampled primitive)."""
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
 from breastplan import BadInputError, Primitive, to_mm
-from breastplan.fitting.superquadric import fit_superquadric
+from breastplan.fitting.superquadric import (_chest_prior, _chest_prior_jacobian, _inverse, _radial, _radial_jacobian,
+                                             fit_superquadric)
 
 CASES = [Primitive(11, 9, 10, 12, 9, 0.8, 1.1), Primitive(10, 11, 9.5, 10, 10, 1.0, 1.0),  # asymmetric: the turn about z is defined
          Primitive(9, 12, 8, 11, 10, 1.2, 0.7)]
@@ -85,3 +87,48 @@ def test_fit_of_an_ingested_synthetic_scan_matches_the_true_breast():
         d = truth.compute_distance(o3d.core.Tensor(camera.astype(np.float32))).numpy()
         assert np.sqrt(np.mean(d ** 2)) <= 1.0                          # Fitting §5: within 1 mm RMS
         assert abs(fit.primitive.volume_cc / breast.primitive.volume_cc - 1) <= 0.03  # shears keep volume
+
+
+def central_differences(f, x, h=1e-6):
+    """(len(f(x)), len(x)) Jacobian of f by central differences."""
+    return np.column_stack([(f(x + h * e) - f(x - h * e)) / (2 * h) for e in np.eye(len(x))])
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.floats(6.0, 14.0), min_size=5, max_size=5), st.floats(0.3, 2.0), st.floats(0.3, 2.0),
+       st.lists(st.floats(-0.5, 0.5), min_size=3, max_size=3), st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3),
+       st.integers(0, 2**31))
+def test_analytic_jacobian_matches_finite_differences(axes, eps1, eps2, rotvec, shift, seed):
+    """Truth: central differences of the residual itself, at random parameters and points off the surface."""
+    rng = np.random.default_rng(seed)
+    P = Primitive(*axes, eps1, eps2)
+    points = P.sample(12, 25) * rng.uniform(0.7, 1.3, (300, 1)) + rng.normal(0.0, 0.5, (300, 3))
+    q = Rotation.from_rotvec(rotvec).inv().apply(points - shift)
+    points = points[np.all(np.abs(q) > 1e-3, axis=1)]    # off the planes where the halves meet (kinks)
+    x = np.concatenate([np.log(axes) + rng.normal(0.0, 0.1, 5), [eps1, eps2], rotvec, shift])
+    numeric = central_differences(lambda y: _radial(y, points), x)
+    assert np.allclose(_radial_jacobian(x, points), numeric, rtol=1e-4, atol=1e-5 * np.abs(numeric).max())
+    prior = central_differences(_chest_prior, x)
+    assert np.allclose(_chest_prior_jacobian(x), prior, atol=1e-8)
+
+
+@pytest.mark.parametrize("shape", ["shape1", "shape2", "shape3", "shape4"])
+def test_fast_inverse_undoes_the_deformations_of_each_table_4_1_shape(shape):
+    """Truth: the primitive samples the library's forward deformations (MODEL.md §3) started from —
+    on both sides of top-shape's fold, where the library's own inverse keeps the first branch."""
+    from breastplan.learn.databases import SHAPES
+    P = Primitive(10.5, 9, 11, 9.5, 10, 1.0, 1.0)
+    samples = P.sample(60, 60)
+    deformed = SHAPES[shape].apply(samples, P)
+    assert np.abs(_inverse(deformed, SHAPES[shape], P) - samples).max() < 0.01
+
+
+def test_full_chen_fit_from_shape_starts_recovers_a_database_shape():
+    """Truth: the primitive and Table 4.1 deformation the breast was built from."""
+    from breastplan.deform.global_deformations import KIND_PARAMS
+    from breastplan.learn.databases import SHAPES
+    P = Primitive(10.5, 9, 11, 9.5, 10, 1.0, 1.0)
+    data = to_mm(SHAPES["shape3"].apply(P.sample(100, 100), P))
+    fit = fit_superquadric(data, deformations=tuple(KIND_PARAMS), starts=list(SHAPES.values()))
+    assert np.allclose(fit.primitive.as_array()[:5], P.as_array()[:5], rtol=0.01)
+    assert np.median(np.abs(fit.residuals_mm)) < 0.05
