@@ -36,6 +36,9 @@ demo: $(STAMP)
 	$(BIN)/breastplan fit $(DEMO)/case-left
 	$(BIN)/breastplan fit $(DEMO)/case-right
 	$(BIN)/breastplan fit $(DEMO)/S-shape1-00-ptosis.ply --out $(DEMO)/fit-S-shape1-00-ptosis
+	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind ptosis --degree 5.5 --out $(DEMO)/S-shape1-00-ptosis-5.5.ply
+	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind ptosis --degree 5.5 --method learnt --out $(DEMO)/S-shape1-00-ptosis-5.5-learnt.ply
+	$(BIN)/breastplan evaluate --study all --quick --out $(DEMO)/study
 	@echo "demo written to $(abspath $(DEMO))"
 
 test: $(STAMP)
@@ -45,6 +48,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_model.py
 	$(BIN)/python benchmarks/bench_ingest.py
 	$(BIN)/python benchmarks/bench_fit.py
+	$(BIN)/python benchmarks/bench_learn.py
 
 clean:
 	rm -rf $(VENV) out

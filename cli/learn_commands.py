@@ -17,7 +17,7 @@ from .output import Timer, progress, report, usage_error
 def evaluate(
     study: str = typer.Option(..., "--study", help=f"{' | '.join(STUDIES)} | all."),
     dd: int = typer.Option(8, "--dd", help="Number of degrees of deformation: 4 or 8 (thesis)."),
-    quick: bool = typer.Option(False, "--quick", help="Small grid, 4 breasts per shape and split, 2500 points."),
+    quick: bool = typer.Option(False, "--quick", help="Small grid, FS5 only, 4 breasts per shape and split, 2500 points (CI)."),
     out: Path = typer.Option(..., "--out", help="Folder for report.md, report.json and figures/."),
     as_json: bool = JSON,
 ):
@@ -28,7 +28,7 @@ def evaluate(
         raise usage_error(f"'{study}' is not a study; choose one of {', '.join(STUDIES)} or all", "--study")
     if dd not in (4, 8):
         raise usage_error(f"--dd must be 4 or 8 (thesis), got {dd}", "--dd")
-    total = sum(len(STUDIES[n].conditions) * configurations(STUDIES[n]) for n in names)
+    total = sum(len(STUDIES[n].conditions) * configurations(STUDIES[n], quick) for n in names)
     results, cache = [], {}
     with progress(f"study {study}", total) as advance:
         for name in names:

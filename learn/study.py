@@ -33,7 +33,7 @@ from .regressors import FAMILIES, select
 PCA_COMPONENTS = (1, 2, 3, 5, 10)
 """Candidate numbers of PCA scores of a feature set's vector blocks, chosen by cross-validation."""
 QUICK_BREASTS = 4
-"""Breasts per shape (and per split) kept by `--quick`."""
+"""Breasts per shape (and per split) kept by `--quick`, which also runs only FS5 (both degrees)."""
 
 
 @dataclass(frozen=True)
@@ -151,7 +151,7 @@ def run_condition(study_name: str, study: Study, ds: Dataset, quick: bool, advan
     """All configurations of one condition (see the module docstring)."""
     run = ConditionRun(study_name, ds)
     results = []
-    plans = [(fs, "discrete") for fs in study.feature_sets] + [("FS5", "continuous")]
+    plans = [(fs, "discrete") for fs in thesis_sets(study, quick)] + [("FS5", "continuous")]
     for fs, degree in plans:
         X_train, X_test, info = run.features(fs, degree)
         for family in FAMILIES:
@@ -163,9 +163,14 @@ def run_condition(study_name: str, study: Study, ds: Dataset, quick: bool, advan
     return results
 
 
-def configurations(study: Study) -> int:
+def thesis_sets(study: Study, quick: bool) -> tuple[str, ...]:
+    """The feature sets run with the discrete degree: the study's, or FS5 alone with `quick`."""
+    return ("FS5",) if quick else study.feature_sets
+
+
+def configurations(study: Study, quick: bool) -> int:
     """Configurations per condition (for progress bars)."""
-    return (len(study.feature_sets) + 1) * len(FAMILIES) + 2
+    return (len(thesis_sets(study, quick)) + 1) * len(FAMILIES) + 2
 
 
 def parameter_errors(result: Result) -> dict[str, float]:
