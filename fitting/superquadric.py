@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 from threadpoolctl import threadpool_limits
 
 from breastplan import BadInputError, Primitive, to_mm, to_model_units
-from breastplan.deform.global_deformations import REFERENCE_AXIS, KIND_PARAMS, Deformation, beta, gamma
+from breastplan.deform.global_deformations import KIND_PARAMS, Deformation, apply_kind, beta, gamma
 
 EPS_BOUNDS = (0.3, 2.0)
 FIT_POINTS = 3000
@@ -94,21 +94,17 @@ TABLE_SIZE = 512
 
 def _inverse(q: np.ndarray, deformation: Deformation, primitive: Primitive) -> np.ndarray:
     """`Deformation.inverse` (MODEL.md §3), fast enough for a fit that calls it hundreds of times:
-    the shears are undone in place, top-shape and flatten-side by interpolating a table of their
-    1-D forward maps instead of a root solve per point."""
+    top-shape and flatten-side are undone by interpolating a table of their 1-D forward maps
+    instead of a root solve per point."""
     q = np.array(q, dtype=float)
     for kind in reversed(deformation.active()):
-        k0, k1, *more = deformation.params(kind)
+        params = deformation.params(kind)
         if kind == "top-shape":
-            q = _top_shape_inverse(q, (k0, k1, *more), primitive)
+            q = _top_shape_inverse(q, params, primitive)
         elif kind == "flatten-side":
-            q = _flatten_side_inverse(q, (k0, k1), primitive)
-        elif kind == "turn-top":
-            w = np.maximum(q[:, 1] / primitive.a3, 0.0)
-            q[:, 0] += w * (k0 + k1 * w)
-        else:                                                  # ptosis (y) or turn (x) by ζ = z/10
-            zeta = q[:, 2] / REFERENCE_AXIS
-            q[:, 1 if kind == "ptosis" else 0] += zeta * (k0 + k1 * zeta)
+            q = _flatten_side_inverse(q, params, primitive)
+        else:                                   # the shears: their closed-form inverses
+            q = apply_kind(q, kind, params, primitive, inverse=True)
     return q
 
 
