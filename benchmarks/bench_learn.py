@@ -22,7 +22,7 @@ from rich.console import Console
 from rich.table import Table
 
 from breastplan.learn.report import write_report
-from breastplan.learn.study import STUDIES, load_dataset, run_condition
+from breastplan.learn.study import STUDIES, run_studies, study_datasets
 
 from timing import fmt
 
@@ -32,12 +32,10 @@ TARGET_STUDY_S = 15 * 60
 
 def run(names: list[str], quick: bool, out: Path) -> tuple[dict, float, float]:
     """(report, study seconds, dataset-building seconds)."""
-    start, cache, results = time.perf_counter(), {}, []
-    t0 = time.perf_counter()
-    datasets = [(n, c, load_dataset(STUDIES[n], c, 8, quick, cache)) for n in names for c in STUDIES[n].conditions]
-    baseline = time.perf_counter() - t0
-    for name, _, ds in datasets:
-        results += run_condition(name, STUDIES[name], ds, quick)
+    start = time.perf_counter()
+    datasets = study_datasets(names, 8, quick)
+    baseline = time.perf_counter() - start
+    results = run_studies(datasets, quick)
     seconds = time.perf_counter() - start
     return write_report(out, results, {"study": names, "quick": quick, "seconds": seconds}), seconds, baseline
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import typer
 
 from breastplan.learn.report import write_report
-from breastplan.learn.study import STUDIES, configurations, load_dataset, run_condition
+from breastplan.learn.study import STUDIES, configurations, run_studies, study_datasets
 from breastplan.learn.train import DEPLOYED, train_all
 
 from .app import JSON, app
@@ -29,12 +29,9 @@ def evaluate(
     if dd not in (4, 8):
         raise usage_error(f"--dd must be 4 or 8 (thesis), got {dd}", "--dd")
     total = sum(len(STUDIES[n].conditions) * configurations(STUDIES[n], quick) for n in names)
-    results, cache = [], {}
+    datasets = study_datasets(names, dd, quick)
     with progress(f"study {study}", total) as advance:
-        for name in names:
-            for cond in STUDIES[name].conditions:
-                ds = load_dataset(STUDIES[name], cond, dd, quick, cache)
-                results += run_condition(name, STUDIES[name], ds, quick, advance)
+        results = run_studies(datasets, quick, advance)
     meta = {"study": study, "dd": dd, "quick": quick, "seconds": timer.seconds}
     written = write_report(out, results, meta)
     best = {f"{h['study']} {h['condition']}": {"best": h["best"],

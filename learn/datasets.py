@@ -50,6 +50,11 @@ class Dataset:
         return len(self.breast)
 
     @property
+    def position(self) -> np.ndarray:
+        """(n_examples,) position t = row / (#dd − 1) of each example on the condition's line."""
+        return self.row / (self.dd - 1)
+
+    @property
     def split(self) -> np.ndarray:
         """(n_examples,) "train" | "test", the split of each example's breast."""
         return self.database.split[self.breast]

@@ -97,11 +97,19 @@ def _plain(v):
     return v
 
 
+EXACT = ("exact", "-", "continuous")
+
+
+def _by_config(results: list[Result]) -> dict[tuple[str, str, str], Result]:
+    """One condition's results by (method, features, degree)."""
+    return {(r.method, r.features, r.degree): r for r in results}
+
+
 def comparisons(results: list[Result]) -> dict[str, dict]:
     """t-tests (modelled→original Euclidean, per test example) between the headline methods."""
     best = best_learnt(results)
-    pick = {(r.method, r.features, r.degree): r for r in results}
-    thesis, exact = pick[THESIS_CONFIG], pick[("exact", "-", "continuous")]
+    pick = _by_config(results)
+    thesis, exact = pick[THESIS_CONFIG], pick[EXACT]
     key = "modelled_to_original_euclidean"
     return {f"{best.label} vs {thesis.label}": ttest(best.distances[key], thesis.distances[key]),
             f"{exact.label} vs {best.label}": ttest(exact.distances[key], best.distances[key])}
@@ -133,14 +141,14 @@ def _six_plots(out: Path, r: Result) -> list[str]:
 
 
 def _headline(study: str, cond: str, results: list[Result], best: Result) -> dict:
-    pick = {(r.method, r.features, r.degree): r for r in results}
+    pick = _by_config(results)
     out = {"study": study, "condition": cond, "best": best.label}
     for name, r in (("thesis_config", pick[THESIS_CONFIG]), ("best_learnt", best),
-                    ("exact_continuous", pick[("exact", "-", "continuous")]),
+                    ("exact_continuous", pick[EXACT]),
                     ("exact_discrete", pick[("exact", "-", "discrete")])):
         out[name] = {k: float(np.mean(r.distances[f"modelled_to_original_{k}"])) for k in ("euclidean", "hausdorff")}
         out[name]["hausdorff_max"] = float(np.max(r.distances["modelled_to_original_hausdorff"]))
-    exact = pick[("exact", "-", "continuous")]
+    exact = pick[EXACT]
     out["exact_continuous"]["euclidean_unclipped"] = float(np.mean(
         exact.distances["modelled_to_original_euclidean"][exact.inside]))
     out["exact_continuous"]["unclipped_share"] = float(np.mean(exact.inside))
@@ -211,9 +219,9 @@ def markdown(report: dict, results: list[Result]) -> str:
 
 
 def _indirect_table(h: dict, results: list[Result]) -> list[str]:
-    pick = {(r.method, r.features, r.degree): r for r in results}
+    pick = _by_config(results)
     named = [("thesis config (ours)", pick[THESIS_CONFIG]), (f"best: {h['best']}", best_learnt(results)),
-             ("exact, continuous degree", pick[("exact", "-", "continuous")])]
+             ("exact, continuous degree", pick[EXACT])]
     lines = [f"### {h['study']}: {h['condition']}", "",
              "| model | statistic | M⇒O Euclidean | M⇒O Hausdorff | O⇒M Euclidean | O⇒M Hausdorff |",
              "|---|---|---|---|---|---|"]

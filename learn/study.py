@@ -101,7 +101,6 @@ class ConditionRun:
         self.out = outputs_of(self.cond)
         self.train = np.flatnonzero(ds.split == "train")
         self.test = np.flatnonzero(ds.split == "test")
-        self.t = ds.row / (ds.dd - 1)       # position on the condition's line (the regression target)
         self.table = breast_table(ds.database, self.cond.kind)
         self.truth = np.stack([ds.deformed_points(k) for k in self.test])
         dc = ds.degree_continuous[self.test]
@@ -128,14 +127,14 @@ class ConditionRun:
 
         def cv(k):
             X = np.column_stack([f.scalars, scores[k]])[self.train]
-            return select("LR", X, self.t[self.train], groups, quick=True).cv_rmse_pct
+            return select("LR", X, self.ds.position[self.train], groups, quick=True).cv_rmse_pct
 
         k = min(scores, key=cv)
         X = np.column_stack([f.scalars, scores[k]])
         return X[self.train], X[self.test], {"pca_components": k, "pca_explained_pct": reducer.explained(k)}
 
     def learnt(self, family: str, feature_set: str, degree: str, X_train, X_test, info, quick) -> Result:
-        sel = select(family, X_train, self.t[self.train], self.ds.breast[self.train], quick)
+        sel = select(family, X_train, self.ds.position[self.train], self.ds.breast[self.train], quick)
         return self._result(family, feature_set, degree, {**sel.params, **info}, sel.cv_rmse_pct,
                             sel.estimator.predict(X_test))
 
@@ -166,6 +165,17 @@ def run_condition(study_name: str, study: Study, ds: Dataset, quick: bool, advan
 def thesis_sets(study: Study, quick: bool) -> tuple[str, ...]:
     """The feature sets run with the discrete degree: the study's, or FS5 alone with `quick`."""
     return ("FS5",) if quick else study.feature_sets
+
+
+def study_datasets(names: list[str], dd: int, quick: bool) -> list[tuple[str, Dataset]]:
+    """(study name, dataset) of every condition of the named studies, databases built once."""
+    cache = {}
+    return [(n, load_dataset(STUDIES[n], c, dd, quick, cache)) for n in names for c in STUDIES[n].conditions]
+
+
+def run_studies(datasets: list[tuple[str, Dataset]], quick: bool, advance=lambda: None) -> list[Result]:
+    """Every configuration of every (study name, dataset)."""
+    return [r for name, ds in datasets for r in run_condition(name, STUDIES[name], ds, quick, advance)]
 
 
 def configurations(study: Study, quick: bool) -> int:

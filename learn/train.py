@@ -25,13 +25,12 @@ FEATURE_SETS = ("FS4", "FS5")
 def train_condition(ds, quick: bool = False) -> tuple[Selected, str, list[str]]:
     """The best family and feature set of one dataset: (selection, feature set, feature names)."""
     train = ds.split == "train"
-    t = ds.row / (ds.dd - 1)
     table = breast_table(ds.database, ds.condition.kind)
     best = None
     for fs in FEATURE_SETS:
         f = example_features(ds, fs, "continuous", table)
         for family in FAMILIES:
-            sel = select(family, f.scalars[train], t[train], ds.breast[train], quick)
+            sel = select(family, f.scalars[train], ds.position[train], ds.breast[train], quick)
             if best is None or sel.cv_rmse_pct < best[0].cv_rmse_pct:
                 best = (sel, fs, f.names)
     return best

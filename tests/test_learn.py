@@ -50,7 +50,7 @@ def test_scalers_and_pca_never_see_the_test_split(db_small):
     b = VectorReducer().fit(poisoned[train])
     np.testing.assert_array_equal(a.pca.components_, b.pca.components_)
     np.testing.assert_array_equal(a.low, f.vectors[train].min(axis=0))
-    sel = select("SVR-rbf", f.scalars[train], (ds.row / 7)[train], ds.breast[train], quick=True)
+    sel = select("SVR-rbf", f.scalars[train], ds.position[train], ds.breast[train], quick=True)
     scaler = sel.estimator.regressor_.named_steps["scale"]
     np.testing.assert_array_equal(scaler.data_min_, f.scalars[train].min(axis=0))
     np.testing.assert_array_equal(scaler.data_max_, f.scalars[train].max(axis=0))
