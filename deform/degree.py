@@ -75,11 +75,31 @@ def discrete_degree(extents, reference) -> np.ndarray:
 
 
 def continuous_degree(extents, reference) -> np.ndarray:
-    """Piecewise-linear degree in [1, #dd] over the reference extents (rounds to the discrete one)."""
+    """Piecewise-linear degree over the reference extents, extended past degrees 1 and #dd along
+    the end segments; rounded and clipped to [1, #dd] it is the discrete degree.
+
+    MODEL.md §5 clips it to [1, #dd]. We extend it instead: on database S 12–34 % of the examples
+    lie beyond the reference extents (ζ = z/10 is in model units, so a larger breast deforms more),
+    and a clipped degree maps them all to the line's end, so neither the exact solver nor a
+    learnt model could recover their row. Unclipped, degree and extent determine each other.
+    """
     ref = np.asarray(reference, dtype=float)
     e = np.asarray(extents, dtype=float)
     if ref[-1] < ref[0]:  # a decreasing signed extent (top-shape s0⁻ > s1⁺)
         ref, e = -ref, -e
     if np.any(np.diff(ref) <= 0):
         raise ValueError("reference extents are not monotone; no continuous degree exists")
-    return np.interp(e, ref, np.arange(1, len(ref) + 1, dtype=float))
+    return _line(e, ref, np.arange(1, len(ref) + 1, dtype=float))
+
+
+def degree_extent(degree, reference) -> np.ndarray:
+    """The reference extent of a continuous degree: the inverse of `continuous_degree`."""
+    ref = np.asarray(reference, dtype=float)
+    return _line(np.asarray(degree, dtype=float), np.arange(1, len(ref) + 1, dtype=float), ref)
+
+
+def _line(x: np.ndarray, xp: np.ndarray, fp: np.ndarray) -> np.ndarray:
+    """Piecewise-linear through (xp, fp), xp increasing, continued straight past both ends."""
+    y = np.interp(x, xp, fp)
+    y = np.where(x < xp[0], fp[0] + (x - xp[0]) * (fp[1] - fp[0]) / (xp[1] - xp[0]), y)
+    return np.where(x > xp[-1], fp[-1] + (x - xp[-1]) * (fp[-1] - fp[-2]) / (xp[-1] - xp[-2]), y)

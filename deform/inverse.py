@@ -3,8 +3,9 @@
 A condition is a line t ∈ [0, 1] in its kind's parameter space (MODEL.md §4). On that line
 the breast's extent (MODEL.md §5; signed for top-shape) is monotone, so the position whose
 extent equals the reference extent of the target degree is a 1-D root (`scipy.optimize.brentq`).
-A continuous degree d ∈ [1, #dd] targets the piecewise-linear reference extent at d, so the
-degree of an example recovers its row exactly; a discrete degree targets E_0d itself. This is the
+A continuous degree targets the piecewise-linear reference extent at d (continued past 1 and
+#dd, `degree.continuous_degree`), so the degree of an example recovers its row exactly; a
+discrete degree targets E_0d itself. This is the
 upper bound no learnt model can pass, and what `plan` uses when the deformation is known.
 """
 from __future__ import annotations
@@ -17,11 +18,13 @@ from scipy.optimize import brentq
 from breastplan import Primitive
 
 from .conditions import Condition
-from .degree import condition_extent, reference_extents
+from .degree import condition_extent, degree_extent, reference_extents
 from .global_deformations import apply_kind
 
 XTOL = 1e-12
 """Tolerance on the line position t (dimensionless)."""
+REACHED = 1e-9
+"""Relative extent error under which a line end counts as reaching the target."""
 
 
 @dataclass(frozen=True)
@@ -36,11 +39,10 @@ class InverseSolution:
 
 
 def target_extent(condition: Condition, dd: int, degree: float, grid: tuple[int, int] = (100, 100)) -> float:
-    """The reference extent of a (continuous) degree in [1, dd]: E_0 interpolated (MODEL.md §5)."""
-    if not 1.0 <= degree <= dd:
-        raise ValueError(f"a degree of {condition.name} with {dd} degrees lies in [1, {dd}], got {degree:g}")
-    ref = reference_extents(condition, dd, *grid)
-    return float(np.interp(degree, np.arange(1, dd + 1), ref))
+    """The reference extent of a (continuous) degree: E_0 interpolated (MODEL.md §5)."""
+    if not np.isfinite(degree):
+        raise ValueError(f"a degree of {condition.name} must be a finite number, got {degree}")
+    return float(degree_extent(degree, reference_extents(condition, dd, *grid)))
 
 
 def solve_degree(points_mu, condition: Condition, dd: int, degree: float, primitive: Primitive | None = None,
@@ -55,9 +57,9 @@ def solve_degree(points_mu, condition: Condition, dd: int, degree: float, primit
         return float(condition_extent(condition, p, moved, primitive)) - goal
 
     ends = excess(0.0), excess(1.0)
-    if np.sign(ends[0]) == np.sign(ends[1]) and ends[0] != 0.0:
-        t = float(np.argmin(np.abs(ends)))  # the target lies beyond the line: its nearer end
-        reached = False
+    if ends[0] * ends[1] > 0:               # the target lies beyond the line: its nearer end,
+        t = float(np.argmin(np.abs(ends)))  # reached if only rounding separates them (a row's own degree)
+        reached = abs(ends[int(t)]) <= REACHED * abs(goal)
     else:
         t = brentq(excess, 0.0, 1.0, xtol=XTOL, rtol=4 * np.finfo(float).eps)
         reached = True

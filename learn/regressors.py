@@ -44,6 +44,8 @@ QUICK = {"C": (2.0 ** -1, 2.0 ** 3), "gamma": (2.0 ** -1,), "neurons": (10,), "d
 SVR_EPSILON = 0.01
 """ε-tube of the SVRs, in scaled target units ([0, 1])."""
 CV_FOLDS = 4
+N_JOBS = -1
+"""Grid points fitted in parallel, one process per core (joblib gives each one BLAS thread)."""
 
 
 @dataclass
@@ -88,7 +90,7 @@ def make_search(family: str, quick: bool = False) -> GridSearchCV:
                  for k, v in grid.items()}
     model = TransformedTargetRegressor(regressor=Pipeline(steps), transformer=MinMaxScaler())
     scorer = make_scorer(lambda y, f: float(np.mean(rmse_pct(f, y))), greater_is_better=False)
-    return GridSearchCV(model, full_grid, scoring=scorer, cv=GroupKFold(CV_FOLDS), refit=True)
+    return GridSearchCV(model, full_grid, scoring=scorer, cv=GroupKFold(CV_FOLDS), refit=True, n_jobs=N_JOBS)
 
 
 def select(family: str, X: np.ndarray, y: np.ndarray, groups: np.ndarray, quick: bool = False) -> Selected:

@@ -67,7 +67,6 @@ class Result:
     target: np.ndarray          # (n_test, n_outputs) true parameters
     predicted: np.ndarray       # (n_test, n_outputs)
     distances: dict = field(default_factory=dict)   # the four indirect keys → (n_test,) %
-    inside: np.ndarray | None = None  # (n_test,) continuous degree strictly inside (1, #dd): not clipped
 
     @property
     def label(self) -> str:
@@ -103,8 +102,6 @@ class ConditionRun:
         self.test = np.flatnonzero(ds.split == "test")
         self.table = breast_table(ds.database, self.cond.kind)
         self.truth = np.stack([ds.deformed_points(k) for k in self.test])
-        dc = ds.degree_continuous[self.test]
-        self.inside = (dc > 1) & (dc < ds.dd)
 
     def _result(self, method, features, degree, hyper, cv, t) -> Result:
         params = self.cond.at(np.asarray(t, dtype=float))
@@ -114,7 +111,7 @@ class ConditionRun:
         return Result(self.study, self.cond.name, method, features, degree,
                       tuple(self.cond.param_names[i] for i in self.out), hyper, cv,
                       self.ds.params[self.test][:, self.out], params[:, self.out],
-                      indirect_metrics(self.truth, modelled), self.inside)
+                      indirect_metrics(self.truth, modelled))
 
     def features(self, feature_set: str, degree: str) -> tuple[np.ndarray, np.ndarray, dict]:
         """(X_train, X_test, info): scalars plus the CV-chosen number of PCA scores."""

@@ -4,7 +4,7 @@ import pytest
 
 from breastplan import Primitive
 from breastplan.deform.conditions import CONDITIONS, find_condition
-from breastplan.deform.degree import (P00, continuous_degree, discrete_degree, extent, reference_extents,
+from breastplan.deform.degree import (P00, continuous_degree, degree_extent, discrete_degree, extent, reference_extents,
                                       reference_points, signed_extent)
 from breastplan.deform.global_deformations import apply_kind
 from breastplan.learn.datasets import build_dataset
@@ -60,19 +60,22 @@ def test_p00_gets_exactly_its_own_degrees(name, dd):
     assert np.allclose(continuous_degree(mine, ref), np.arange(1, dd + 1))
 
 
-def test_degrees_clip_at_the_ends_and_interpolate():
+def test_discrete_degrees_clip_and_continuous_ones_extend_the_end_segments():
     ref = np.array([0.1, 0.2, 0.4, 0.8])
     assert list(discrete_degree([0.0, 0.14, 0.16, 0.35, 5.0], ref)) == [1, 1, 2, 3, 4]
-    assert np.allclose(continuous_degree([0.0, 0.15, 0.3, 0.6, 5.0], ref), [1, 1.5, 2.5, 3.5, 4])
+    # inside: linear between reference extents; outside: the end segments continued (slopes 0.1 and 0.4)
+    assert np.allclose(continuous_degree([0.0, 0.15, 0.3, 0.6, 1.2], ref), [0, 1.5, 2.5, 3.5, 5])
+    assert np.allclose(degree_extent([0, 1.5, 2.5, 3.5, 5], ref), [0.0, 0.15, 0.3, 0.6, 1.2])
     # a decreasing (signed) reference works the same way
-    assert np.allclose(continuous_degree([-0.15, -0.6], -ref), [1.5, 3.5])
+    assert np.allclose(continuous_degree([-0.15, -0.6, -1.2], -ref), [1.5, 3.5, 5])
+    assert np.allclose(degree_extent([1.5, 5], -ref), [-0.15, -1.2])
 
 
 @pytest.mark.parametrize("name", list(CONDITIONS))
 def test_continuous_degree_rounds_to_discrete(db_s, name):
     data = build_dataset(db_s, name, 8)
-    # ties (exact midpoints) aside, rounding the continuous degree gives the thesis degree
-    assert np.array_equal(np.floor(data.degree_continuous + 0.5).astype(int), data.degree)
+    # ties (exact midpoints) aside, rounding and clipping the continuous degree gives the thesis degree
+    assert np.array_equal(np.clip(np.floor(data.degree_continuous + 0.5), 1, 8).astype(int), data.degree)
     assert data.degree.min() >= 1 and data.degree.max() <= 8
 
 
