@@ -9,7 +9,7 @@ import typer
 
 from breastplan import BadInputError, read_ply
 from breastplan.deform.global_deformations import KIND_PARAMS
-from breastplan.fitting.breast_fit import fit_breast
+from breastplan.fitting.breast_fit import SHEARS, fit_breast
 from breastplan.learn.databases import SHAPES
 from breastplan.ingest.scan import load_scan
 
@@ -23,8 +23,9 @@ def fit(
     out: Optional[Path] = typer.Option(None, "--out", help="Folder for fit.npz and fit.ply (default: the case folder, "
                                        "or the PLY's folder)."),
     lattice: int = typer.Option(5, "--lattice", help="Control points per lattice axis, 3..7 (5 = 125 CP)."),
-    deformations: str = typer.Option("", "--deformations", help="Global deformations fitted with the primitive, "
-                                     f"comma-separated: {', '.join(KIND_PARAMS)}."),
+    deformations: str = typer.Option(",".join(SHEARS), "--deformations", help="Global deformations fitted with the "
+                                     f"primitive, comma-separated from {', '.join(KIND_PARAMS)}; 'none' for the "
+                                     "plain primitive."),
     max_iterations: int = typer.Option(1000, "--max-iterations", help="FFD iterations before giving up (thesis: 1000)."),
     max_seconds: float = typer.Option(20.0, "--max-seconds", help="Time guard of the FFD fit, seconds."),
     as_json: bool = JSON,
@@ -33,14 +34,14 @@ def fit(
     timer = Timer()
     if not 3 <= lattice <= 7:
         raise usage_error(f"--lattice must be 3..7, got {lattice}", "--lattice")
-    kinds = tuple(k.strip() for k in deformations.split(",") if k.strip())
+    kinds = tuple(k.strip() for k in deformations.split(",") if k.strip() not in ("", "none"))
     unknown = sorted(set(kinds) - set(KIND_PARAMS))
     if unknown:
         raise usage_error(f"unknown deformations {unknown}; choose from {', '.join(KIND_PARAMS)}", "--deformations")
     if max_iterations < 1 or not max_seconds > 0:
         raise usage_error("--max-iterations must be at least 1 and --max-seconds positive", "--max-iterations")
     points, source, folder = _breast_points(input)
-    starts = tuple(SHAPES.values()) if kinds else ()   # the Table 4.1 shapes seed the full Chen model
+    starts = tuple(SHAPES.values()) if set(kinds) - set(SHEARS) else ()  # Table 4.1 shapes seed the full Chen model
     result = fit_breast(points, lattice, kinds, starts=starts, path=source, max_iterations=max_iterations,
                         max_seconds=max_seconds)
     paths = result.save(out or folder)

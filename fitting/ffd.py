@@ -25,7 +25,8 @@ from scipy.special import comb
 STOP_RESIDUAL = 0.0015
 MAX_ITERATIONS = 1000
 STALL = 1e-3
-"""Relative improvement below which a step counts as no progress (the fit has converged)."""
+"""Relative improvement below which a least-damped step counts as no progress (the fit has
+converged); a damped step that gains little is a short step, not convergence."""
 FIT_POINTS = 2000
 """Data points per solve (a seeded subset): 2000 surface points pin 375 lattice coordinates."""
 DAMPING = (0.01, 0.03, 1.0)
@@ -130,7 +131,7 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
             trial_match = _match(trial, faces32, sub, B)
             trial_residual = np.mean(trial_match[3] / norm)
             if trial_residual < residual:
-                stalled = trial_residual > (1 - STALL) * residual
+                stalled = trial_residual > (1 - STALL) * residual and damping <= DAMPING[0]
                 P, current, match, residual = step, trial, trial_match, trial_residual
                 damping = max(damping / 2, DAMPING[0])
             else:
