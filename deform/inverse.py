@@ -5,8 +5,8 @@ the breast's extent (MODEL.md §5; signed for top-shape) is monotone, so the pos
 extent equals the reference extent of the target degree is a 1-D root (`scipy.optimize.brentq`).
 A continuous degree targets the piecewise-linear reference extent at d (continued past 1 and
 #dd, `degree.continuous_degree`), so the degree of an example recovers its row exactly; a
-discrete degree targets E_0d itself. This is the
-upper bound no learnt model can pass, and what `plan` uses when the deformation is known.
+discrete degree targets E_0d itself. This is the upper bound no learnt model can pass, and what
+`plan` uses when the deformation is known.
 """
 from __future__ import annotations
 

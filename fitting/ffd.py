@@ -109,8 +109,8 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
     L = lattice.laplacian()
     LL = np.kron(np.eye(3), L.T @ L) * smoothness * len(sub)   # λ‖L(P − P0)‖², all three coordinates
     for c in range(3 if held is not None else 0):          # Σ_v held_vc·(B_v (P_c − rest_c))², per coordinate
-        v = np.flatnonzero(held[:, c])
-        LL[c * K:(c + 1) * K, c * K:(c + 1) * K] += len(sub) * (B[v] * held[v, c, None]).T @ B[v]
+        h = np.flatnonzero(held[:, c])                     # the held vertices
+        LL[c * K:(c + 1) * K, c * K:(c + 1) * K] += len(sub) * (B[h] * held[h, c, None]).T @ B[h]
     rest = lattice.rest.T.reshape(-1)                      # coordinate-major: x of every CP, then y, z
     # both penalties are quadratic in P − rest (B·rest = vertices), so LL @ (P − rest) is their gradient
     faces32 = np.ascontiguousarray(faces, dtype=np.uint32)

@@ -44,7 +44,7 @@ class Dataset:
     params: np.ndarray              # (n_examples, n_params) = rows[row]
     extent: np.ndarray              # (n_examples,) extent (signed for top-shape)
     degree: np.ndarray              # (n_examples,) discrete degree 1..dd
-    degree_continuous: np.ndarray   # (n_examples,) in [1, dd]
+    degree_continuous: np.ndarray   # (n_examples,) continuous degree, may lie outside [1, dd]
 
     def __len__(self) -> int:
         return len(self.breast)
