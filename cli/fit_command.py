@@ -9,8 +9,7 @@ import typer
 
 from breastplan import BadInputError, read_ply
 from breastplan.deform.global_deformations import KIND_PARAMS
-from breastplan.fitting.breast_fit import SHEARS, fit_breast
-from breastplan.learn.databases import SHAPES
+from breastplan.fitting.breast_fit import DEFORMATIONS, fit_breast
 from breastplan.ingest.scan import load_scan
 
 from .app import JSON, app
@@ -23,7 +22,7 @@ def fit(
     out: Optional[Path] = typer.Option(None, "--out", help="Folder for fit.npz and fit.ply (default: the case folder, "
                                        "or the PLY's folder)."),
     lattice: int = typer.Option(5, "--lattice", help="Control points per lattice axis, 3..7 (5 = 125 CP)."),
-    deformations: str = typer.Option(",".join(SHEARS), "--deformations", help="Global deformations fitted with the "
+    deformations: str = typer.Option(",".join(DEFORMATIONS), "--deformations", help="Global deformations fitted with the "
                                      f"primitive, comma-separated from {', '.join(KIND_PARAMS)}; 'none' for the "
                                      "plain primitive."),
     max_iterations: int = typer.Option(1000, "--max-iterations", help="FFD iterations before giving up (thesis: 1000)."),
@@ -41,8 +40,7 @@ def fit(
     if max_iterations < 1 or not max_seconds > 0:
         raise usage_error("--max-iterations must be at least 1 and --max-seconds positive", "--max-iterations")
     points, source, folder = _breast_points(input)
-    starts = tuple(SHAPES.values()) if set(kinds) - set(SHEARS) else ()  # Table 4.1 shapes seed the full Chen model
-    result = fit_breast(points, lattice, kinds, starts=starts, path=source, max_iterations=max_iterations,
+    result = fit_breast(points, lattice, kinds, path=source, max_iterations=max_iterations,
                         max_seconds=max_seconds)
     paths = result.save(out or folder)
     stats = result.residual_stats()

@@ -32,11 +32,13 @@ SMOOTHNESS = (1e-9, 1e-6)
 the unseen side of a frontal scan within 0.5 mm RMS of the truth where 1e-8 lets it drift 1 mm)."""
 UNSEEN_MM, UNSEEN_SHARE = 6.0, 0.02
 """A model vertex is unseen with no data point within 6 mm; a breast is partly seen above 2 %."""
-SHEARS = ("ptosis", "turn")
-"""Deformations fitted with the primitive by default: shears by z with closed-form inverses, cheap
-to fit, and a sagging or turned breast is no superellipsoid. Fitted on the 480 degree-8 database-S
-examples they let the lattice meet the thesis stopping rule on every ptosis and turn example of
-shapes 1, 3 and 4, where the plain primitive left turn at 0.003–0.006 (benchmarks/bench_fit.py)."""
+DEFORMATIONS = ("top-shape", "ptosis", "turn")
+"""Deformations fitted with the primitive by default. Ptosis and turn are shears by z with
+closed-form inverses, top-shape the upper half's own profile (MODEL.md §3); a sagging, turned or
+top-heavy breast is no superellipsoid, and the lattice alone cannot make up the difference. On the
+360 ptosis and turn examples of database S at degree 8 every fit meets the thesis stopping rule
+with them, against 270 with ptosis and turn alone (shape 2's top-shape lifts its upper half up to
+2.25×; benchmarks/bench_fit.py)."""
 MAX_RESIDUAL = 0.05
 """A fit whose mean normalised residual stays above 5 % describes no breast surface."""
 
@@ -103,15 +105,14 @@ class BreastFit:
                 "fit_ply": write_ply(folder / "fit.ply", self.vertices, faces=self.faces, comments=comments)}
 
 
-def fit_breast(points_mm: np.ndarray, lattice: int = 5, deformations: tuple[str, ...] = SHEARS, *, starts=(),
+def fit_breast(points_mm: np.ndarray, lattice: int = 5, deformations: tuple[str, ...] = DEFORMATIONS, *,
                path=None, max_iterations: int = 1000, max_seconds: float = 20.0) -> BreastFit:
     """Fit the breast model to (N, 3) points (mm, breast frame, base on z = 0).
 
-    `starts` (Deformation records) seed the fitted `deformations` (see `fit_superquadric`).
     Raises BadInputError naming `path` for unusable points or a fit that does not converge.
     """
     with threadpool_limits(1, "blas"):          # small dense solves: threads only add overhead
-        sq = fit_superquadric(points_mm, deformations=deformations, starts=starts, path=path)
+        sq = fit_superquadric(points_mm, deformations=deformations, path=path)
         vertices, faces = model_mesh(sq)
         points = np.asarray(points_mm, float)
         ffd = fit_ffd(points, vertices, faces, n=lattice, smoothness=smoothness(vertices, points),

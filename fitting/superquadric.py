@@ -29,9 +29,15 @@ a free turn about z would let the fit trade ptosis for turn on a near-round brea
 SEMI_AXIS_RANGE = (0.2, 1.5)
 """Semi-axes bounded to this range × the largest initial one: a side the scanner did not see
 (the medial side, cropped between the breasts) would otherwise let its semi-axis run away."""
-START_POINTS, START_NFEV, DEFORMED_FIT_POINTS = 200, 5, 600
-"""Each start is refined briefly (START_NFEV evaluations on START_POINTS points) and the best one
-finished on DEFORMED_FIT_POINTS points (deformations: finite-difference Jacobian)."""
+DEFORMED_FIT_POINTS = 600
+"""Points of a fit with deformations (finite-difference Jacobian: each point costs more)."""
+START_TURN_RAD = 1e-6
+"""The pose of a top-shape start keeps the breast frame's axes: a cloud's lower part alone lets a
+turn about z trade places with a1 and a2."""
+LOWER_MARGIN, LOW_SHARE = 0.7, 0.1
+"""A top-shape fit starts from the points top-shape barely moves: those below y = −0.7·a4 (cloud
+centre, breast frame), in the lower half whatever ptosis moved down, and those below 10 % of the
+height, which z·(β − 1) moves by under 2 % of the height for |s0| ≤ 2.5 (MODEL.md §3–4)."""
 CHEST_PRIOR_WEIGHT = 30.0
 """Weight of the prior residuals (tilt of the base, rad; height of the base, mu) per √point."""
 
@@ -79,12 +85,9 @@ def _radial(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...] = ()) -> np.nda
     Signed (negative inside), unlike `Primitive.radial_distance`, so that least squares sees
     a smooth residual through the surface.
     """
-    a, e1, e2, rot, t = _unpack(x)
-    primitive = Primitive(*a, e1, e2)
-    q = Rotation.from_rotvec(rot).inv().apply(p - t)
-    if kinds:
-        q = _inverse(q, _deformation(x, kinds), primitive)
-    f = np.maximum(primitive.inside_outside(q), 1e-12)
+    a, e1, e2, _, _ = _unpack(x)
+    q = _undone(x, p, kinds)
+    f = np.maximum(Primitive(*a, e1, e2).inside_outside(q), 1e-12)
     return np.linalg.norm(q, axis=1) * (1.0 - f ** (-e1 / 2))
 
 
@@ -220,14 +223,6 @@ def _chest_prior_jacobian(x: np.ndarray) -> np.ndarray:
     return J
 
 
-def _base_centre(p: np.ndarray) -> np.ndarray:
-    """Centre of the extents of the lowest tenth of the points (the base ring, which ptosis and turn,
-    shears by z, leave in place; MODEL.md §3), on the chest wall z = 0."""
-    ring = p[p[:, 2] <= np.percentile(p[:, 2], 10)]
-    lo, hi = ring.min(0), ring.max(0)
-    return np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, 0.0])
-
-
 def initial_guess(p: np.ndarray) -> np.ndarray:
     """Parameters from the cloud's extents in the breast frame (base on z = 0, nipple along z)."""
     lo, hi = np.percentile(p, [1, 99], axis=0)
@@ -237,15 +232,13 @@ def initial_guess(p: np.ndarray) -> np.ndarray:
     return np.concatenate([np.log(a), [1.0, 1.0], np.zeros(3), centre])
 
 
-def fit_superquadric(points_mm, *, deformations=(), starts=(), chest_prior: bool = True, loss: str = "soft_l1",
+def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, loss: str = "soft_l1",
                      f_scale_mm: float = 1.0, x0: np.ndarray | None = None, path=None) -> SuperquadricFit:
-    """Fit primitive + pose (+ the global `deformations`, e.g. ("ptosis", "turn")) to (N, 3) points
-    (mm, breast frame).
+    """Fit primitive + pose (+ the global `deformations`, e.g. ("top-shape", "ptosis", "turn")) to
+    (N, 3) points (mm, breast frame).
 
-    `starts` (Deformation records, e.g. a catalogue of typical breast shapes): the deformation
-    parameters start from each, on the plainly fitted primitive (`x0`, else fitted here) set upright
-    in the breast frame; each start is refined briefly on a small subset and the best one finished.
-    Without starts they start from zero, or from `x0`.
+    The deformation parameters start from zero, or with top-shape from `_top_shape_start`, unless
+    `x0` gives the whole parameter vector.
     """
     kinds = tuple(k for k in KIND_PARAMS if k in set(deformations))  # MODEL.md §3 order
     unknown = set(deformations) - set(KIND_PARAMS)
@@ -255,20 +248,12 @@ def fit_superquadric(points_mm, *, deformations=(), starts=(), chest_prior: bool
     everything = to_model_units(_checked(points_mm, path))
     p = _subset(everything, FIT_POINTS)
     solve = _Solver(chest_prior, loss, float(to_model_units(f_scale_mm)))
-    n_deform = sum(len(KIND_PARAMS[k]) for k in kinds)
     nfev = 0
     with threadpool_limits(1, "blas"):          # small dense solves: threads only add overhead
-        if kinds and starts:
-            if x0 is None:
-                plain = solve(p, (), initial_guess(p))
-                x0, nfev = plain.x, plain.nfev
-            upright = np.concatenate([x0[:7], np.zeros(3), _base_centre(p)])
-            trials = [solve(_subset(p, START_POINTS), kinds, np.concatenate([upright, _params(d, kinds)]),
-                            max_nfev=START_NFEV) for d in starts]
-            nfev += sum(t.nfev for t in trials)
-            x0 = min(trials, key=lambda t: t.cost).x
+        if x0 is None and "top-shape" in kinds:
+            x0, nfev = _top_shape_start(p, kinds, solve)
         elif x0 is None:
-            x0 = np.concatenate([initial_guess(p), np.zeros(n_deform)])
+            x0 = np.concatenate([initial_guess(p), np.zeros(sum(len(KIND_PARAMS[k]) for k in kinds))])
         sol = solve(_subset(p, DEFORMED_FIT_POINTS) if kinds else p, kinds, x0)
     a, e1, e2, rot, t = _unpack(sol.x)
     pose = np.eye(4)
@@ -279,14 +264,40 @@ def fit_superquadric(points_mm, *, deformations=(), starts=(), chest_prior: bool
                            sol.x)
 
 
+def _top_shape_start(p: np.ndarray, kinds: tuple[str, ...], solve: "_Solver") -> tuple[np.ndarray, int]:
+    """Start of a fit with top-shape (p in mu). Top-shape scales only the heights of the upper half
+    (MODEL.md §3), so the primitive, pose and other deformations are first fitted to the points it
+    barely moves (LOWER_MARGIN, LOW_SHARE; picked again once the fit can take points back), and (s0, s1)
+    then solve the linear least squares z = h·β(w) over the upper points, h the fitted primitive's
+    height above each (t0 = t1 = 0). Returns the start and the solver's function evaluations."""
+    rest = tuple(k for k in kinds if k != "top-shape")
+    x = np.concatenate([initial_guess(p), np.zeros(sum(len(KIND_PARAMS[k]) for k in rest))])
+    q, nfev = p - x[10:13], 0
+    for _ in range(2):
+        still = (q[:, 1] < -LOWER_MARGIN * np.exp(x[3])) | (q[:, 2] < LOW_SHARE * np.exp(x[4]))
+        sol = solve(_subset(p[still], DEFORMED_FIT_POINTS), rest, x, max_turn=START_TURN_RAD)
+        x, nfev, q = sol.x, nfev + sol.nfev, _undone(sol.x, p, rest)
+    a, e1, e2, _, _ = _unpack(x)
+    primitive = Primitive(*a, e1, e2)
+    upper = q[(q[:, 1] > 0) & (q[:, 2] > 0)]
+    h = _height(upper, primitive)
+    seen = h > 0.05 * primitive.a5                           # β is undefined where h → 0
+    w = primitive.latitude_at(h[seen]) * (2 / np.pi)
+    basis = np.column_stack([beta(w, 1, 0, 0, 0), beta(w, 0, 1, 0, 0)]) - 1
+    s, *_ = np.linalg.lstsq(basis * h[seen, None], upper[seen, 2] - h[seen], rcond=None)
+    return np.concatenate([x[:13], s, [0.0, 0.0], x[13:]]), nfev
+
+
+def _undone(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
+    """Points p (mu, data frame) taken back through the pose and deformations of x to the primitive."""
+    a, e1, e2, rot, t = _unpack(x)
+    q = Rotation.from_rotvec(rot).inv().apply(p - t)
+    return _inverse(q, _deformation(x, kinds), Primitive(*a, e1, e2)) if kinds else q
+
+
 def _subset(p: np.ndarray, n: int) -> np.ndarray:
     """A seeded random subset of n points (all of them if there are fewer)."""
     return p[np.random.default_rng(0).choice(len(p), n, replace=False)] if len(p) > n else p
-
-
-def _params(deformation: Deformation, kinds: tuple[str, ...]) -> np.ndarray:
-    """The parameters of `kinds` (in order) from a Deformation record."""
-    return np.concatenate([deformation.params(k) for k in kinds])
 
 
 @dataclass(frozen=True)
@@ -308,26 +319,22 @@ class _Solver:
     def weight(self, p: np.ndarray) -> float:
         return CHEST_PRIOR_WEIGHT * np.sqrt(len(p))
 
-    def cost(self, x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> float:
-        """The robust (soft-L1) cost least squares minimises."""
-        z = (self.residuals(x, p, kinds) / self.f_scale) ** 2
-        return float(np.sum(2 * (np.sqrt(1 + z) - 1)))
-
-    def __call__(self, p: np.ndarray, kinds: tuple[str, ...], x0: np.ndarray, max_nfev: int = 200):
+    def __call__(self, p: np.ndarray, kinds: tuple[str, ...], x0: np.ndarray, max_nfev: int = 200,
+                 max_turn: float = MAX_TURN_RAD):
         """least_squares from x0: analytic Jacobian for the plain primitive, 2-point with deformations."""
-        lower, upper = _bounds(x0)
+        lower, upper = _bounds(x0, max_turn)
         x0 = np.clip(x0, lower + 1e-9, upper - 1e-9)
         jac = "2-point" if kinds else (lambda x: self.jacobian(x, p))
         return least_squares(lambda x: self.residuals(x, p, kinds), x0, jac=jac, bounds=(lower, upper),
                              loss=self.loss, f_scale=self.f_scale, x_scale="jac", max_nfev=max_nfev)
 
 
-def _bounds(x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """eps in EPS_BOUNDS, each rotation-vector component within ±MAX_TURN_RAD, semi-axes within
+def _bounds(x0: np.ndarray, max_turn: float) -> tuple[np.ndarray, np.ndarray]:
+    """eps in EPS_BOUNDS, each rotation-vector component within ±max_turn, semi-axes within
     SEMI_AXIS_RANGE × the largest initial one; the rest free."""
     lower, upper = np.full(len(x0), -np.inf), np.full(len(x0), np.inf)
     lower[5:7], upper[5:7] = EPS_BOUNDS
-    lower[7:10], upper[7:10] = -MAX_TURN_RAD, MAX_TURN_RAD
+    lower[7:10], upper[7:10] = -max_turn, max_turn
     size = np.log(np.exp(x0[:5]).max())
     lower[:5], upper[:5] = size + np.log(SEMI_AXIS_RANGE[0]), size + np.log(SEMI_AXIS_RANGE[1])
     return lower, upper

@@ -123,12 +123,30 @@ def test_fast_inverse_undoes_the_deformations_of_each_table_4_1_shape(shape):
     assert np.abs(_inverse(deformed, SHAPES[shape], P) - samples).max() < 0.01
 
 
-def test_full_chen_fit_from_shape_starts_recovers_a_database_shape():
-    """Truth: the primitive and Table 4.1 deformation the breast was built from."""
+@pytest.mark.parametrize("shape", ["shape2", "shape3"])
+def test_full_chen_fit_recovers_a_database_shape(shape):
+    """Truth: the primitive and Table 4.1 deformation the breast was built from. Shape 2's top-shape
+    lifts its upper half up to 2.25× (β(0.5) = 2.25 by hand from MODEL.md §3's quintic)."""
     from breastplan.deform.global_deformations import KIND_PARAMS
     from breastplan.learn.databases import SHAPES
     P = Primitive(10.5, 9, 11, 9.5, 10, 1.0, 1.0)
-    data = to_mm(SHAPES["shape3"].apply(P.sample(100, 100), P))
-    fit = fit_superquadric(data, deformations=tuple(KIND_PARAMS), starts=list(SHAPES.values()))
+    data = to_mm(SHAPES[shape].apply(P.sample(100, 100), P))
+    fit = fit_superquadric(data, deformations=tuple(KIND_PARAMS))
     assert np.allclose(fit.primitive.as_array()[:5], P.as_array()[:5], rtol=0.01)
     assert np.median(np.abs(fit.residuals_mm)) < 0.05
+
+
+@pytest.mark.parametrize("s0,s1", [(1.5, -2.0), (-0.5, 0.25), (0.8, 0.0)])
+def test_top_shape_fit_recovers_the_profile_of_a_ptotic_breast(s0, s1):
+    """Truth: the top-shape profile β(w) (t0 = t1 = 0) and ptosis the samples were deformed by. The
+    four top-shape parameters trade against each other; the profile they give does not. Points
+    that cross the tear along y = 0 (MODEL.md §3) make the cost jump, so ptosis is held to 0.1 mu
+    (0.6 mm at the nipple)."""
+    from breastplan.deform.global_deformations import Deformation, beta
+    P = Primitive(10, 11, 9.5, 10.5, 9, 0.9, 1.0)
+    truth = Deformation(top_shape=(s0, s1, 0.0, 0.0), ptosis=(0.8, 0.2))
+    fit = fit_superquadric(to_mm(truth.apply(P.sample(100, 100), P)), deformations=("top-shape", "ptosis", "turn"))
+    w = np.linspace(0, 1, 101)
+    assert np.abs(beta(w, *fit.deformation.top_shape) - beta(w, s0, s1, 0, 0)).max() < 0.03
+    assert np.allclose(fit.deformation.ptosis, (0.8, 0.2), atol=0.1)
+    assert np.allclose(fit.primitive.as_array()[:5], P.as_array()[:5], rtol=0.01)
