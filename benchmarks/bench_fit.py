@@ -12,8 +12,8 @@ library does in `ingest.pipeline` (small dense solves: BLAS threads only add con
    over the breasts of database S. Target ≤ 300 ms. Baseline: one open3d closest-point query
    (`fitting.ffd._closest`) of the fit's data subset on the initial model mesh — the floor of
    one FFD iteration; the median iteration count is reported too;
-3. all 60 breasts of database S through `fit_breast` with its defaults (superquadric with ptosis
-   and turn, then FFD): total seconds, median over passes. Target ≤ 30 s. Baseline:
+3. all 60 breasts of database S through `fit_breast` with its defaults (superquadric with
+   top-shape, ptosis and turn, then FFD): total seconds, median over passes. Target ≤ 30 s. Baseline:
    `build_database("S")`, timed alternately with each pass.
    Also (information): median and worst FFD normalised residual, worst volume error vs
    `Database.volume_cc`;
@@ -296,7 +296,7 @@ def database_fit(db, runs: list[dict], builds: list[float]) -> dict:
 def print_database_fit(r: dict, console: Console) -> None:
     label = (f"{r['fitted']} of {r['breasts']} fitted, projected ×{r['breasts'] / r['fitted']:g}" if r["projected"]
              else f"all {r['breasts']}")
-    caption = (f"Total = wall time of one pass of fit_breast (superquadric with ptosis and turn + FFD, lattice {LATTICE}) over the "
+    caption = (f"Total = wall time of one pass of fit_breast (superquadric with top-shape, ptosis and turn + FFD, lattice {LATTICE}) over the "
                f"breasts, median over passes. Baseline: build_database('S') timed after each pass. "
                f"Pass totals: {', '.join(fmt(t) for t in r['pass_totals_s'])}.")
     table = new_table("bench_fit 3 — database S through fit_breast",
