@@ -37,7 +37,7 @@ turn about z trade places with a1 and a2."""
 LOWER_MARGIN, LOW_SHARE = 0.7, 0.1
 """A top-shape fit starts from the points top-shape barely moves: those below y = −0.7·a4 (cloud
 centre, breast frame), in the lower half whatever ptosis moved down, and those below 10 % of the
-height, which z·(β − 1) moves by under 2 % of the height for |s0| ≤ 2.5 (MODEL.md §3–4)."""
+height, which z·(β − 1) moves by under 0.02·a5 for |s0| ≤ 2.5 (MODEL.md §3–4)."""
 CHEST_PRIOR_WEIGHT = 30.0
 """Weight of the prior residuals (tilt of the base, rad; height of the base, mu) per √point."""
 
@@ -267,9 +267,9 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
 def _top_shape_start(p: np.ndarray, kinds: tuple[str, ...], solve: "_Solver") -> tuple[np.ndarray, int]:
     """Start of a fit with top-shape (p in mu). Top-shape scales only the heights of the upper half
     (MODEL.md §3), so the primitive, pose and other deformations are first fitted to the points it
-    barely moves (LOWER_MARGIN, LOW_SHARE; picked again once the fit can take points back), and (s0, s1)
-    then solve the linear least squares z = h·β(w) over the upper points, h the fitted primitive's
-    height above each (t0 = t1 = 0). Returns the start and the solver's function evaluations."""
+    barely moves (LOWER_MARGIN, LOW_SHARE; picked again once the fit can take points back), then
+    (s0, s1) solve the linear least squares z = h·β(w) over the upper points, h the fitted
+    primitive's height above each (t0 = t1 = 0). Returns the start and the solver's evaluations."""
     rest = tuple(k for k in kinds if k != "top-shape")
     x = np.concatenate([initial_guess(p), np.zeros(sum(len(KIND_PARAMS[k]) for k in rest))])
     q, nfev = p - x[10:13], 0
