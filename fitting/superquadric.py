@@ -223,13 +223,15 @@ def _chest_prior_jacobian(x: np.ndarray) -> np.ndarray:
     return J
 
 
-def initial_guess(p: np.ndarray) -> np.ndarray:
-    """Parameters from the cloud's extents in the breast frame (base on z = 0, nipple along z)."""
+def initial_guess(p: np.ndarray, kinds: tuple[str, ...] = ()) -> np.ndarray:
+    """Parameters from the cloud's extents in the breast frame (base on z = 0, nipple along z),
+    with the deformations of `kinds` at zero."""
     lo, hi = np.percentile(p, [1, 99], axis=0)
     centre = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, 0.0])
     half = np.maximum((hi - lo)[:2] / 2, 1e-3)
     a = np.array([half[0], half[0], half[1], half[1], max(hi[2], 1e-3)])
-    return np.concatenate([np.log(a), [1.0, 1.0], np.zeros(3), centre])
+    deformations = np.zeros(sum(len(KIND_PARAMS[k]) for k in kinds))
+    return np.concatenate([np.log(a), [1.0, 1.0], np.zeros(3), centre, deformations])
 
 
 def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, loss: str = "soft_l1",
@@ -253,7 +255,7 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
         if x0 is None and "top-shape" in kinds:
             x0, nfev = _top_shape_start(p, kinds, solve)
         elif x0 is None:
-            x0 = np.concatenate([initial_guess(p), np.zeros(sum(len(KIND_PARAMS[k]) for k in kinds))])
+            x0 = initial_guess(p, kinds)
         sol = solve(_subset(p, DEFORMED_FIT_POINTS) if kinds else p, kinds, x0)
     a, e1, e2, rot, t = _unpack(sol.x)
     pose = np.eye(4)
@@ -271,7 +273,7 @@ def _top_shape_start(p: np.ndarray, kinds: tuple[str, ...], solve: "_Solver") ->
     (s0, s1) solve the linear least squares z = h·β(w) over the upper points, h the fitted
     primitive's height above each (t0 = t1 = 0). Returns the start and the solver's evaluations."""
     rest = tuple(k for k in kinds if k != "top-shape")
-    x = np.concatenate([initial_guess(p), np.zeros(sum(len(KIND_PARAMS[k]) for k in rest))])
+    x = initial_guess(p, rest)
     q, nfev = p - x[10:13], 0
     for _ in range(2):
         still = (q[:, 1] < -LOWER_MARGIN * np.exp(x[3])) | (q[:, 2] < LOW_SHARE * np.exp(x[4]))
