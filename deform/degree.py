@@ -15,7 +15,7 @@ import numpy as np
 from breastplan import Primitive
 
 from .conditions import Condition
-from .global_deformations import Deformation, apply_kind
+from .global_deformations import Deformation, changing
 
 GENERIC_SHAPE = Deformation(turn=(0.38, 0.0), turn_top=(0.41, 0.0))
 """Database V's generic breast shape (MODEL.md §4, Table 4.1)."""
@@ -54,8 +54,8 @@ def reference_points(n_u: int = 100, n_v: int = 100) -> np.ndarray:
 @lru_cache(maxsize=64)
 def _reference_extents(name: str, kind: str, first, last, dd: int, n_u: int, n_v: int) -> np.ndarray:
     cond = Condition(name, kind, first, last)
-    p0 = reference_points(n_u, n_v)
-    ext = [condition_extent(cond, p0, apply_kind(p0, kind, row, P00), P00) for row in cond.rows(dd)]
+    p0, move = reference_points(n_u, n_v), changing(kind, P00.sample(n_u, n_v), GENERIC_SHAPE, P00)
+    ext = [condition_extent(cond, p0, move(row), P00) for row in cond.rows(dd)]
     out = np.array(ext)
     out.setflags(write=False)
     return out

@@ -6,8 +6,8 @@ are provided for each (top-shape and flatten-side by a vectorised 1-D root solve
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
-from typing import Mapping, Sequence
+from dataclasses import dataclass, fields, replace
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -249,8 +249,37 @@ class Deformation:
             raise ValueError(f"a deformation vector has {i} values, got {len(values)}")
         return cls(**out)
 
+    def split(self, kind: str) -> tuple["Deformation", "Deformation"]:
+        """(the stages before `kind`, `kind`'s stage and the later ones), MODEL.md §3 order."""
+        names = [f.name for f in fields(self)]   # MODEL.md §3 order
+        i = names.index(kind.replace("-", "_"))
+        zero = Deformation()
+        return (replace(self, **{n: getattr(zero, n) for n in names[i:]}),
+                replace(self, **{n: getattr(zero, n) for n in names[:i]}))
+
+    def plus(self, kind: str, params) -> "Deformation":
+        """This record with `params` added to `kind`'s parameters."""
+        added = np.add(self.params(kind), kind_params(kind, params))
+        return replace(self, **{kind.replace("-", "_"): tuple(float(v) for v in added)})
+
     @classmethod
     def single(cls, kind: str, params) -> "Deformation":
         """A record with only `kind` set."""
         return cls(**{kind.replace("-", "_"): kind_params(kind, params)})
 
+
+
+def changing(kind: str, sample, own: Deformation, primitive: Primitive | None = None
+             ) -> Callable[[object], np.ndarray]:
+    """params ↦ the breast `own.apply(sample)` with `kind`'s parameters changed by `params`.
+
+    A condition changes the breast's own parameters: its kind's stage and the later ones are
+    redone from the primitive `sample` (model units), so the chain keeps MODEL.md §3 order. For
+    ptosis and turn (shears of the last stages) this equals applying the change on top; for
+    top-shape it keeps one top-shape (β of summed parameters) where stacking would give two
+    β profiles and two tears at y = 0. Works from the sample because top-shape folds just below
+    the nipple and has no inverse there.
+    """
+    before, rest = own.split(kind)
+    base = before.apply(sample, primitive)
+    return lambda params: rest.plus(kind, params).apply(base, primitive)

@@ -11,6 +11,7 @@ discrete degree targets E_0d itself. This is the upper bound no learnt model can
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 from scipy.optimize import brentq
@@ -46,15 +47,17 @@ def target_extent(condition: Condition, dd: int, degree: float, grid: tuple[int,
 
 
 def solve_degree(points_mu, condition: Condition, dd: int, degree: float, primitive: Primitive | None = None,
-                 grid: tuple[int, int] = (100, 100)) -> InverseSolution:
+                 grid: tuple[int, int] = (100, 100), move: Callable | None = None) -> InverseSolution:
     """The parameters of `condition` that give the breast `points_mu` (model units, breast frame) the
-    extent of `degree`; `grid` is the (n_u, n_v) sampling of the reference breast P00."""
+    extent of `degree`; `grid` is the (n_u, n_v) sampling of the reference breast P00. `move(params)`
+    deforms the breast (default: the condition's kind applied on top of `points_mu`; a database
+    breast passes `Database.changer`, which changes its own parameters)."""
     p = np.asarray(points_mu, dtype=float)
     goal = target_extent(condition, dd, degree, grid)
+    move = move or (lambda params: apply_kind(p, condition.kind, params, primitive))
 
     def excess(t: float) -> float:
-        moved = apply_kind(p, condition.kind, condition.at(t), primitive)
-        return float(condition_extent(condition, p, moved, primitive)) - goal
+        return float(condition_extent(condition, p, move(condition.at(t)), primitive)) - goal
 
     ends = excess(0.0), excess(1.0)
     if ends[0] * ends[1] > 0:               # the target lies beyond the line: its nearer end,

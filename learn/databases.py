@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 from scipy.special import ndtr, ndtri
@@ -16,7 +17,7 @@ from scipy.special import ndtr, ndtri
 from breastplan import ArtefactError, Primitive, load_npz, mu3_to_cc, save_npz, to_mm, to_model_units, write_ply
 from breastplan.meshes import mesh_volume
 from breastplan.deform.degree import GENERIC_SHAPE
-from breastplan.deform.global_deformations import Deformation
+from breastplan.deform.global_deformations import Deformation, changing
 
 SCHEMA = "breastplan.database/1"
 SHAPES: dict[str, Deformation] = {
@@ -71,6 +72,12 @@ class Database:
 
     def points_mu(self, i: int) -> np.ndarray:
         return to_model_units(self.points[i])
+
+    def changer(self, i: int, kind: str) -> Callable[[object], np.ndarray]:
+        """params ↦ breast i (model units) with its `kind` parameters changed by params
+        (`global_deformations.changing`: the change acts at the kind's place in the chain)."""
+        prim = self.primitive(i)
+        return changing(kind, prim.sample(*self.grid), Deformation.from_vector(self.deformation[i]), prim)
 
     def index(self, name: str) -> int:
         hits = np.flatnonzero(self.names == name)

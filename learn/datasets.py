@@ -1,12 +1,15 @@
 """Deformation datasets: database × condition × #dd (MODEL.md §4–§5, thesis §4.1.1).
 
 Every breast of the database deformed by every row of the condition, with its extent and
-its degree (discrete and continuous). Deformed points are recomputed on demand from the
-embedded database (a few hundred µs per breast, faster than storing and reading them).
+its degree (discrete and continuous). A row changes the breast's own parameters of its kind
+(`Database.changer`), so a top-shape row does not stack a second top-shape on the breast's.
+Deformed points are recomputed on demand from the embedded database (a few ms per breast,
+faster than storing and reading them).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +18,6 @@ from breastplan import ArtefactError, load_npz, save_npz, to_mm, to_model_units
 from breastplan.deform.conditions import Condition, find_condition
 from breastplan.deform.degree import (condition_extent, continuous_degree, discrete_degree,
                                       reference_extents)
-from breastplan.deform.global_deformations import apply_kind
 
 from .databases import _SPEC as _DB_SPEC
 from .databases import Database
@@ -63,12 +65,14 @@ class Dataset:
         """Example k's breast before deformation, mm."""
         return self.database.points[self.breast[k]]
 
-    def deformed_points(self, k: int) -> np.ndarray:
-        """Example k's deformed breast, mm, recomputed from the database."""
-        i = int(self.breast[k])
-        p = apply_kind(self.database.points_mu(i), self.condition.kind, self.params[k],
-                       self.database.primitive(i))
-        return to_mm(p)
+    @cached_property
+    def _changers(self) -> list:
+        return [self.database.changer(i, self.condition.kind) for i in range(len(self.database))]
+
+    def deformed_points(self, k: int, params=None) -> np.ndarray:
+        """Example k's breast, mm, deformed by `params` (default: its row's), recomputed from the
+        database; the condition changes the breast's own parameters (`Database.changer`)."""
+        return to_mm(self._changers[int(self.breast[k])](self.params[k] if params is None else params))
 
     def save(self, path: str | Path) -> Path:
         arrays = {k: getattr(self, k) for k in ("rows", "reference_extents", "breast", "row", "params",
@@ -106,9 +110,9 @@ def build_dataset(database: Database, condition: Condition | str, dd: int, progr
     n = len(database)
     extents = np.empty((n, dd))
     for i in range(n):
-        original, prim = database.points_mu(i), database.primitive(i)
+        original, prim, change = database.points_mu(i), database.primitive(i), database.changer(i, cond.kind)
         for j, row in enumerate(rows):
-            extents[i, j] = condition_extent(cond, original, apply_kind(original, cond.kind, row, prim), prim)
+            extents[i, j] = condition_extent(cond, original, change(row), prim)
         if progress:
             progress()
     breast, row = (a.ravel() for a in np.meshgrid(np.arange(n), np.arange(dd), indexing="ij"))

@@ -21,7 +21,6 @@ import numpy as np
 
 from breastplan import to_mm
 from breastplan.deform.conditions import Condition, find_condition
-from breastplan.deform.global_deformations import apply_kind
 from breastplan.deform.inverse import solve_degree
 
 from .databases import build_database
@@ -105,9 +104,7 @@ class ConditionRun:
 
     def _result(self, method, features, degree, hyper, cv, t) -> Result:
         params = self.cond.at(np.asarray(t, dtype=float))
-        modelled = np.stack([to_mm(apply_kind(self.ds.database.points_mu(self.ds.breast[k]), self.cond.kind, p,
-                                              self.ds.database.primitive(self.ds.breast[k])))
-                             for k, p in zip(self.test, params)])
+        modelled = np.stack([self.ds.deformed_points(k, p) for k, p in zip(self.test, params)])
         return Result(self.study, self.cond.name, method, features, degree,
                       tuple(self.cond.param_names[i] for i in self.out), hyper, cv,
                       self.ds.params[self.test][:, self.out], params[:, self.out],
@@ -138,8 +135,8 @@ class ConditionRun:
     def exact(self, degree: str) -> Result:
         db, ds = self.ds.database, self.ds
         dd = ds.degree if degree == "discrete" else ds.degree_continuous
-        t = [solve_degree(db.points_mu(ds.breast[k]), self.cond, ds.dd, float(dd[k]),
-                          db.primitive(ds.breast[k]), db.grid).t for k in self.test]
+        t = [solve_degree(db.points_mu(ds.breast[k]), self.cond, ds.dd, float(dd[k]), db.primitive(ds.breast[k]),
+                          db.grid, move=db.changer(ds.breast[k], self.cond.kind)).t for k in self.test]
         return self._result("exact", "-", degree, {}, float("nan"), t)
 
 

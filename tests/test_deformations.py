@@ -168,3 +168,32 @@ def test_parameter_names_are_checked():
         apply_kind(np.zeros((1, 3)), "ptosis", {"c0": 1.0})
     with pytest.raises(ValueError, match="unknown deformation"):
         apply_kind(np.zeros((1, 3)), "sag", {})
+
+
+SHAPED = Deformation(top_shape=(1.0, -0.5, 0.5, -0.5), flatten_side=(0.1, 0), turn_top=(0.41, 0),
+                     ptosis=(-0.1, -0.05), turn=(0.38, 0))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.sampled_from(["ptosis", "turn"]), st.lists(st.floats(-2.0, 2.0), min_size=2, max_size=2))
+def test_a_change_of_the_last_stages_is_the_change_applied_on_top(kind, params):
+    p = PRIM.sample(30, 30)
+    moved = gd.changing(kind, p, SHAPED, PRIM)(params)
+    assert np.allclose(moved, apply_kind(SHAPED.apply(p, PRIM), kind, params), atol=1e-12)
+
+
+def test_a_top_shape_change_acts_on_the_breasts_own_top_shape():
+    p = PRIM.sample(40, 40)
+    change = gd.changing("top-shape", p, SHAPED, PRIM)
+    assert np.allclose(change((0, 0, 0, 0)), SHAPED.apply(p, PRIM), atol=1e-12)
+    # cancelling the breast's own top-shape leaves the breast without one: one chain, not two stacked
+    flat = Deformation.from_vector(np.r_[0, 0, 0, 0, SHAPED.as_vector()[4:]])
+    assert np.allclose(change((-1.0, 0.5, -0.5, 0.5)), flat.apply(p, PRIM), atol=1e-12)
+
+
+def test_split_and_plus_keep_model_order():
+    before, rest = SHAPED.split("turn-top")
+    assert before.active() == ["top-shape", "flatten-side"] and rest.active() == ["turn-top", "ptosis", "turn"]
+    assert np.allclose(rest.apply(before.apply(PRIM.sample(20, 20), PRIM), PRIM),
+                       SHAPED.apply(PRIM.sample(20, 20), PRIM), atol=1e-12)
+    assert SHAPED.plus("ptosis", {"b1": 0.05}).ptosis == (-0.1, 0.0)

@@ -25,7 +25,8 @@ def database():
 
 
 @pytest.mark.parametrize("condition,breast", [("ptosis b0>b1", 3), ("turn c1>c0", 40), ("ptosis b1>=b0", 57),
-                                              ("turn c0>c1", 0), ("ptosis b0", 23), ("turn c0>c1", 29)])
+                                              ("turn c0>c1", 0), ("ptosis b0", 23), ("turn c0>c1", 29),
+                                              ("top-shape s0->s1+", 20), ("top-shape s1->s0+", 16)])
 def test_ffd_of_a_degree_8_database_breast_meets_the_thesis_stopping_rule(database, condition, breast):
     from breastplan.learn.datasets import build_dataset
     ds = build_dataset(database, condition, 8)
