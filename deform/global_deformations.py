@@ -268,7 +268,6 @@ class Deformation:
         return cls(**{kind.replace("-", "_"): kind_params(kind, params)})
 
 
-
 def changing(kind: str, sample, own: Deformation, primitive: Primitive | None = None
              ) -> Callable[[object], np.ndarray]:
     """params ↦ the breast `own.apply(sample)` with `kind`'s parameters changed by `params`.
