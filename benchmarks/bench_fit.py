@@ -57,6 +57,7 @@ from breastplan.deform.global_deformations import Deformation
 from breastplan.fitting import breast_fit
 from breastplan.fitting.breast_fit import MESH_GRID, BreastFit, fit_breast, model_mesh
 from breastplan.fitting.ffd import FIT_POINTS, STOP_RESIDUAL, _closest
+from breastplan.fitting.sampling import seeded_subset
 from breastplan.fitting.superquadric import fit_superquadric
 from breastplan.learn.databases import build_database
 from breastplan.learn.datasets import build_dataset
@@ -88,7 +89,6 @@ def rounded(x, digits: int = 5):
     if isinstance(x, (list, tuple)):
         return [rounded(v, digits) for v in x]
     return x
-
 
 
 def yes_no(flag: bool) -> str:
@@ -201,8 +201,7 @@ def closest_floor(fit: BreastFit, points: np.ndarray) -> tuple[float, float]:
     from): of the FIT_POINTS data subset fit_ffd solves with, and of all the data."""
     vertices, faces = model_mesh(fit.superquadric)
     faces32 = np.ascontiguousarray(faces, dtype=np.uint32)
-    sub = points[np.random.default_rng(0).choice(len(points), FIT_POINTS, replace=False)] \
-        if len(points) > FIT_POINTS else points
+    sub = seeded_subset(points, FIT_POINTS)
     return timed(lambda: _closest(vertices, faces32, sub)), timed(lambda: _closest(vertices, faces32, points))
 
 

@@ -180,7 +180,6 @@ def speed_recording(path: Path, repeats: int) -> dict:
             "steps_ms": step_medians(timings[1:]), "frames": frames[1:], "baseline_frames": replayed[1:]}
 
 
-
 def print_speed(rows: list[dict], console: Console) -> None:
     parts = rows[0]["baseline_parts_s"]
     caption = (f"{BASELINE_NOTE} The one-frame baseline splits into create_from_depth_image "

@@ -108,7 +108,6 @@ def database_rows(repeats: int) -> list[dict]:
                 TARGET_DB_DATASETS_S)]
 
 
-
 def print_table(rows: list[dict], repeats: int, db_repeats: int) -> None:
     table = Table(title=f"bench_model — medians of {repeats} (per-point) / {db_repeats} (database) repeats",
                   caption=BASELINE_NOTE, caption_justify="left")

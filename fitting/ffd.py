@@ -22,6 +22,8 @@ import numpy as np
 import open3d as o3d
 from scipy.special import comb
 
+from .sampling import seeded_subset
+
 STOP_RESIDUAL = 0.0015
 MAX_ITERATIONS = 1000
 STALL = 1e-3
@@ -100,9 +102,7 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
     coordinate where it starts — for the parts of the surface no data point sees.
     """
     start = time.perf_counter()
-    sub = data
-    if len(sub) > FIT_POINTS:
-        sub = sub[np.random.default_rng(0).choice(len(sub), FIT_POINTS, replace=False)]
+    sub = seeded_subset(data, FIT_POINTS)
     lattice = Lattice.around(np.vstack([data, vertices]), n)
     B = lattice.basis(vertices)
     K = n**3

@@ -19,6 +19,8 @@ from threadpoolctl import threadpool_limits
 from breastplan import BadInputError, Primitive, to_mm, to_model_units
 from breastplan.deform.global_deformations import KIND_PARAMS, Deformation, apply_kind, beta, gamma
 
+from .sampling import seeded_subset
+
 EPS_BOUNDS = (0.3, 2.0)
 FIT_POINTS = 3000
 """Larger clouds are fitted on a seeded random subset of this size (the residuals of all
@@ -248,7 +250,7 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
         raise ValueError(f"unknown deformations {sorted(unknown)}; choose from {', '.join(KIND_PARAMS)}")
     start = time.perf_counter()
     everything = to_model_units(_checked(points_mm, path))
-    p = _subset(everything, FIT_POINTS)
+    p = seeded_subset(everything, FIT_POINTS)
     solve = _Solver(chest_prior, loss, float(to_model_units(f_scale_mm)))
     nfev = 0
     with threadpool_limits(1, "blas"):          # small dense solves: threads only add overhead
@@ -256,7 +258,7 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
             x0, nfev = _top_shape_start(p, kinds, solve)
         elif x0 is None:
             x0 = initial_guess(p, kinds)
-        sol = solve(_subset(p, DEFORMED_FIT_POINTS) if kinds else p, kinds, x0)
+        sol = solve(seeded_subset(p, DEFORMED_FIT_POINTS) if kinds else p, kinds, x0)
     a, e1, e2, rot, t = _unpack(sol.x)
     pose = np.eye(4)
     pose[:3, :3] = Rotation.from_rotvec(rot).as_matrix()
@@ -277,7 +279,7 @@ def _top_shape_start(p: np.ndarray, kinds: tuple[str, ...], solve: "_Solver") ->
     q, nfev = p - x[10:13], 0
     for _ in range(2):
         still = (q[:, 1] < -LOWER_MARGIN * np.exp(x[3])) | (q[:, 2] < LOW_SHARE * np.exp(x[4]))
-        sol = solve(_subset(p[still], DEFORMED_FIT_POINTS), rest, x, max_turn=START_TURN_RAD)
+        sol = solve(seeded_subset(p[still], DEFORMED_FIT_POINTS), rest, x, max_turn=START_TURN_RAD)
         x, nfev, q = sol.x, nfev + sol.nfev, _undone(sol.x, p, rest)
     a, e1, e2, _, _ = _unpack(x)
     primitive = Primitive(*a, e1, e2)
@@ -295,11 +297,6 @@ def _undone(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
     a, e1, e2, rot, t = _unpack(x)
     q = Rotation.from_rotvec(rot).inv().apply(p - t)
     return _inverse(q, _deformation(x, kinds), Primitive(*a, e1, e2)) if kinds else q
-
-
-def _subset(p: np.ndarray, n: int) -> np.ndarray:
-    """A seeded random subset of n points (all of them if there are fewer)."""
-    return p[np.random.default_rng(0).choice(len(p), n, replace=False)] if len(p) > n else p
 
 
 @dataclass(frozen=True)
