@@ -36,8 +36,8 @@ DEFORMATIONS = ("top-shape", "ptosis", "turn")
 """Deformations fitted with the primitive by default. Ptosis and turn are shears by z with
 closed-form inverses, top-shape the upper half's own profile (MODEL.md §3); a sagging, turned or
 top-heavy breast is no superellipsoid, and the lattice alone cannot make up the difference. On the
-360 ptosis and turn examples of database S at degree 8 every fit meets the thesis stopping rule
-with them, against 270 with ptosis and turn alone (shape 2's top-shape lifts its upper half up to
+480 examples of database S at degree 8 (8 conditions) every fit meets the thesis stopping rule
+with them; with ptosis and turn alone 274 did (shape 2's top-shape lifts its upper half up to
 2.25×; benchmarks/bench_fit.py)."""
 MAX_RESIDUAL = 0.05
 """A fit whose mean normalised residual stays above 5 % describes no breast surface."""

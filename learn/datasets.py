@@ -69,10 +69,15 @@ class Dataset:
     def _changers(self) -> list:
         return [self.database.changer(i, self.condition.kind) for i in range(len(self.database))]
 
+    def changer(self, k: int):
+        """params ↦ example k's breast (model units) with the condition's kind changed by params
+        (`Database.changer`, built once per breast)."""
+        return self._changers[int(self.breast[k])]
+
     def deformed_points(self, k: int, params=None) -> np.ndarray:
         """Example k's breast, mm, deformed by `params` (default: its row's), recomputed from the
         database; the condition changes the breast's own parameters (`Database.changer`)."""
-        return to_mm(self._changers[int(self.breast[k])](self.params[k] if params is None else params))
+        return to_mm(self.changer(k)(self.params[k] if params is None else params))
 
     def save(self, path: str | Path) -> Path:
         arrays = {k: getattr(self, k) for k in ("rows", "reference_extents", "breast", "row", "params",

@@ -57,7 +57,7 @@ NOTES = [
     "  on the line is linear in DD; the thesis's degree mapping (§4.1.1) assigned some degrees badly (its",
     "  outliers, §5.1.4.1), which we do not reproduce.",
     "* **The continuous degree (ours) beats the discrete one** wherever breasts differ in shape: the",
-    "  discrete degree quantises the extent to 8 levels, which alone costs the exact solver 0.18–0.30 %",
+    "  discrete degree quantises the extent to 8 levels, which alone costs the exact solver 0.18–0.42 %",
     "  Euclidean on database S (its discrete column).",
     "* **The exact solver is exact** (≈ 1e-14 %) because the continuous degree is not clipped to [1, #dd]",
     "  (a departure from MODEL.md §5, see `deform.degree.continuous_degree`): 12–34 % of database S's",

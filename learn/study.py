@@ -136,7 +136,7 @@ class ConditionRun:
         db, ds = self.ds.database, self.ds
         dd = ds.degree if degree == "discrete" else ds.degree_continuous
         t = [solve_degree(db.points_mu(ds.breast[k]), self.cond, ds.dd, float(dd[k]), db.primitive(ds.breast[k]),
-                          db.grid, move=db.changer(ds.breast[k], self.cond.kind)).t for k in self.test]
+                          db.grid, move=ds.changer(k)).t for k in self.test]
         return self._result("exact", "-", degree, {}, float("nan"), t)
 
 

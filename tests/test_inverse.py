@@ -18,7 +18,7 @@ def test_continuous_degree_recovers_the_true_row(db_s, name):
     for k in np.r_[rng.choice(len(ds.row), 4, replace=False), outside[:2]]:
         i = ds.breast[k]
         sol = solve_degree(db_s.points_mu(i), ds.condition, 8, float(ds.degree_continuous[k]),
-                           db_s.primitive(i), db_s.grid, move=db_s.changer(i, ds.condition.kind))
+                           db_s.primitive(i), db_s.grid, move=ds.changer(k))
         assert sol.reached
         assert abs(sol.t - ds.row[k] / 7) < 1e-6
         np.testing.assert_allclose(sol.params, ds.params[k], atol=1e-6)
@@ -52,5 +52,5 @@ def test_unreachable_degree_stops_at_the_line_end(db_s):
     k = last[np.argmin(ds.extent[last])]   # the breast the last row moves least
     assert ds.degree_continuous[k] < 8, "the test needs a breast that cannot reach degree 8"
     i = ds.breast[k]
-    sol = solve_degree(db_s.points_mu(i), cond, 8, 8.0, db_s.primitive(i), db_s.grid, move=db_s.changer(i, cond.kind))
+    sol = solve_degree(db_s.points_mu(i), cond, 8, 8.0, db_s.primitive(i), db_s.grid, move=ds.changer(k))
     assert not sol.reached and sol.t == 1.0
