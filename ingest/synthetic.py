@@ -86,6 +86,14 @@ class Scene:
     def camera_from_breast(self, side: str) -> np.ndarray:
         return self.camera_from_body @ body_from_breast(side)
 
+    def surface_distance(self, side: str, points_camera: np.ndarray) -> np.ndarray:
+        """Distance (mm) of points (camera frame, mm) to the true outer surface of the `side` breast."""
+        V, F = self.breasts[side].surface()
+        surface = o3d.t.geometry.RaycastingScene()
+        surface.add_triangles(o3d.core.Tensor(transform_points(self.camera_from_breast(side), V).astype(np.float32)),
+                              o3d.core.Tensor(F.astype(np.uint32)))
+        return surface.compute_distance(o3d.core.Tensor(np.asarray(points_camera, np.float32))).numpy()
+
 
 def chest_z(x, y):
     """Z of the chest wall (body frame, mm): a quadric, 0 at the sternum."""

@@ -124,6 +124,14 @@ def test_breast_frame_of_the_scene_is_on_the_chest_wall():
     assert abs(np.dot(tangent_x, T[:3, 2])) < 1e-9
 
 
+def test_surface_distance_is_zero_on_the_nipple_and_the_offset_along_its_normal():
+    scene = synthetic.make_scene(0)
+    T = scene.camera_from_breast("right")
+    tip = scene.breasts["right"].nipple_mm               # on the surface; its normal is the breast's z
+    points = np.array([tip, tip + [0.0, 0.0, 5.0]]) @ T[:3, :3].T + T[:3, 3]
+    assert np.allclose(scene.surface_distance("right", points), [0.0, 5.0], atol=0.05)
+
+
 # --- the pipeline against the truth -----------------------------------------------------
 @pytest.mark.parametrize("side", synthetic.SIDES)
 def test_ingest_meets_the_accuracy_targets(scanned, side):
