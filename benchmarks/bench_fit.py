@@ -1,12 +1,12 @@
 """Speed and accuracy of the fitting stage: superquadric fit, FFD lattice fit, database S.
 
-Measures (issue "Fitting"), with every fit run under `threadpool_limits(1, "blas")` as the
+Measures, with every fit run under `threadpool_limits(1, "blas")` as the
 library does in `ingest.pipeline` (small dense solves: BLAS threads only add contention):
 
 1. `fit_superquadric` on clouds of 1 000, 10 000 and 100 000 points of database-S breasts (one
    per shape; medians over repeats after one warm-up). Target: 10 000 points ≤ 100 ms. Baseline,
    same run: one vectorised `Primitive.radial_distance` over the same points (model units), so
-   the ratio reads "a fit costs this many residual passes over the cloud". The issue's external
+   the ratio reads "a fit costs this many residual passes over the cloud". The external
    reference (EMS, about 1.1 s for 11 000 points) is printed as a note, not measured;
 2. the FFD stage of `fit_breast` (n = 5, 125 control points): `BreastFit.ffd.seconds`, median
    over the breasts of database S. Target ≤ 300 ms. Baseline: one open3d closest-point query
@@ -21,7 +21,7 @@ library does in `ingest.pipeline` (small dense solves: BLAS threads only add con
    of each of the 8 conditions: max and median of `BreastFit.ffd.residual` and how many meet the
    thesis stopping rule (< STOP_RESIDUAL = 0.0015, the target for every breast). The discrete
    degree build_dataset gives these examples is printed too (it is not 8 for every condition);
-5. accuracy against known truths (issue "Fitting" §5), worst case of each figure:
+5. accuracy against known truths, worst case of each figure:
    noise-free posed samples of 3 known primitives (semi-axes ≤ 0.5 %, eps ≤ 0.02, pose ≤ 0.5 mm
    and 0.5°; baseline: the initial guess); the front of one with 1 mm noise and 10 % outliers
    (inlier RMS ≤ 1.1 mm, volume ≤ 2 %; baseline: the same fit with a squared loss); synthetic
@@ -89,7 +89,7 @@ NOISE_MM, OUTLIERS, OUTLIER_MM = 1.0, 0.1, 15.0
 INGEST_SEEDS = (2, 3, 4)
 ACCURACY_TARGETS = {"semi_axis_pct": 0.5, "eps": 0.02, "shift_mm": 0.5, "angle_deg": 0.5, "front_rms_mm": 1.1,
                     "front_volume_pct": 2.0, "scan_rms_mm": 1.0, "scan_volume_pct": 3.0}
-EMS_NOTE = ("External reference (issue, not measured here): EMS, the best open superquadric fitter, "
+EMS_NOTE = ("External reference (not measured here): EMS, the best open superquadric fitter, "
             "takes about 1.1 s for 11 000 points.")
 SQ_NOTE = ("Clouds: each breast is its primitive (db.primitive(i)) deformed by its shape "
            "(db.deformation[i]) and sampled on an n_u × n_v grid — the same surface as db.points[i] "

@@ -1,6 +1,6 @@
 """Accuracy and speed of the ingest stage: depthai recordings of the synthetic scanner → breast clouds.
 
-Measures (issue "Ingest" §5, §6):
+Measures:
 
 1. accuracy: for seeds 0, 1, 2 × tilt 0° and 10° × both sides, 10 depth frames of the synthetic
    scanner are recorded with `write_recording`, replayed with `read_recording`, ingested

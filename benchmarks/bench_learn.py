@@ -1,4 +1,4 @@
-"""Accuracy and speed of the deformation-parameter study (issue 5 §5).
+"""Accuracy and speed of the deformation-parameter study.
 
 Runs `breastplan evaluate --study all` in process (database S test split, 8 degrees,
 modelled ⇒ original) and prints, per condition, the best learnt model's and the exact solver's

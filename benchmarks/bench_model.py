@@ -1,6 +1,6 @@
 """Speed of the breast model: primitive sampling, the five global deformations, database S + datasets.
 
-Measures (MODEL.md §2–§5), each as the median wall time over repeats after one warm-up call:
+Measures (docs/model.md §2–§5), each as the median wall time over repeats after one warm-up call:
 
 1. `Primitive.sample` on 100×100 and 1000×1000 grids, for P00 and a non-unit-eps primitive;
 2. each of the five deformations, and all five together (`Deformation.apply`), on 10 000 and

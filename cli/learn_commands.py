@@ -49,7 +49,7 @@ def train(
     quick: bool = typer.Option(False, "--quick", help="Small grid and 2500 points (for tests)."),
     as_json: bool = JSON,
 ):
-    """Train the best model of each condition on database S's training split (issue 5 §4)."""
+    """Train the best model of each condition on database S's training split."""
     timer = Timer()
     with progress("training", len(DEPLOYED)) as advance:
         written = train_all(out, quick=quick, n_points=2500 if quick else 10_000, advance=advance)

@@ -1,4 +1,4 @@
-"""The `breastplan` command (DESIGN.md "Command line")."""
+"""The `breastplan` command (docs/cli.md)."""
 from __future__ import annotations
 
 import sys
@@ -29,7 +29,7 @@ def synth(
     ply: bool = typer.Option(False, "--ply", help="Also write one PLY per breast (mm, breast frame)."),
     as_json: bool = JSON,
 ):
-    """Write synthetic database V or S (MODEL.md §4) as DIR/database.npz."""
+    """Write synthetic database V or S (docs/model.md §4) as DIR/database.npz."""
     timer = Timer()
     if db not in ("V", "S"):
         raise usage_error(f"'{db}' is not a database; choose V or S", "--db")
@@ -55,7 +55,7 @@ def synth(
 def deform(
     input: Path = typer.Argument(..., help="Breast PLY (points or mesh), mm, breast frame."),
     kind: str = typer.Option(..., "--kind", help=f"Deformation: {', '.join(KIND_PARAMS)}."),
-    param: List[str] = typer.Option([], "--param", help="NAME=VALUE, model units (MODEL.md §3); "
+    param: List[str] = typer.Option([], "--param", help="NAME=VALUE, model units (docs/model.md §3); "
                                     "repeat or comma-separate; unnamed parameters are 0."),
     degree: Optional[float] = typer.Option(None, "--degree", help=f"Degree of deformation in [1, {DD}] "
                                            "(instead of --param): ptosis, turn or top-shape."),
@@ -149,7 +149,7 @@ def dataset(
 
 
 def main() -> None:
-    """Entry point: run the app, mapping deliberate errors to exit codes (DESIGN.md)."""
+    """Entry point: run the app, mapping deliberate errors to exit codes (docs/design.md)."""
     try:
         app()
     except BadInputError as exc:

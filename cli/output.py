@@ -1,6 +1,6 @@
 """Command-line plumbing shared by all commands: consoles, JSON results, progress, exit codes.
 
-Exit codes (DESIGN.md): 0 ok, 2 usage error, 3 bad input (one sentence, no traceback),
+Exit codes (docs/design.md): 0 ok, 2 usage error, 3 bad input (one sentence, no traceback),
 1 internal error.
 """
 from __future__ import annotations

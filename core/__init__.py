@@ -1,7 +1,7 @@
 """breastplan: plan the aesthetic result of breast surgery from a 3-D scan.
 
 The core package holds artefact I/O, units and frames, the breast primitive and errors.
-Stages live in the subpackages ingest, fitting, deform, learn and cli (DESIGN.md).
+Stages live in the subpackages ingest, fitting, deform, learn and cli (docs/design.md).
 """
 from importlib.metadata import PackageNotFoundError, version as _version
 

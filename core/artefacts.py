@@ -1,4 +1,4 @@
-"""NPZ artefacts (DESIGN.md "Artefacts"): schema-tagged, pickle-free, validated, atomic.
+"""NPZ artefacts (docs/artefacts.md): schema-tagged, pickle-free, validated, atomic.
 
 Every artefact holds `schema` ("breastplan.<name>/<version>"), `units`, `frame`,
 `version` (of the producing breastplan), `meta` (a JSON string) and plain numeric or

@@ -1,4 +1,4 @@
-"""Atomic file writes: a temporary file in the target folder, then os.replace (DESIGN.md)."""
+"""Atomic file writes: a temporary file in the target folder, then os.replace (docs/design.md)."""
 from __future__ import annotations
 
 import contextlib

@@ -1,4 +1,4 @@
-"""Errors breastplan raises on purpose; the CLI maps them to exit codes (DESIGN.md)."""
+"""Errors breastplan raises on purpose; the CLI maps them to exit codes (docs/design.md)."""
 from __future__ import annotations
 
 from pathlib import Path

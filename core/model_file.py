@@ -2,7 +2,7 @@
 
 A model is a fitted `TransformedTargetRegressor(Pipeline([MinMaxScaler, PolynomialFeatures?,
 R]), transformer=MinMaxScaler)` with R a LinearRegression, an SVR (linear, poly or rbf
-kernel), a MultiOutputRegressor of such SVRs, or an MLPRegressor (DESIGN.md "Artefacts").
+kernel), a MultiOutputRegressor of such SVRs, or an MLPRegressor (docs/artefacts.md).
 `export_arrays` flattens it into plain arrays; `ModelFile.predict` replays the forward pass
 in numpy in scikit-learn's order of operations, so predictions match the estimator's to the
 last bit or within a few ulps.

@@ -1,4 +1,4 @@
-"""PLY point clouds and triangle meshes (DESIGN.md: binary little-endian, millimetres).
+"""PLY point clouds and triangle meshes (docs/artefacts.md: binary little-endian, millimetres).
 
 Read: ascii and binary PLY, vertices with optional normals, faces of one polygon size
 (fan-triangulated). Every defect (not PLY, truncated, NaN, bad indices) raises

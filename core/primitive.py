@@ -1,6 +1,6 @@
-"""The breast primitive: a half superellipsoid closed by the chest wall (MODEL.md §2).
+"""The breast primitive: a half superellipsoid closed by the chest wall (docs/model.md §2).
 
-All lengths are model units (MODEL.md §1) in the breast frame: z anterior (chest wall
+All lengths are model units (docs/model.md §1) in the breast frame: z anterior (chest wall
 z = 0 → nipple), y superior, x lateral–medial. Latitude u ∈ [0, π/2] (0 = base ring,
 π/2 = nipple), longitude v ∈ [−π, π).
 """
@@ -17,7 +17,7 @@ PARAM_NAMES = ("a1", "a2", "a3", "a4", "a5", "eps1", "eps2")
 
 
 def spow(t, e):
-    """Signed power sign(t)·|t|^e (MODEL.md §2)."""
+    """Signed power sign(t)·|t|^e (docs/model.md §2)."""
     return np.sign(t) * np.abs(t) ** e
 
 
@@ -58,7 +58,7 @@ class Primitive:
 
     # --- surface -------------------------------------------------------------
     def surface(self, u, v) -> np.ndarray:
-        """Surface points (..., 3) at broadcastable latitudes u and longitudes v (MODEL.md §2)."""
+        """Surface points (..., 3) at broadcastable latitudes u and longitudes v (docs/model.md §2)."""
         u, v = np.broadcast_arrays(np.asarray(u, float), np.asarray(v, float))
         cu, su, cv, sv = np.cos(u), np.sin(u), np.cos(v), np.sin(v)
         ax = np.where(cv >= 0, self.a1, self.a2)
@@ -92,7 +92,7 @@ class Primitive:
 
     # --- implicit form -------------------------------------------------------
     def inside_outside(self, points) -> np.ndarray:
-        """F(p): < 1 inside, 1 on, > 1 outside (MODEL.md §2); |z| is used below the base."""
+        """F(p): < 1 inside, 1 on, > 1 outside (docs/model.md §2); |z| is used below the base."""
         p = np.asarray(points, dtype=float)
         x, y, z = p[..., 0], p[..., 1], p[..., 2]
         ax = np.where(x >= 0, self.a1, self.a2)
@@ -108,23 +108,23 @@ class Primitive:
         return p * f[..., None] ** (-self.eps1 / 2)
 
     def radial_distance(self, points) -> np.ndarray:
-        """Radial distance |p|·|1 − F^(−eps1/2)| (Gross & Boult; MODEL.md §2), model units."""
+        """Radial distance |p|·|1 − F^(−eps1/2)| (Gross & Boult; docs/model.md §2), model units."""
         p = np.asarray(points, dtype=float)
         f = np.maximum(self.inside_outside(p), 1e-300)
         return np.linalg.norm(p, axis=-1) * np.abs(1.0 - f ** (-self.eps1 / 2))
 
     def latitude(self, points) -> np.ndarray:
-        """Latitude u of arbitrary points (..., 3) (MODEL.md §2)."""
+        """Latitude u of arbitrary points (..., 3) (docs/model.md §2)."""
         return self.latitude_at(np.asarray(points, dtype=float)[..., 2])
 
     def latitude_at(self, z) -> np.ndarray:
-        """Latitude u at heights z: sin u = clip(z/a5, 0, 1)^(1/eps1) (MODEL.md §2)."""
+        """Latitude u at heights z: sin u = clip(z/a5, 0, 1)^(1/eps1) (docs/model.md §2)."""
         return np.arcsin(np.clip(np.asarray(z, dtype=float) / self.a5, 0.0, 1.0) ** (1.0 / self.eps1))
 
     # --- volume ----------------------------------------------------------------
     @property
     def volume_mu3(self) -> float:
-        """Closed-form volume of the closed half superellipsoid (MODEL.md §2), mu³."""
+        """Closed-form volume of the closed half superellipsoid (docs/model.md §2), mu³."""
         e1, e2 = self.eps1, self.eps2
         return float(e1 * e2 / 4 * euler_beta(e1 / 2 + 1, e1) * euler_beta(e2 / 2, e2 / 2)
                      * self.a5 * (self.a3 + self.a4) * (self.a1 + self.a2))

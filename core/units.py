@@ -1,4 +1,4 @@
-"""Units (MODEL.md §1): scans in millimetres, model formulas in model units, 1 mu = 6 mm.
+"""Units (docs/model.md §1): scans in millimetres, model formulas in model units, 1 mu = 6 mm.
 
 Conversion happens once, at the boundary between files (mm) and the model (mu).
 """
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 MM_PER_MU = 6.0
-"""Millimetres per model unit (MODEL.md §1): P00's 10-mu semi-axes are 60 mm."""
+"""Millimetres per model unit (docs/model.md §1): P00's 10-mu semi-axes are 60 mm."""
 
 
 def to_model_units(mm):

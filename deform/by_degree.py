@@ -3,7 +3,7 @@
 `exact` solves the condition's line for the degree (`deform.inverse`, the upper bound);
 `learnt` runs the shipped regression of the condition (`deform/models/*.npz`, trained by
 `breastplan train` on database S, `breastplan.model/1`) on the breast's FS5 descriptors
-(`deform.descriptors`). Either way the parameters lie on the condition's line (MODEL.md §4).
+(`deform.descriptors`). Either way the parameters lie on the condition's line (docs/model.md §4).
 """
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ class ByDegree:
     method: str
     t: float                    # position on the condition's line
     params: np.ndarray          # the condition's kind's parameters, model units
-    degree_reached: float       # continuous degree of the result (MODEL.md §5)
+    degree_reached: float       # continuous degree of the result (docs/model.md §5)
 
 
 def slug(condition: Condition) -> str:

@@ -1,4 +1,4 @@
-"""Deformation conditions and their parameter rows (MODEL.md §4, thesis Table 4.2).
+"""Deformation conditions and their parameter rows (docs/model.md §4, thesis Table 4.2).
 
 A condition is a line in one kind's parameter space from a first to a last row; with
 #dd degrees, row j is the linear interpolation between them (first and last never move).
@@ -27,7 +27,7 @@ class Condition:
 
     @property
     def signed(self) -> bool:
-        """Top-shape degrees use the signed extent (MODEL.md §5)."""
+        """Top-shape degrees use the signed extent (docs/model.md §5)."""
         return self.kind == "top-shape"
 
     def at(self, t) -> np.ndarray:
@@ -53,7 +53,7 @@ CONDITIONS: dict[str, Condition] = {c.name: c for c in [
     Condition("top-shape s0->s1+", "top-shape", (-0.5, 0.25, 0.0, 0.0), (-2.5, 2.0, 0.0, 0.0)),
     Condition("top-shape s1->s0+", "top-shape", (0.25, -0.5, 0.0, 0.0), (1.75, -2.0, 0.0, 0.0)),
 ]}
-"""The eight conditions of MODEL.md §4 by canonical name."""
+"""The eight conditions of docs/model.md §4 by canonical name."""
 
 
 def _normalise(name: str) -> str:

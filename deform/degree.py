@@ -1,9 +1,9 @@
-"""Extent and degree of deformation (MODEL.md §5, thesis §4.1.1).
+"""Extent and degree of deformation (docs/model.md §5, thesis §4.1.1).
 
 Extent of a deformed breast: mean normalised distance of corresponding points,
 ‖p_ij,k − p_i0,k‖ / ‖p_i0,k‖ (Eq. 4.2). Top-shape uses a signed extent instead: the mean
 z-change of the upper half (y > 0) divided by a5, because its unsigned extents of
-opposite-sign parameters overlap (MODEL.md §5). Degrees compare an extent with the
+opposite-sign parameters overlap (docs/model.md §5). Degrees compare an extent with the
 reference extents E_0j of P00 (generic shape, all semi-axes 10) under the same rows.
 """
 from __future__ import annotations
@@ -18,7 +18,7 @@ from .conditions import Condition
 from .global_deformations import Deformation, changing
 
 GENERIC_SHAPE = Deformation(turn=(0.38, 0.0), turn_top=(0.41, 0.0))
-"""Database V's generic breast shape (MODEL.md §4, Table 4.1)."""
+"""Database V's generic breast shape (docs/model.md §4, Table 4.1)."""
 P00 = Primitive()
 """The reference primitive: all semi-axes 10 mu, eps = (1, 1)."""
 
@@ -31,7 +31,7 @@ def extent(original, deformed) -> np.ndarray:
 
 
 def signed_extent(original, deformed, a5) -> np.ndarray:
-    """Mean signed z-change of the upper half (original y > 0), divided by a5 (MODEL.md §5)."""
+    """Mean signed z-change of the upper half (original y > 0), divided by a5 (docs/model.md §5)."""
     o = np.asarray(original, dtype=float)
     d = np.asarray(deformed, dtype=float)
     upper = o[..., 1] > 0
@@ -78,7 +78,7 @@ def continuous_degree(extents, reference) -> np.ndarray:
     """Piecewise-linear degree over the reference extents, extended past degrees 1 and #dd along
     the end segments; rounded and clipped to [1, #dd] it is the discrete degree.
 
-    MODEL.md §5 clips it to [1, #dd]. We extend it instead: on database S 12–34 % of the examples
+    docs/model.md §5 clips it to [1, #dd]. We extend it instead: on database S 12–34 % of the examples
     lie beyond the reference extents (ζ = z/10 is in model units, so a larger breast deforms more),
     and a clipped degree maps them all to the line's end, so neither the exact solver nor a
     learnt model could recover their row. Unclipped, degree and extent determine each other.

@@ -1,7 +1,7 @@
 """Scalar descriptors of a breast point set, the inputs of the learnt deformation models.
 
 Thesis Table 4.3 describes a breast by its volume v0 and its mean point; top-shape adds the
-upper-pole profile (issue 5 §1). Every descriptor is computed from the points alone (mm, breast
+upper-pole profile. Every descriptor is computed from the points alone (mm, breast
 frame), so training on database breasts and deploying on a patient use one definition.
 """
 from __future__ import annotations
@@ -32,7 +32,7 @@ def hull_volume_cc(points_mm) -> float:
 def upper_profile(points_mm, bins: int = PROFILE_BINS) -> np.ndarray:
     """Mean height z of the upper pole (y > 0) in `bins` bands of y / max(y), over max(z).
 
-    The top-shape deformation changes exactly this profile (MODEL.md §3); empty bands borrow
+    The top-shape deformation changes exactly this profile (docs/model.md §3); empty bands borrow
     their neighbours' value by linear interpolation.
     """
     p = np.asarray(points_mm, dtype=float)

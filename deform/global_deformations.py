@@ -1,4 +1,4 @@
-"""The five global deformations of Chen et al. 2000 (MODEL.md §3), vectorised over points.
+"""The five global deformations of Chen et al. 2000 (docs/model.md §3), vectorised over points.
 
 Every function takes an (N, 3) array (or (..., 3)) in the breast frame, model units, and
 returns a new array; the input is never modified and the point order is kept. Inverses
@@ -20,11 +20,11 @@ KIND_PARAMS: dict[str, tuple[str, ...]] = {
     "ptosis": ("b0", "b1"),
     "turn": ("c0", "c1"),
 }
-"""Parameter names of each kind, in the order the kinds are applied (MODEL.md §3)."""
+"""Parameter names of each kind, in the order the kinds are applied (docs/model.md §3)."""
 
 NEEDS_PRIMITIVE = frozenset({"top-shape", "flatten-side", "turn-top"})
 REFERENCE_AXIS = 10.0
-"""ζ = z / 10: polynomial arguments normalised by P00's semi-axis (MODEL.md §3)."""
+"""ζ = z / 10: polynomial arguments normalised by P00's semi-axis (docs/model.md §3)."""
 
 
 def _copy(points) -> np.ndarray:
@@ -41,7 +41,7 @@ def _need(primitive: Primitive | None, kind: str) -> Primitive:
 
 
 def beta(w, s0, s1, t0, t1):
-    """Top-shape quintic Hermite β(w) (MODEL.md §3): β(0)=β(1)=1, β'=(s0,s1), β''=(t0,t1)."""
+    """Top-shape quintic Hermite β(w) (docs/model.md §3): β(0)=β(1)=1, β'=(s0,s1), β''=(t0,t1)."""
     a = -t0 / 2 - 3 * s0 - 3 * s1 + t1 / 2
     b = 3 * t0 / 2 + 8 * s0 + 7 * s1 - t1
     c = -3 * t0 / 2 - 6 * s0 - 4 * s1 + t1 / 2
@@ -49,7 +49,7 @@ def beta(w, s0, s1, t0, t1):
 
 
 def gamma(w, h0, h1):
-    """Flatten-side cubic Hermite γ(w) (MODEL.md §3): γ(0)=1, γ'(0)=0, γ(1)=1−h0, γ'(1)=h1."""
+    """Flatten-side cubic Hermite γ(w) (docs/model.md §3): γ(0)=1, γ'(0)=0, γ(1)=1−h0, γ'(1)=h1."""
     g = 1.0 - h0
     return ((h1 + 2 - 2 * g) * w + (3 * g - 3 - h1)) * w * w + 1.0
 
@@ -64,7 +64,7 @@ def _shear_by_z(points, axis: int, k0: float, k1: float) -> np.ndarray:
 
 
 def ptosis(points, b0: float, b1: float) -> np.ndarray:
-    """y ← y − (b0·ζ + b1·ζ²), ζ = z/10, all points (MODEL.md §3)."""
+    """y ← y − (b0·ζ + b1·ζ²), ζ = z/10, all points (docs/model.md §3)."""
     return _shear_by_z(points, 1, b0, b1)
 
 
@@ -73,7 +73,7 @@ def ptosis_inverse(points, b0: float, b1: float) -> np.ndarray:
 
 
 def turn(points, c0: float, c1: float) -> np.ndarray:
-    """x ← x − (c0·ζ + c1·ζ²), ζ = z/10, all points (MODEL.md §3)."""
+    """x ← x − (c0·ζ + c1·ζ²), ζ = z/10, all points (docs/model.md §3)."""
     return _shear_by_z(points, 0, c0, c1)
 
 
@@ -83,7 +83,7 @@ def turn_inverse(points, c0: float, c1: float) -> np.ndarray:
 
 # --- turn-top: shear along x driven by y, upper half ---------------------------------
 def turn_top(points, g0: float, g1: float, *, primitive: Primitive) -> np.ndarray:
-    """x ← x − (g0·w + g1·w²), w = y/a3, where y > 0 (MODEL.md §3)."""
+    """x ← x − (g0·w + g1·w²), w = y/a3, where y > 0 (docs/model.md §3)."""
     a3 = _need(primitive, "turn-top").a3
     p = _copy(points)
     w = p[..., 1] / a3
@@ -97,7 +97,7 @@ def turn_top_inverse(points, g0: float, g1: float, *, primitive: Primitive) -> n
 
 # --- top-shape: z scaled by β of the latitude, upper half ----------------------------
 def top_shape(points, s0: float, s1: float, t0: float, t1: float, *, primitive: Primitive) -> np.ndarray:
-    """z ← z·β(w), w = 2u/π with u the point's latitude, where y > 0 (MODEL.md §3)."""
+    """z ← z·β(w), w = 2u/π with u the point's latitude, where y > 0 (docs/model.md §3)."""
     prim = _need(primitive, "top-shape")
     p = _copy(points)
     w = prim.latitude(p) * (2 / np.pi)
@@ -133,7 +133,7 @@ def top_shape_inverse(points, s0: float, s1: float, t0: float, t1: float, *,
 
 # --- flatten-side: x scaled by γ(|x|/a2), lateral half ---------------------------------
 def flatten_side(points, h0: float, h1: float, *, primitive: Primitive) -> np.ndarray:
-    """x ← x·γ(|x|/a2) where x < 0 (lateral half, MODEL.md §3)."""
+    """x ← x·γ(|x|/a2) where x < 0 (lateral half, docs/model.md §3)."""
     a2 = _need(primitive, "flatten-side").a2
     p = _copy(points)
     x = p[..., 0]
@@ -179,7 +179,7 @@ _INVERSE = {"top-shape": top_shape_inverse, "flatten-side": flatten_side_inverse
 
 
 def kind_params(kind: str, params: Mapping[str, float] | Sequence[float]) -> tuple[float, ...]:
-    """A kind's parameters as a tuple in MODEL.md order, from a mapping (missing → 0) or a sequence."""
+    """A kind's parameters as a tuple in docs/model.md order, from a mapping (missing → 0) or a sequence."""
     if kind not in KIND_PARAMS:
         raise ValueError(f"unknown deformation kind '{kind}'; choose one of {', '.join(KIND_PARAMS)}")
     names = KIND_PARAMS[kind]
@@ -205,7 +205,7 @@ def apply_kind(points, kind: str, params, primitive: Primitive | None = None, *,
 
 @dataclass(frozen=True)
 class Deformation:
-    """Parameters of all five deformations; `apply` composes them in MODEL.md §3 order."""
+    """Parameters of all five deformations; `apply` composes them in docs/model.md §3 order."""
 
     top_shape: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     flatten_side: tuple[float, float] = (0.0, 0.0)
@@ -235,7 +235,7 @@ class Deformation:
         return p
 
     def as_vector(self) -> np.ndarray:
-        """The 12 parameters in MODEL.md order (s0 s1 t0 t1 h0 h1 g0 g1 b0 b1 c0 c1)."""
+        """The 12 parameters in docs/model.md order (s0 s1 t0 t1 h0 h1 g0 g1 b0 b1 c0 c1)."""
         return np.concatenate([self.params(k) for k in KIND_PARAMS]).astype(float)
 
     @classmethod
@@ -250,8 +250,8 @@ class Deformation:
         return cls(**out)
 
     def split(self, kind: str) -> tuple["Deformation", "Deformation"]:
-        """(the stages before `kind`, `kind`'s stage and the later ones), MODEL.md §3 order."""
-        names = [f.name for f in fields(self)]   # MODEL.md §3 order
+        """(the stages before `kind`, `kind`'s stage and the later ones), docs/model.md §3 order."""
+        names = [f.name for f in fields(self)]   # docs/model.md §3 order
         i = names.index(kind.replace("-", "_"))
         zero = Deformation()
         return (replace(self, **{n: getattr(zero, n) for n in names[i:]}),
@@ -273,7 +273,7 @@ def changing(kind: str, sample, own: Deformation, primitive: Primitive | None = 
     """params ↦ the breast `own.apply(sample)` with `kind`'s parameters changed by `params`.
 
     A condition changes the breast's own parameters: its kind's stage and the later ones are
-    redone from the primitive `sample` (model units), so the chain keeps MODEL.md §3 order. For
+    redone from the primitive `sample` (model units), so the chain keeps docs/model.md §3 order. For
     ptosis and turn (shears of the last stages) this equals applying the change on top; for
     top-shape it keeps one top-shape (β of summed parameters) where stacking would give two
     β profiles and two tears at y = 0. Works from the sample because top-shape folds just below

@@ -1,7 +1,7 @@
 """Exact inverse solver: where on a condition's line a breast reaches a target degree.
 
-A condition is a line t ∈ [0, 1] in its kind's parameter space (MODEL.md §4). On that line
-the breast's extent (MODEL.md §5; signed for top-shape) is monotone, so the position whose
+A condition is a line t ∈ [0, 1] in its kind's parameter space (docs/model.md §4). On that line
+the breast's extent (docs/model.md §5; signed for top-shape) is monotone, so the position whose
 extent equals the reference extent of the target degree is a 1-D root (`scipy.optimize.brentq`).
 A continuous degree targets the piecewise-linear reference extent at d (continued past 1 and
 #dd, `degree.continuous_degree`), so the degree of an example recovers its row exactly; a
@@ -40,7 +40,7 @@ class InverseSolution:
 
 
 def target_extent(condition: Condition, dd: int, degree: float, grid: tuple[int, int] = (100, 100)) -> float:
-    """The reference extent of a (continuous) degree: E_0 interpolated (MODEL.md §5)."""
+    """The reference extent of a (continuous) degree: E_0 interpolated (docs/model.md §5)."""
     if not np.isfinite(degree):
         raise ValueError(f"a degree of {condition.name} must be a finite number, got {degree}")
     return float(degree_extent(degree, reference_extents(condition, dd, *grid)))

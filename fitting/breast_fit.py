@@ -1,6 +1,6 @@
 """The breast model fitted to a breast-frame cloud: superquadric (+ global deformations), then FFD.
 
-`fit_breast` runs the two stages of MODEL.md §2–§3 and §6; `BreastFit.save` writes `fit.npz`
+`fit_breast` runs the two stages of docs/model.md §2–§3 and §6; `BreastFit.save` writes `fit.npz`
 (`breastplan.fit/1`) and `fit.ply` (the fitted closed surface: mm, breast frame, base cap on
 the chest wall); `load_fit` reads the NPZ back.
 """
@@ -34,7 +34,7 @@ UNSEEN_MM, UNSEEN_SHARE = 6.0, 0.02
 """A model vertex is unseen with no data point within 6 mm; a breast is partly seen above 2 %."""
 DEFORMATIONS = ("top-shape", "ptosis", "turn")
 """Deformations fitted with the primitive by default. Ptosis and turn are shears by z with
-closed-form inverses, top-shape the upper half's own profile (MODEL.md §3); a sagging, turned or
+closed-form inverses, top-shape the upper half's own profile (docs/model.md §3); a sagging, turned or
 top-heavy breast is no superellipsoid, and the lattice alone cannot make up the difference. On the
 480 examples of database S at degree 8 (8 conditions) every fit meets the thesis stopping rule
 with them; with ptosis and turn alone 274 did (shape 2's top-shape lifts its upper half up to

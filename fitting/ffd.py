@@ -1,4 +1,4 @@
-"""Free-form deformation lattice fitted to a breast cloud (MODEL.md §6, Bardinet et al. 1998).
+"""Free-form deformation lattice fitted to a breast cloud (docs/model.md §6, Bardinet et al. 1998).
 
 The model surface (a closed triangle mesh, mm, breast frame) sits in a box of n×n×n control
 points; each vertex has fixed lattice coordinates and a row of the trivariate Bernstein basis,
@@ -6,7 +6,7 @@ precomputed once, so the deformed surface is B·P. Fitting alternates *match* (e
 ↔ its closest point on the current surface) and *solve* (a damped Gauss–Newton step on the
 control points: the distance along the surface normal, a small weight on the tangential
 offset, and λ‖L(P − P0)‖² with L the lattice Laplacian) until the mean normalised residual
-‖d − m‖/‖d‖ (MODEL.md §7's normalisation by ‖o‖) is below 0.0015 (thesis stopping rule), the
+‖d − m‖/‖d‖ (docs/model.md §7's normalisation by ‖o‖) is below 0.0015 (thesis stopping rule), the
 residual stops improving, or the iterations or time run out.
 
 Matching on the *closed* mesh holds the base cap to the data's base ring on the chest wall;

@@ -1,6 +1,6 @@
-"""Fit the breast primitive (MODEL.md §2) and a rigid pose to a breast point cloud.
+"""Fit the breast primitive (docs/model.md §2) and a rigid pose to a breast point cloud.
 
-Least squares on the radial (geometric) distance of MODEL.md §2 with a robust loss
+Least squares on the radial (geometric) distance of docs/model.md §2 with a robust loss
 (`scipy.optimize.least_squares`). Data are in the breast frame (mm): the base of the
 breast lies on the chest wall z = 0, which a prior holds the model's base to (a scanner
 sees only the front of the breast, so without it the hidden half is unconstrained).
@@ -39,7 +39,7 @@ turn about z trade places with a1 and a2."""
 LOWER_MARGIN, LOW_SHARE = 0.7, 0.1
 """A top-shape fit starts from the points top-shape barely moves: those below y = −0.7·a4 (cloud
 centre, breast frame), in the lower half whatever ptosis moved down, and those below 10 % of the
-height, which z·(β − 1) moves by under 0.02·a5 for |s0| ≤ 2.5 (MODEL.md §3–4)."""
+height, which z·(β − 1) moves by under 0.02·a5 for |s0| ≤ 2.5 (docs/model.md §3–4)."""
 CHEST_PRIOR_WEIGHT = 30.0
 """Weight of the prior residuals (tilt of the base, rad; height of the base, mu) per √point."""
 
@@ -83,7 +83,7 @@ def _deformation(x: np.ndarray, kinds: tuple[str, ...]) -> Deformation:
 def _radial(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...] = ()) -> np.ndarray:
     """Radial distance (mu) of points p (mu, data frame) to the posed, deformed primitive x.
 
-    Points are taken back through the inverse deformations (MODEL.md §3) to the primitive.
+    Points are taken back through the inverse deformations (docs/model.md §3) to the primitive.
     Signed (negative inside), unlike `Primitive.radial_distance`, so that least squares sees
     a smooth residual through the surface.
     """
@@ -98,7 +98,7 @@ TABLE_SIZE = 512
 
 
 def _inverse(q: np.ndarray, deformation: Deformation, primitive: Primitive) -> np.ndarray:
-    """`Deformation.inverse` (MODEL.md §3), fast enough for a fit that calls it hundreds of times:
+    """`Deformation.inverse` (docs/model.md §3), fast enough for a fit that calls it hundreds of times:
     top-shape and flatten-side are undone by interpolating a table of their 1-D forward maps
     instead of a root solve per point."""
     q = np.array(q, dtype=float)
@@ -116,7 +116,7 @@ def _inverse(q: np.ndarray, deformation: Deformation, primitive: Primitive) -> n
 def _top_shape_inverse(q: np.ndarray, params, primitive: Primitive) -> np.ndarray:
     """Upper half: z ↦ z·β(w) tabulated over latitudes u (where the map is smooth) and inverted.
 
-    With s1 < 0 the map rises to a maximum and folds back to the nipple (MODEL.md §3), so a
+    With s1 < 0 the map rises to a maximum and folds back to the nipple (docs/model.md §3), so a
     height has two preimages; each point takes the branch of the primitive's own height at its
     (x, y), which is where a surface point comes from. Heights beyond a branch's image clip to it.
     """
@@ -137,7 +137,7 @@ def _top_shape_inverse(q: np.ndarray, params, primitive: Primitive) -> np.ndarra
 
 
 def _height(q: np.ndarray, primitive: Primitive) -> np.ndarray:
-    """Height of the primitive's surface above (x, y) (MODEL.md §2: F = 1 solved for z; 0 outside)."""
+    """Height of the primitive's surface above (x, y) (docs/model.md §2: F = 1 solved for z; 0 outside)."""
     flat = primitive.inside_outside(q * [1.0, 1.0, 0.0])
     return primitive.a5 * np.maximum(1.0 - flat, 0.0) ** (primitive.eps1 / 2)
 
@@ -155,7 +155,7 @@ def _flatten_side_inverse(q: np.ndarray, params, primitive: Primitive) -> np.nda
 def _radial_jacobian(x: np.ndarray, p: np.ndarray) -> np.ndarray:
     """(N, 13) analytic Jacobian of `_radial` for the plain posed primitive (no deformations).
 
-    r = |q|(1 − F^(−eps1/2)), q = Rᵀ(p − t), F the inside–outside function of MODEL.md §2; each
+    r = |q|(1 − F^(−eps1/2)), q = Rᵀ(p − t), F the inside–outside function of docs/model.md §2; each
     point sees the semi-axes of its half (a1/a2 by the sign of x, a3/a4 by that of y), so the
     derivative w.r.t. each log semi-axis is masked by that sign. The rotation-vector part uses
     d(Rᵀv)/dw = Rᵀ[v]ₓ J_l(w) (J_l the left Jacobian of SO(3)).
@@ -244,7 +244,7 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
     The deformation parameters start from zero, or with top-shape from `_top_shape_start`, unless
     `x0` gives the whole parameter vector.
     """
-    kinds = tuple(k for k in KIND_PARAMS if k in set(deformations))  # MODEL.md §3 order
+    kinds = tuple(k for k in KIND_PARAMS if k in set(deformations))  # docs/model.md §3 order
     unknown = set(deformations) - set(KIND_PARAMS)
     if unknown:
         raise ValueError(f"unknown deformations {sorted(unknown)}; choose from {', '.join(KIND_PARAMS)}")
@@ -270,7 +270,7 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
 
 def _top_shape_start(p: np.ndarray, kinds: tuple[str, ...], solve: "_Solver") -> tuple[np.ndarray, int]:
     """Start of a fit with top-shape (p in mu). Top-shape scales only the heights of the upper half
-    (MODEL.md §3), so the primitive, pose and other deformations are first fitted to the points it
+    (docs/model.md §3), so the primitive, pose and other deformations are first fitted to the points it
     barely moves (LOWER_MARGIN, LOW_SHARE; picked again once the fit can take points back), then
     (s0, s1) solve the linear least squares z = h·β(w) over the upper points, h the fitted
     primitive's height above each (t0 = t1 = 0). Returns the start and the solver's evaluations."""

@@ -1,4 +1,4 @@
-"""Breast isolation and the breast frame (MODEL.md §1) from a torso cloud and its chest wall.
+"""Breast isolation and the breast frame (docs/model.md §1) from a torso cloud and its chest wall.
 
 All inputs are in the viewing frame (camera convention: x to the image's right = the
 patient's left, y down, z away from the viewer; mm). A mound is a connected patch of

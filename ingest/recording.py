@@ -1,4 +1,4 @@
-"""depthai recordings of depth frames (DESIGN.md "Known facts").
+"""depthai recordings of depth frames (docs/design.md "Known facts").
 
 A recording is an MCAP file written by `dai.node.RecordMessage` in a host-only pipeline
 (`dai.Pipeline(False)`): RAW16 `ImgFrame`s holding depth in millimetres (0 = no

@@ -2,8 +2,8 @@
 
 Body frame (mm): origin on the sternum at the height of the breast-base centres, X towards
 the patient's left, Y superior, Z anterior. Camera frame: OpenCV (x right in the image, y
-down, z forward), mm. Each breast is the primitive of MODEL.md §2 with the deformations of
-MODEL.md §3 in its breast frame (MODEL.md §1), whose base plane is the tangent plane of the
+down, z forward), mm. Each breast is the primitive of docs/model.md §2 with the deformations of
+docs/model.md §3 in its breast frame (docs/model.md §1), whose base plane is the tangent plane of the
 chest wall at the base centre; the base ring is extruded into the body so that the breast
 meets the curved chest. Depth is rendered with open3d ray casting; the noise grows with the
 square of the distance, grazing surfaces and random holes give no depth (0), as on an OAK.
@@ -283,7 +283,7 @@ def scene_from_truth(truth) -> Scene:
 
 def scan_errors(points_camera: np.ndarray, nipple_camera: np.ndarray, z_axis_camera: np.ndarray,
                 truth, side: str, n_samples: int = 20_000) -> dict[str, float]:
-    """Accuracy of an ingested breast against the truth (Ingest §5), all in camera mm.
+    """Accuracy of an ingested breast against the truth, all in camera mm.
 
     rms_mm: RMS distance of the points to the true breast surface; nipple_mm; z_axis_deg;
     coverage: fraction of the camera-visible true surface with a point within 3 mm.

@@ -1,4 +1,4 @@
-"""Synthetic breast databases V and S (MODEL.md §4, thesis §4.1, Table 4.1).
+"""Synthetic breast databases V and S (docs/model.md §4, thesis §4.1, Table 4.1).
 
 A database is a pure function of (name, seed, n_points). Each breast is a primitive
 (eps = (1, 1)) deformed by its shape's Table 4.1 parameters, sampled on the (u, v) grid
@@ -31,7 +31,7 @@ SHAPES: dict[str, Deformation] = {
     "shape4": Deformation(ptosis=(-0.1, -0.05), turn=(0.38, 0.0), top_shape=(1.0, -0.5, 0.5, -0.5),
                           turn_top=(0.41, 0.0)),
 }
-"""Table 4.1 as MODEL.md §4 reads it (N/A → 0)."""
+"""Table 4.1 as docs/model.md §4 reads it (N/A → 0)."""
 
 LAYOUT = {  # name → (shapes, breasts per shape, test breasts per shape, semi-axis jitter)
     "V": (("generic",), 65, 15, 0.0),
@@ -133,7 +133,7 @@ def grid_for(n_points: int) -> tuple[int, int]:
 
 
 def draw_volumes(rng: np.random.Generator, n: int) -> np.ndarray:
-    """n volumes (cc) from the truncated normal of MODEL.md §4, stratified (one per n-quantile bin).
+    """n volumes (cc) from the truncated normal of docs/model.md §4, stratified (one per n-quantile bin).
 
     Stratification keeps each database's mean and sd close to the law for any seed.
     """
@@ -143,7 +143,7 @@ def draw_volumes(rng: np.random.Generator, n: int) -> np.ndarray:
 
 
 def build_database(name: str, seed: int = 0, n_points: int = 10_000) -> Database:
-    """Database "V" (65 breasts, 50/15) or "S" (4 shapes × 15, 48/12), MODEL.md §4."""
+    """Database "V" (65 breasts, 50/15) or "S" (4 shapes × 15, 48/12), docs/model.md §4."""
     if name not in LAYOUT:
         raise ValueError(f"unknown database '{name}'; choose V or S")
     shapes, per_shape, test_per_shape, jitter = LAYOUT[name]

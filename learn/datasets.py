@@ -1,4 +1,4 @@
-"""Deformation datasets: database × condition × #dd (MODEL.md §4–§5, thesis §4.1.1).
+"""Deformation datasets: database × condition × #dd (docs/model.md §4–§5, thesis §4.1.1).
 
 Every breast of the database deformed by every row of the condition, with its extent and
 its degree (discrete and continuous). A row changes the breast's own parameters of its kind
@@ -108,7 +108,7 @@ class Dataset:
 
 
 def build_dataset(database: Database, condition: Condition | str, dd: int, progress=None) -> Dataset:
-    """Deform every breast by every row; extents and degrees per example (MODEL.md §5)."""
+    """Deform every breast by every row; extents and degrees per example (docs/model.md §5)."""
     cond = find_condition(condition) if isinstance(condition, str) else condition
     rows = cond.rows(dd)
     ref = reference_extents(cond, dd, *database.grid)

@@ -1,4 +1,4 @@
-"""Feature sets of the deformation-parameter regressions (thesis Table 4.3, issue 5 §1).
+"""Feature sets of the deformation-parameter regressions (thesis Table 4.3).
 
 Each kind moves one coordinate as a function of another ("moved" and "driver" axes): ptosis
 moves y by z, turn moves x by z (the thesis: "use x where ptosis uses y"), top-shape moves z on
@@ -9,7 +9,7 @@ the upper pole, so its driver is y. With M the moved axis and D the driver:
 
 capitals are the vectors of every point's coordinate, lower case the mean point's. Top-shape's
 FS5 adds the upper-pole profile (`deform.descriptors.upper_profile`). DD is the discrete degree
-(thesis) or the continuous one (MODEL.md §5). Vector blocks are scaled to [0, 1] and reduced by
+(thesis) or the continuous one (docs/model.md §5). Vector blocks are scaled to [0, 1] and reduced by
 PCA fitted on the training split only (`VectorReducer`).
 """
 from __future__ import annotations

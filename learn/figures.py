@@ -1,4 +1,4 @@
-"""Figures of the learned models: the residual six-plot (MODEL.md §7, thesis §4.2.4).
+"""Figures of the learned models: the residual six-plot (docs/model.md §7, thesis §4.2.4).
 
 Figures are built as `matplotlib.figure.Figure` objects on the Agg canvas (no pyplot state,
 no GUI), so they are safe to draw from several threads, and written atomically.
@@ -28,7 +28,7 @@ def _png_bytes(fig: Figure) -> bytes:
 
 
 def six_plot(target, predicted, path: str | Path, title: str) -> Path:
-    """Residual six-plot of one output as a PNG at `path` (MODEL.md §7); returns the path.
+    """Residual six-plot of one output as a PNG at `path` (docs/model.md §7); returns the path.
 
     Panels: predicted vs target (with y = x), residual vs target, residual vs predicted,
     lag plot (residual k vs k − 1), histogram and normal probability plot of the residuals,

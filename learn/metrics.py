@@ -1,4 +1,4 @@
-"""Metrics of the learned models (MODEL.md §7, thesis §4.2.4).
+"""Metrics of the learned models (docs/model.md §7, thesis §4.2.4).
 
 Direct metrics compare predicted with target parameters (RMSE%, MPE%, Eq. 4.23–4.24).
 Indirect metrics compare the true deformed breast ("Original", O) with the one deformed by
@@ -16,7 +16,7 @@ from scipy import stats
 from scipy.spatial import cKDTree
 
 ALPHA = 0.05
-"""Significance level of `ttest` (MODEL.md §7)."""
+"""Significance level of `ttest` (docs/model.md §7)."""
 INDIRECT_KEYS = ("modelled_to_original_euclidean", "modelled_to_original_hausdorff",
                  "original_to_modelled_euclidean", "original_to_modelled_hausdorff")
 
@@ -82,7 +82,7 @@ def _indirect(original, modelled, workers: int) -> tuple[float, float, float, fl
 
 
 def indirect_distances(original, modelled) -> dict[str, float]:
-    """Both-direction normalised nearest-point distances of one breast, in % (MODEL.md §7).
+    """Both-direction normalised nearest-point distances of one breast, in % (docs/model.md §7).
 
     `original`, `modelled`: (N, 3) and (M, 3) points in one frame and unit; they need not
     correspond. Modelled→original: each m's distance to its nearest original o* is
@@ -118,7 +118,7 @@ def summary(values) -> dict[str, float]:
 
 
 def ttest(a, b) -> dict[str, float | bool]:
-    """Independent-samples t-test of two methods' errors, α = 0.05 (MODEL.md §7).
+    """Independent-samples t-test of two methods' errors, α = 0.05 (docs/model.md §7).
 
     Pooled-variance (Student) test: the classical independent-samples test the thesis names,
     and the methods are compared on the same test examples, so the groups have equal sizes,

@@ -47,7 +47,7 @@ THESIS_RMSE = {  # (condition, family) → feature set → RMSE %, thesis Table 
 
 
 NOTES = [
-    "* **All our distances are 10–40× below the thesis's, its own configuration included.** MODEL.md §3",
+    "* **All our distances are 10–40× below the thesis's, its own configuration included.** docs/model.md §3",
     "  normalises the polynomial argument (ζ = z/10, a project decision), so a row of Table 4.2 moves a",
     "  breast by at most b0 + b1 model units (≈ 15 mm at ptosis b0 = 2.25); with the thesis's raw z the same",
     "  row moves it 10× (b0) to 100× (b1) further, and every error scales with the displacement. Compare",
@@ -60,7 +60,7 @@ NOTES = [
     "  discrete degree quantises the extent to 8 levels, which alone costs the exact solver 0.18–0.42 %",
     "  Euclidean on database S (its discrete column).",
     "* **The exact solver is exact** (≈ 1e-14 %) because the continuous degree is not clipped to [1, #dd]",
-    "  (a departure from MODEL.md §5, see `deform.degree.continuous_degree`): 12–34 % of database S's",
+    "  (a departure from docs/model.md §5, see `deform.degree.continuous_degree`): 12–34 % of database S's",
     "  examples lie beyond the reference extents, and clipped they would cost it 0.06–0.12 % Euclidean.",
     "* **Top-shape:** thesis Table 5.7 is missing from the extracted thesis text, so no figure stands beside ours.",
 ]
@@ -68,7 +68,7 @@ NOTES = [
 
 
 def json_rows(results: list[Result]) -> list[dict]:
-    """Two rows per configuration (one per direction) with the issue's fields and the thesis's."""
+    """Two rows per configuration (one per direction) with our fields and the thesis's."""
     rows = []
     for r in results:
         errors = parameter_errors(r)
@@ -166,7 +166,7 @@ def _f(v) -> str:
 def markdown(report: dict, results: list[Result]) -> str:
     """report.md: headline table, per-condition indirect tables, model-selection table, t-tests."""
     lines = ["# breastplan study report", "", f"Run: {json.dumps(report['meta'])}", "",
-             "Test split, modelled ⇒ original, % of ‖o‖ (MODEL.md §7). *Thesis config*: MLP on FS5 with the",
+             "Test split, modelled ⇒ original, % of ‖o‖ (docs/model.md §7). *Thesis config*: MLP on FS5 with the",
              "discrete degree, reproduced here. *Best learnt*: the learnt configuration with the lowest",
              "cross-validated RMSE on the training split (REF excluded: it needs the true displacement).",
              "*Exact*: the inverse solver (the upper bound), given the continuous degree (continued past",

@@ -5,7 +5,7 @@ degree (the thesis's configurations), the same families on FS5 with the continuo
 (ours), and the exact inverse solver (`breastplan.deform.inverse`) with either degree. Each
 configuration is selected on the training split and evaluated on the test split: RMSE % and
 MPE % of the parameters (Eq. 4.23–4.24) and the indirect distances between the truly deformed
-breast ("Original") and the breast deformed by the predicted parameters ("Modelled"), MODEL.md §7.
+breast ("Original") and the breast deformed by the predicted parameters ("Modelled"), docs/model.md §7.
 
 The regressions predict the position t ∈ [0, 1] on the condition's line, and the parameters are
 `condition.at(t)`. This is the thesis's regression of each varying parameter, not an

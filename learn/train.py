@@ -1,4 +1,4 @@
-"""Train the deployable deformation models (issue 5 §4): one `breastplan.model/1` file per condition.
+"""Train the deployable deformation models: one `breastplan.model/1` file per condition.
 
 Each condition's model is the best (lowest cross-validated RMSE) of every regressor family on
 FS4 and FS5 with the continuous degree, trained on database S's training split. Only feature

@@ -1,4 +1,4 @@
-"""PLY and NPZ artefacts: round trips, validation, atomic writes (DESIGN.md "Artefacts")."""
+"""PLY and NPZ artefacts: round trips, validation, atomic writes (docs/artefacts.md)."""
 import os
 import zipfile
 

@@ -1,4 +1,4 @@
-"""The `breastplan` command end to end through files, as a user runs it (DESIGN.md exit codes)."""
+"""The `breastplan` command end to end through files, as a user runs it (docs/cli.md exit codes)."""
 import json
 import subprocess
 

@@ -1,4 +1,4 @@
-"""Databases V and S (MODEL.md §4) and deformation datasets."""
+"""Databases V and S (docs/model.md §4) and deformation datasets."""
 import numpy as np
 import pytest
 
@@ -7,7 +7,7 @@ from breastplan.deform.global_deformations import Deformation, apply_kind
 from breastplan.learn.databases import Database, build_database
 from breastplan.learn.datasets import Dataset, build_dataset
 
-# Table 4.1, typed here from MODEL.md §4: (b0,b1) (c0,c1) (s0,s1,t0,t1) (h0,h1) (g0,g1)
+# Table 4.1, typed here from docs/model.md §4: (b0,b1) (c0,c1) (s0,s1,t0,t1) (h0,h1) (g0,g1)
 TABLE_4_1 = {
     "generic": [(0, 0), (0.38, 0), (0, 0, 0, 0), (0, 0), (0.41, 0)],
     "shape1": [(-0.2, 0), (0.25, 0), (0.5, -1, 0, -1), (0, 0.01), (0, 0.2)],

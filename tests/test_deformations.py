@@ -1,4 +1,4 @@
-"""The five global deformations (MODEL.md §3): boundary conditions, identities, shears, inverses."""
+"""The five global deformations (docs/model.md §3): boundary conditions, identities, shears, inverses."""
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -150,7 +150,7 @@ def test_composition_follows_model_order_and_inverts():
                     ptosis=(-0.1, -0.05), turn=(0.38, 0))
     p = PRIM.sample(50, 50)
     expected = p
-    for kind in ["top-shape", "flatten-side", "turn-top", "ptosis", "turn"]:  # MODEL.md §3 order
+    for kind in ["top-shape", "flatten-side", "turn-top", "ptosis", "turn"]:  # docs/model.md §3 order
         expected = apply_kind(expected, kind, d.params(kind), PRIM)
     assert np.array_equal(d.apply(p, PRIM), expected)
     assert np.allclose(d.inverse(d.apply(p, PRIM), PRIM), p, atol=1e-9)

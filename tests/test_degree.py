@@ -1,4 +1,4 @@
-"""Extent and degree of deformation (MODEL.md §5) and the condition rows (MODEL.md §4)."""
+"""Extent and degree of deformation (docs/model.md §5) and the condition rows (docs/model.md §4)."""
 import numpy as np
 import pytest
 

@@ -1,4 +1,4 @@
-"""FFD lattice (MODEL.md §6): Bernstein basis properties and an exactly representable fit."""
+"""FFD lattice (docs/model.md §6): Bernstein basis properties and an exactly representable fit."""
 import numpy as np
 from hypothesis import given, settings, strategies as st
 

@@ -1,6 +1,6 @@
 """Ingest: depthai recordings, fusion, chest wall, the synthetic scanner and the whole pipeline.
 
-Accuracy is measured against the synthetic scanner's truth (Ingest §5): the recorded
+Accuracy is measured against the synthetic scanner's truth: the recorded
 frames go through depthai (RecordMessage → MCAP → ReplayMessage) as a clinic's would.
 """
 from __future__ import annotations

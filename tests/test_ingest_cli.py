@@ -1,4 +1,4 @@
-"""`breastplan scan-synth` and `breastplan ingest` end to end, and every bad input of Ingest §7."""
+"""`breastplan scan-synth` and `breastplan ingest` end to end, and every bad input of ingest."""
 import json
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""The exact inverse solver (issue 5 §2) against rows of known parameters."""
+"""The exact inverse solver against rows of known parameters."""
 import numpy as np
 import pytest
 

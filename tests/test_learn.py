@@ -1,4 +1,4 @@
-"""Deformation models (issue 5): features, training discipline, model files, the study, `deform --degree`."""
+"""Deformation models: features, training discipline, model files, the study, `deform --degree`."""
 import json
 
 import numpy as np
@@ -128,7 +128,7 @@ def test_deform_by_degree_usage_errors(cli, db_s, tmp_path, args):
 
 
 def test_quick_study_end_to_end(cli, tmp_path):
-    """`evaluate --quick` writes the report with the issue's row fields, both directions."""
+    """`evaluate --quick` writes the report with its row fields, both directions."""
     out = tmp_path / "study"
     res = run(cli, "evaluate", "--study", "turn-S", "--quick", "--out", out, "--json")
     assert res.returncode == 0, res.stderr

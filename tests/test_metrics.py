@@ -1,4 +1,4 @@
-"""Metrics and the six-plot (MODEL.md §7): hand-computed truths, not numbers from the code."""
+"""Metrics and the six-plot (docs/model.md §7): hand-computed truths, not numbers from the code."""
 import math
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""The breast primitive against closed forms and geometric identities (MODEL.md §2)."""
+"""The breast primitive against closed forms and geometric identities (docs/model.md §2)."""
 import numpy as np
 import pymeshlab
 import pytest
@@ -19,7 +19,7 @@ def test_hemisphere_volume_is_two_thirds_pi_a_cubed(a):
 
 
 def test_p00_is_452_cc():
-    # 60 mm hemisphere: (2/3)·π·60³ mm³ = 452.389 cc (MODEL.md §1)
+    # 60 mm hemisphere: (2/3)·π·60³ mm³ = 452.389 cc (docs/model.md §1)
     assert Primitive().volume_cc == pytest.approx(2 / 3 * np.pi * 60**3 / 1000, rel=1e-12)
     assert mu3_to_cc(1.0) == pytest.approx(0.216)
 

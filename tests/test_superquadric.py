@@ -108,7 +108,7 @@ def test_analytic_jacobian_matches_finite_differences(axes, eps1, eps2, rotvec, 
 
 @pytest.mark.parametrize("shape", ["shape1", "shape2", "shape3", "shape4"])
 def test_fast_inverse_undoes_the_deformations_of_each_table_4_1_shape(shape):
-    """Truth: the primitive samples the library's forward deformations (MODEL.md §3) started from —
+    """Truth: the primitive samples the library's forward deformations (docs/model.md §3) started from —
     on both sides of top-shape's fold, where the library's own inverse keeps the first branch."""
     from breastplan.learn.databases import SHAPES
     P = Primitive(10.5, 9, 11, 9.5, 10, 1.0, 1.0)
@@ -120,7 +120,7 @@ def test_fast_inverse_undoes_the_deformations_of_each_table_4_1_shape(shape):
 @pytest.mark.parametrize("shape", ["shape2", "shape3"])
 def test_full_chen_fit_recovers_a_database_shape(shape):
     """Truth: the primitive and Table 4.1 deformation the breast was built from. Shape 2's top-shape
-    lifts its upper half up to 2.25× (β(0.5) = 2.25 by hand from MODEL.md §3's quintic)."""
+    lifts its upper half up to 2.25× (β(0.5) = 2.25 by hand from docs/model.md §3's quintic)."""
     from breastplan.deform.global_deformations import KIND_PARAMS
     from breastplan.learn.databases import SHAPES
     P = Primitive(10.5, 9, 11, 9.5, 10, 1.0, 1.0)
@@ -134,7 +134,7 @@ def test_full_chen_fit_recovers_a_database_shape(shape):
 def test_top_shape_fit_recovers_the_profile_of_a_ptotic_breast(s0, s1):
     """Truth: the top-shape profile β(w) (t0 = t1 = 0) and ptosis the samples were deformed by. The
     four top-shape parameters trade against each other; the profile they give does not. Points
-    that cross the tear along y = 0 (MODEL.md §3) make the cost jump, so ptosis is held to 0.1 mu
+    that cross the tear along y = 0 (docs/model.md §3) make the cost jump, so ptosis is held to 0.1 mu
     (0.6 mm at the nipple)."""
     from breastplan.deform.global_deformations import Deformation, beta
     P = Primitive(10, 11, 9.5, 10.5, 9, 0.9, 1.0)
