@@ -1,7 +1,7 @@
 """Speed and accuracy of the fitting stage: superquadric fit, FFD lattice fit, database S.
 
-Measures, with every fit run under `threadpool_limits(1, "blas")` as the
-library does in `ingest.pipeline` (small dense solves: BLAS threads only add contention):
+Measures, with every fit run under `threadpool_limits(1, "blas")` as the commands run them
+(small dense solves: BLAS threads only add contention):
 
 1. `fit_superquadric` on clouds of 1 000, 10 000 and 100 000 points of database-S breasts (one
    per shape; medians over repeats after one warm-up). Target: 10 000 points ≤ 100 ms. Baseline,
@@ -68,6 +68,7 @@ from breastplan.fitting.sampling import seeded_subset
 from breastplan.fitting.superquadric import fit_superquadric, initial_guess
 from breastplan.ingest import synthetic
 from breastplan.ingest.pipeline import ingest_frames
+from breastplan.options import FitOptions, IngestOptions
 from breastplan.ingest.recording import DepthFrames
 from breastplan.learn.databases import build_database
 from breastplan.learn.datasets import build_dataset
@@ -207,7 +208,7 @@ def fit_example(points: np.ndarray) -> tuple[BreastFit, str | None]:
     """fit_breast, or (when it raises BadInputError after both stages) the fit it rejected and why."""
     with recording_stages() as seen:
         try:
-            return fit_breast(points, lattice=LATTICE), None
+            return fit_breast(points, FitOptions(lattice=LATTICE)), None
         except BadInputError as e:
             if "ffd" not in seen:      # rejected before fitting: nothing to report
                 raise
@@ -239,7 +240,7 @@ def fit_pass(db, breasts) -> dict:
 
 def database_passes(db, breasts, passes: int) -> tuple[list[dict], list[float]]:
     """`passes` fit passes, each followed by a timed build_database("S") (the baseline)."""
-    fit_breast(db.points[breasts[0]], lattice=LATTICE)   # warm-up (imports, open3d, caches)
+    fit_breast(db.points[breasts[0]], FitOptions(lattice=LATTICE))   # warm-up (imports, open3d, caches)
     runs, builds = [], []
     for _ in range(passes):
         runs.append(fit_pass(db, breasts))
@@ -434,7 +435,7 @@ def scan_rows(seeds) -> list[dict]:
         scene = synthetic.make_scene(seed, tilt_deg=10.0)
         frames = DepthFrames(synthetic.depth_frames(scene, 10, seed), scene.K, "synthetic")
         for side in synthetic.SIDES:
-            scan = ingest_frames(frames, side)
+            scan = ingest_frames(frames, IngestOptions(side))
             fit = fit_breast(scan.points)
             to_camera = np.linalg.inv(scan.camera_to_breast)
             d = scene.surface_distance(side, transform_points(to_camera, fit.vertices[MESH_GRID[1]:-1]))

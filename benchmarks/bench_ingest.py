@@ -12,7 +12,7 @@ Measures:
        target ≤ 60 ms); baseline: open3d `PointCloud.create_from_depth_image` +
        `voxel_down_sample(2.0)` of the same whole frame (the least any open3d pipeline does);
    (b) a 30-frame recording through the whole pipeline, replay included
-       (`breastplan.ingest.scan.ingest(path, "left")`; target ≤ 1.5 s); baseline: the depthai
+       (`breastplan.ingest.scan.ingest(path, IngestOptions("left"))`; target ≤ 1.5 s); baseline: the depthai
        replay alone (`read_recording(path)`);
    (c) the median time of every step the pipeline times (`Ingested.timings_ms`), for (a) and (b).
 
@@ -37,11 +37,13 @@ import numpy as np
 import open3d as o3d
 from rich.console import Console
 from rich.table import Table
+from threadpoolctl import threadpool_limits
 
 from breastplan.ingest import synthetic
 from breastplan.ingest.pipeline import ingest_frames
 from breastplan.ingest.recording import DepthFrames, read_recording, write_recording
 from breastplan.ingest.scan import ingest
+from breastplan.options import IngestOptions
 
 from timing import fmt, median_times, timed
 
@@ -66,7 +68,7 @@ def to_camera(result) -> tuple[np.ndarray, np.ndarray]:
 
 
 def errors(frames: DepthFrames, truth, side: str) -> dict:
-    result = ingest_frames(frames, side, VOXEL_MM)
+    result = ingest_frames(frames, IngestOptions(side, VOXEL_MM))
     points, z_axis = to_camera(result)
     return synthetic.scan_errors(points, result.nipple_camera, z_axis, truth, side)
 
@@ -142,7 +144,7 @@ def speed_one_frame(frame: DepthFrames, repeats: int) -> dict:
     timings = []
 
     def run():
-        timings.append(ingest_frames(frame, "left", VOXEL_MM).timings_ms)
+        timings.append(ingest_frames(frame, IngestOptions("left", VOXEL_MM)).timings_ms)
     K, (w, h) = frame.K, frame.size
     intrinsic = o3d.camera.PinholeCameraIntrinsic(w, h, K[0, 0], K[1, 1], K[0, 2], K[1, 2])
     depth = np.ascontiguousarray(frame.depth[0])
@@ -170,9 +172,9 @@ def speed_recording(path: Path, repeats: int) -> dict:
     timings, frames, replayed = [], [], []
 
     def run():
-        result, source = ingest(path, "left", VOXEL_MM)
-        timings.append(result.timings_ms)
-        frames.append(source.frames)
+        scan = ingest(path, IngestOptions("left", VOXEL_MM))
+        timings.append(scan.timings_ms)
+        frames.append(scan.source.frames)
     median, baseline = median_times(run, lambda: replayed.append(read_recording(path).depth.shape[0]), repeats)
     return {"case": f"{SPEED_FRAMES}-frame recording → breast cloud (scan.ingest)", "repeats": repeats,
             "median_s": median, "baseline_s": baseline, "ratio": median / baseline,
@@ -225,7 +227,7 @@ def main() -> None:
     console = Console(width=150)
     start, load_start = time.perf_counter(), os.getloadavg()
 
-    with tempfile.TemporaryDirectory(prefix="bench_ingest_") as tmp:
+    with tempfile.TemporaryDirectory(prefix="bench_ingest_") as tmp, threadpool_limits(1, "blas"):  # as `ingest` runs
         workdir = Path(tmp)
         cases = accuracy_cases(seeds, workdir)
         w = worst(cases)

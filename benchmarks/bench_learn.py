@@ -21,7 +21,8 @@ from rich.console import Console
 from rich.table import Table
 
 from breastplan.learn.report import write_report
-from breastplan.learn.study import STUDIES, run_studies, study_datasets
+from breastplan.learn.study import run_studies, study_datasets
+from breastplan.learn.studies import STUDIES
 
 from timing import fmt
 

@@ -1,8 +1,13 @@
-"""Timing helpers shared by the benchmarks: wall-clock seconds and medians after a warm-up."""
+"""Timing helpers shared by the benchmarks: wall-clock seconds and medians after a warm-up.
+
+The clock is breastplan's own (`breastplan.clock.Clock`), the one the commands and the ingest
+pipeline use.
+"""
 from __future__ import annotations
 
 import statistics
-import time
+
+from breastplan.clock import Clock
 
 
 def fmt(seconds: float, ms_digits: int = 1) -> str:
@@ -12,9 +17,10 @@ def fmt(seconds: float, ms_digits: int = 1) -> str:
 
 def timed(fn) -> float:
     """Seconds one call of fn() takes."""
-    t0 = time.perf_counter()
-    fn()
-    return time.perf_counter() - t0
+    clock = Clock()
+    with clock("call"):
+        fn()
+    return clock.ms["call"] / 1e3
 
 
 def median_time(fn, repeats: int, before=None) -> float:

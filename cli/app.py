@@ -1,15 +1,71 @@
-"""The typer application and option parsing shared by the command modules."""
+"""The typer application and option parsing shared by the command modules.
+
+Each command lives in its own module (cli/synth.py, cli/deform.py, …) and registers itself with
+`@command()`; `cli/main.py` imports them. At its top a command module imports only the standard
+library, typer, rich and plain-data modules (option defaults and help come from modules such as
+`breastplan.deform.names`); numpy, the stage it runs and the heavy libraries behind it (open3d,
+scipy, scikit-learn, matplotlib, depthai, pymeshlab, igl) are imported inside the command
+function, so that `breastplan --help` and every command's start-up stay fast
+(tests/test_cli_startup.py, benchmarks/bench_cli.py).
+"""
 from __future__ import annotations
 
-from typing import List
+import math
+from typing import TYPE_CHECKING, List
 
-import numpy as np
 import typer
+from typer.core import TyperCommand, TyperGroup
 
 from .output import usage_error
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+if TYPE_CHECKING:
+    import numpy as np
+
+
+class _Flags:
+    """Typer's rich help prints a type after every option, flags included (`--json <bool>`), as if a
+    flag took a value; an empty metavar shows a flag as a flag (`--json`)."""
+
+    def get_params(self, ctx):
+        params = super().get_params(ctx)
+        for param in params:
+            if getattr(param, "is_flag", False) and param.metavar is None:
+                param.metavar = ""
+        return params
+
+
+class Group(_Flags, TyperGroup):
+    pass
+
+
+class Command(_Flags, TyperCommand):
+    pass
+
+
+app = typer.Typer(cls=Group, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Plan the aesthetic result of breast surgery from a 3-D scan.")
+
+
+def command(name: str | None = None):
+    """Register the decorated function as the command `name` (default: the function's name)."""
+    return app.command(name, cls=Command)
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from breastplan import __version__
+
+        print(f"breastplan {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(
+    version: bool = typer.Option(False, "--version", is_eager=True, callback=_print_version,
+                                 help="Print the version and exit."),
+):
+    pass
+
 
 JSON = typer.Option(False, "--json", help="Print one JSON object on stdout (logs go to stderr).")
 
@@ -25,7 +81,7 @@ def parse_pairs(items: List[str], what: str, option: str) -> dict[str, float]:
             pairs[name.strip()] = float(value)
         except ValueError:
             raise usage_error(f"'{item}' is not NAME=VALUE with a number VALUE ({what})", option) from None
-        if not np.isfinite(pairs[name.strip()]):
+        if not math.isfinite(pairs[name.strip()]):
             raise usage_error(f"'{item}' is not a finite number ({what})", option)
     return pairs
 
@@ -34,6 +90,8 @@ def parse_numbers(text: str | None, count: int, option: str) -> np.ndarray | Non
     """'a,b,c' → an array of `count` finite floats; usage error otherwise."""
     if text is None:
         return None
+    import numpy as np
+
     try:
         values = np.array([float(v) for v in text.split(",")])
     except ValueError:

@@ -1,19 +1,17 @@
 """Command-line plumbing shared by all commands: consoles, JSON results, progress, exit codes.
 
 Exit codes (docs/design.md): 0 ok, 2 usage error, 3 bad input (one sentence, no traceback),
-1 internal error.
+1 internal error. The `seconds` a command reports come from `breastplan.clock.Clock`. rich's
+progress bar and table are imported when used: every command's start-up imports this module.
 """
 from __future__ import annotations
 
 import contextlib
 import json
-import time
 from typing import Any, Iterator
 
 import typer
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
 
 stdout = Console(highlight=False)
 stderr = Console(stderr=True, highlight=False)
@@ -27,6 +25,8 @@ def usage_error(message: str, param: str | None = None) -> typer.BadParameter:
 @contextlib.contextmanager
 def progress(label: str, total: int) -> Iterator[Any]:
     """A progress bar on stderr (only on a terminal); yields a function that advances it by one."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
     bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                    console=stderr, transient=True, disable=not stderr.is_terminal)
     with bar:
@@ -39,21 +39,12 @@ def report(result: dict, as_json: bool, title: str) -> None:
     if as_json:
         print(json.dumps(result, default=_plain))
         return
+    from rich.table import Table
+
     table = Table(title=title, show_header=False, title_justify="left")
     for key, value in result.items():
         table.add_row(key, _human(value))
     stdout.print(table)
-
-
-class Timer:
-    """Wall-clock seconds since construction."""
-
-    def __init__(self):
-        self.start = time.perf_counter()
-
-    @property
-    def seconds(self) -> float:
-        return round(time.perf_counter() - self.start, 3)
 
 
 def _plain(value):

@@ -1,7 +1,9 @@
 """Errors breastplan raises on purpose; the CLI maps them to exit codes (docs/design.md)."""
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
+from typing import Iterator
 
 
 class BreastplanError(Exception):
@@ -34,3 +36,15 @@ def require_file(path: str | Path, kind: str, error: type[BadInputError] = BadIn
     if path.stat().st_size == 0:
         raise error(path, "is empty (0 bytes)")
     return path
+
+
+@contextlib.contextmanager
+def about(path: str | Path | None) -> Iterator[None]:
+    """Name `path` in the BadInputErrors raised inside that name no file (stages raise them without
+    paths; the command that read the file knows which it was)."""
+    try:
+        yield
+    except BadInputError as exc:
+        if exc.path is not None or path is None:
+            raise
+        raise type(exc)(path, exc.problem) from None

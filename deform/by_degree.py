@@ -20,13 +20,10 @@ from .degree import condition_extent, continuous_degree, reference_extents
 from .descriptors import breast_scalars
 from .global_deformations import apply_kind
 from .inverse import solve_degree
+from .names import DD, DEFAULT_CONDITION, METHODS
 
 MODELS = Path(__file__).parent / "models"
 """The shipped models, one `<slug>.npz` per condition."""
-DD = 8
-"""Degrees of the shipped models and of `deform --degree` (thesis: 8)."""
-DEFAULT_CONDITION = {"ptosis": "ptosis b0>b1", "turn": "turn c0>c1", "top-shape": "top-shape s1->s0+"}
-METHODS = ("exact", "learnt")
 
 
 @dataclass(frozen=True)

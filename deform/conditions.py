@@ -2,14 +2,18 @@
 
 A condition is a line in one kind's parameter space from a first to a last row; with
 #dd degrees, row j is the linear interpolation between them (first and last never move).
+The table is plain data: the `breastplan` command lists the conditions in its help without
+loading numpy, which `Condition.at` and `rows` import when they compute.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import numpy as np
+from .names import KIND_PARAMS
 
-from .global_deformations import KIND_PARAMS
+if TYPE_CHECKING:
+    import numpy as np
 
 
 @dataclass(frozen=True)
@@ -32,6 +36,8 @@ class Condition:
 
     def at(self, t) -> np.ndarray:
         """Parameters at position t ∈ [0, 1] on the line (t may be an array: (..., n_params))."""
+        import numpy as np
+
         t = np.asarray(t, dtype=float)[..., None]
         first, last = np.array(self.first), np.array(self.last)
         return first + t * (last - first)
@@ -40,6 +46,8 @@ class Condition:
         """(dd, n_params) parameter matrix: row j interpolates first → last."""
         if dd < 2:
             raise ValueError(f"the number of degrees must be at least 2, got {dd}")
+        import numpy as np
+
         return self.at(np.linspace(0.0, 1.0, dd))
 
 

@@ -78,7 +78,7 @@ def continuous_degree(extents, reference) -> np.ndarray:
     """Piecewise-linear degree over the reference extents, extended past degrees 1 and #dd along
     the end segments; rounded and clipped to [1, #dd] it is the discrete degree.
 
-    docs/model.md §5 clips it to [1, #dd]. We extend it instead: on database S 12–34 % of the examples
+    The thesis clips it to [1, #dd]; docs/model.md §5 extends it: on database S many examples
     lie beyond the reference extents (ζ = z/10 is in model units, so a larger breast deforms more),
     and a clipped degree maps them all to the line's end, so neither the exact solver nor a
     learnt model could recover their row. Unclipped, degree and extent determine each other.

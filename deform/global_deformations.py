@@ -2,7 +2,8 @@
 
 Every function takes an (N, 3) array (or (..., 3)) in the breast frame, model units, and
 returns a new array; the input is never modified and the point order is kept. Inverses
-are provided for each (top-shape and flatten-side by a vectorised 1-D root solve).
+are provided for each (top-shape and flatten-side from tables of their 1-D maps, refined by
+scipy's bracketed root finder).
 """
 from __future__ import annotations
 
@@ -13,18 +14,12 @@ import numpy as np
 
 from breastplan import Primitive
 
-KIND_PARAMS: dict[str, tuple[str, ...]] = {
-    "top-shape": ("s0", "s1", "t0", "t1"),
-    "flatten-side": ("h0", "h1"),
-    "turn-top": ("g0", "g1"),
-    "ptosis": ("b0", "b1"),
-    "turn": ("c0", "c1"),
-}
-"""Parameter names of each kind, in the order the kinds are applied (docs/model.md §3)."""
+from .names import KIND_PARAMS, NEEDS_PRIMITIVE
 
-NEEDS_PRIMITIVE = frozenset({"top-shape", "flatten-side", "turn-top"})
 REFERENCE_AXIS = 10.0
 """ζ = z / 10: polynomial arguments normalised by P00's semi-axis (docs/model.md §3)."""
+TABLE_SIZE = 512
+"""Nodes of the tables of the 1-D maps that top-shape and flatten-side invert."""
 
 
 def _copy(points) -> np.ndarray:
@@ -106,28 +101,35 @@ def top_shape(points, s0: float, s1: float, t0: float, t1: float, *, primitive: 
 
 
 def top_shape_inverse(points, s0: float, s1: float, t0: float, t1: float, *,
-                      primitive: Primitive) -> np.ndarray:
-    """Inverse of top_shape on its first increasing branch.
+                      primitive: Primitive, fast: bool = False) -> np.ndarray:
+    """Inverse of top_shape on the upper half, from a table of its 1-D map refined by root bracketing.
 
-    On the upper half top-shape maps z ↦ f(z) = z·β(w(z)). Where f is increasing on
-    [0, a5] this is the exact inverse. With s1 < 0 (every Table 4.1 shape) f folds back
-    just below the nipple, because dw/dz is unbounded there, so no inverse exists for
-    points from that band; heights in f([0, z*]) are mapped back to the branch [0, z*] before
-    f's first maximum, and higher points (untouched by top-shape) are left as they are.
+    On the upper half top-shape maps z ↦ f(z) = z·β(w(z)). With s1 < 0 (every Table 4.1 shape)
+    f rises to a maximum and folds back to a5 just below the nipple, because dw/dz is unbounded
+    there (docs/model.md §3), so heights between a5 and the maximum have two preimages. Exact
+    (default): every point takes the rising branch, solved to rounding by scipy's bracketed root
+    finder inside the table's bracket. `fast`: for points on the breast's surface, as a fit needs
+    hundreds of times: the table's linear interpolation, and a point whose primitive surface above
+    (x, y) rises past the fold takes the folding branch, which is where a surface point comes from.
+    Heights beyond the maximum (never an image) are left as they are, or with `fast` clipped to it.
     """
     prim = _need(primitive, "top-shape")
 
-    def forward(zz):
-        return zz * beta(prim.latitude_at(zz) * (2 / np.pi), s0, s1, t0, t1)
+    def forward(z):
+        return z * beta(prim.latitude_at(z) * (2 / np.pi), s0, s1, t0, t1)
 
-    grid = np.linspace(0.0, prim.a5, 4097)
-    rising = np.diff(forward(grid)) > 0
-    z_star = prim.a5 if rising.all() else grid[np.argmin(rising)]
+    z = prim.a5 * np.sin(np.linspace(0.0, np.pi / 2, TABLE_SIZE)) ** prim.eps1
+    image = forward(z)
+    falling = np.flatnonzero(np.diff(image) <= 0)
+    top = falling[0] if len(falling) else TABLE_SIZE - 1      # the first maximum of the map
     p = _copy(points)
-    z = p[..., 2]
-    sel = (p[..., 1] > 0) & (z > 0) & (z < forward(z_star))  # the branch's image; above it β = 1
-    target = z[sel]
-    z[sel] = _solve_increasing(forward, target, np.zeros_like(target), np.full_like(target, z_star))
+    sel = (p[..., 1] > 0) & (p[..., 2] > 0) & (fast | (p[..., 2] < image[top]))   # fast: clip to the top
+    h = p[..., 2][sel]
+    solved = _monotone_inverse(forward, h, z[:top + 1], image[:top + 1], exact=not fast)
+    if fast and top < TABLE_SIZE - 1:
+        fold = prim.height(p[sel]) > z[top]
+        solved[fold] = np.interp(h[fold], image[top:][::-1], z[top:][::-1])
+    p[..., 2][sel] = solved
     return p
 
 
@@ -141,41 +143,50 @@ def flatten_side(points, h0: float, h1: float, *, primitive: Primitive) -> np.nd
     return p
 
 
-def flatten_side_inverse(points, h0: float, h1: float, *, primitive: Primitive) -> np.ndarray:
-    """Inverse of flatten_side where w ↦ w·γ(w) is increasing (true for Table 4.1 values)."""
+def flatten_side_inverse(points, h0: float, h1: float, *, primitive: Primitive, fast: bool = False) -> np.ndarray:
+    """Inverse of flatten_side where w ↦ w·γ(w) is increasing (true for Table 4.1 values): a table of
+    that map over [0, w_max] (widened until it holds every point), refined by root bracketing
+    unless `fast` (see `top_shape_inverse`)."""
     a2 = _need(primitive, "flatten-side").a2
     p = _copy(points)
     x = p[..., 0]
     sel = x < 0
     target = -x[sel] / a2
+
     def forward(w):
         return w * gamma(w, h0, h1)
 
-    hi = np.ones_like(target)
-    for _ in range(64):  # widen the bracket until it holds every target (vectorised)
-        short = forward(hi) < target
-        if not short.any():
-            break
-        hi[short] *= 2
-    x[sel] = -a2 * _solve_increasing(forward, target, np.zeros_like(target), hi)
+    w_max = max(1.0, 1.5 * target.max(initial=0.0))
+    while forward(w_max) < target.max(initial=0.0) and w_max < 2.0**64:
+        w_max *= 2
+    w = np.linspace(0.0, w_max, TABLE_SIZE)
+    x[sel] = -a2 * _monotone_inverse(forward, target, w, forward(w), exact=not fast)
     return p
 
 
-def _solve_increasing(f, target: np.ndarray, lo: np.ndarray, hi: np.ndarray, iters: int = 64) -> np.ndarray:
-    """Vectorised bisection for f(x) = target with f increasing on [lo, hi] per element."""
-    lo, hi = lo.copy(), hi.copy()
-    for _ in range(iters):
-        mid = 0.5 * (lo + hi)
-        below = f(mid) < target
-        lo = np.where(below, mid, lo)
-        hi = np.where(below, hi, mid)
-    return 0.5 * (lo + hi)
+def _monotone_inverse(f, target: np.ndarray, xs: np.ndarray, fs: np.ndarray, exact: bool) -> np.ndarray:
+    """x with f(x) = target for f increasing on the table (xs, fs = f(xs)); targets beyond the table
+    clip to its ends. Linear interpolation of the table, then (exact) scipy's bracketed root finder
+    (Chandrupatla) between the two table nodes around each target."""
+    x = np.interp(target, fs, xs)
+    if not exact or not target.size:
+        return x
+    k = np.clip(np.searchsorted(fs, target), 1, len(fs) - 1)
+    inside = (fs[k - 1] < target) & (target < fs[k])          # on a node or beyond the table: done
+    if inside.any():
+        from scipy.optimize import elementwise     # only the exact inverses need it
+
+        res = elementwise.find_root(lambda v, t: f(v) - t, (xs[k - 1][inside], xs[k][inside]),
+                                    args=(target[inside],))
+        x[inside] = res.x
+    return x
 
 
 _FORWARD = {"top-shape": top_shape, "flatten-side": flatten_side, "turn-top": turn_top,
             "ptosis": ptosis, "turn": turn}
 _INVERSE = {"top-shape": top_shape_inverse, "flatten-side": flatten_side_inverse,
             "turn-top": turn_top_inverse, "ptosis": ptosis_inverse, "turn": turn_inverse}
+_TABULATED = frozenset({"top-shape", "flatten-side"})
 
 
 def kind_params(kind: str, params: Mapping[str, float] | Sequence[float]) -> tuple[float, ...]:
@@ -194,12 +205,15 @@ def kind_params(kind: str, params: Mapping[str, float] | Sequence[float]) -> tup
     return values
 
 
-def apply_kind(points, kind: str, params, primitive: Primitive | None = None, *, inverse: bool = False):
-    """Apply (or undo) one deformation kind with parameters given as a mapping or a sequence."""
+def apply_kind(points, kind: str, params, primitive: Primitive | None = None, *, inverse: bool = False,
+               fast: bool = False):
+    """Apply (or undo) one deformation kind with parameters given as a mapping or a sequence;
+    `fast` inverts top-shape and flatten-side for surface points from their tables (`top_shape_inverse`)."""
     values = kind_params(kind, params)
     fn = (_INVERSE if inverse else _FORWARD)[kind]
+    options = {"fast": fast} if inverse and kind in _TABULATED else {}
     if kind in NEEDS_PRIMITIVE:
-        return fn(points, *values, primitive=_need(primitive, kind))
+        return fn(points, *values, primitive=_need(primitive, kind), **options)
     return fn(points, *values)
 
 
@@ -227,11 +241,11 @@ class Deformation:
             p = apply_kind(p, kind, self.params(kind), primitive)
         return p
 
-    def inverse(self, points, primitive: Primitive | None = None) -> np.ndarray:
-        """Undo `apply`: the inverses in reverse order."""
+    def inverse(self, points, primitive: Primitive | None = None, *, fast: bool = False) -> np.ndarray:
+        """Undo `apply`: the inverses in reverse order (`fast`: see `apply_kind`)."""
         p = _copy(points)
         for kind in reversed(self.active()):
-            p = apply_kind(p, kind, self.params(kind), primitive, inverse=True)
+            p = apply_kind(p, kind, self.params(kind), primitive, inverse=True, fast=fast)
         return p
 
     def as_vector(self) -> np.ndarray:

@@ -1,13 +1,15 @@
 """Free-form deformation lattice fitted to a breast cloud (docs/model.md §6, Bardinet et al. 1998).
 
 The model surface (a closed triangle mesh, mm, breast frame) sits in a box of n×n×n control
-points; each vertex has fixed lattice coordinates and a row of the trivariate Bernstein basis,
-precomputed once, so the deformed surface is B·P. Fitting alternates *match* (each data point
-↔ its closest point on the current surface) and *solve* (a damped Gauss–Newton step on the
-control points: the distance along the surface normal, a small weight on the tangential
-offset, and λ‖L(P − P0)‖² with L the lattice Laplacian) until the mean normalised residual
-‖d − m‖/‖d‖ (docs/model.md §7's normalisation by ‖o‖) is below 0.0015 (thesis stopping rule), the
-residual stops improving, or the iterations or time run out.
+points (`breastplan.deform.lattice.Lattice`); each vertex has fixed lattice coordinates and a
+row of the trivariate Bernstein basis, precomputed once, so the deformed surface is B·P.
+Fitting alternates *match* (each data point ↔ its closest point on the current surface) and
+*solve* (a damped Gauss–Newton step on the control points: the distance along the surface
+normal, a small weight on the tangential offset, and λ‖L(P − P0)‖² with L the lattice
+Laplacian) until the mean normalised residual ‖d − m‖/‖d‖ (docs/model.md §7's normalisation
+by ‖o‖) is below 0.0015 (thesis stopping rule), the residual stops improving, or the
+iterations run out: the budget is counted in iterations, never in seconds, so a result does not
+depend on the machine's load.
 
 Matching on the *closed* mesh holds the base cap to the data's base ring on the chest wall;
 the tangential weight is the Levenberg–Marquardt damping: raised after a step that made the
@@ -18,9 +20,12 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+import igl
 import numpy as np
 import open3d as o3d
-from scipy.special import comb
+from scipy import sparse
+
+from breastplan.deform.lattice import Lattice
 
 from .sampling import seeded_subset
 
@@ -35,56 +40,9 @@ DAMPING = (0.01, 0.03, 1.0)
 """Tangential weight: floor, start, ceiling."""
 
 
-def bernstein(n: int, s: np.ndarray) -> np.ndarray:
-    """(..., n+1) Bernstein polynomials B_i^n(s), s ∈ [0, 1]."""
-    i = np.arange(n + 1)
-    s = np.asarray(s, float)[..., None]
-    return comb(n, i) * s**i * (1 - s) ** (n - i)
-
-
-@dataclass
-class Lattice:
-    """Control points of an n³ lattice on an axis-aligned box (mm)."""
-
-    n: int                     # control points per axis (degree n − 1)
-    lo: np.ndarray             # (3,) box corner
-    hi: np.ndarray             # (3,) opposite corner
-    rest: np.ndarray           # (n³, 3) rest control points
-    points: np.ndarray         # (n³, 3) current control points
-
-    @classmethod
-    def around(cls, points: np.ndarray, n: int, margin: float = 0.1) -> "Lattice":
-        lo, hi = points.min(0), points.max(0)
-        pad = margin * (hi - lo) + 1.0
-        lo, hi = lo - pad, hi + pad
-        axes = [np.linspace(lo[k], hi[k], n) for k in range(3)]
-        rest = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-        return cls(n, lo, hi, rest, rest.copy())
-
-    def basis(self, points: np.ndarray) -> np.ndarray:
-        """(N, n³) trivariate Bernstein rows of points (mm) inside the box."""
-        s = (points - self.lo) / (self.hi - self.lo)
-        bx, by, bz = (bernstein(self.n - 1, s[:, k]) for k in range(3))
-        return (bx[:, :, None, None] * by[:, None, :, None] * bz[:, None, None, :]).reshape(len(points), -1)
-
-    def laplacian(self) -> np.ndarray:
-        """(n³, n³) graph Laplacian of the lattice (6-neighbourhood)."""
-        n = self.n
-        idx = np.arange(n**3).reshape(n, n, n)
-        L = np.zeros((n**3, n**3))
-        for axis in range(3):
-            a = np.moveaxis(idx, axis, 0)[:-1].ravel()
-            b = np.moveaxis(idx, axis, 0)[1:].ravel()
-            L[a, b] -= 1
-            L[b, a] -= 1
-            L[a, a] += 1
-            L[b, b] += 1
-        return L
-
-
 @dataclass
 class FFDFit:
-    lattice: Lattice
+    lattice: Lattice           # its control points set to the fitted ones
     vertices: np.ndarray       # (V, 3) fitted surface, mm
     residual: float            # mean normalised residual of every data point at the end
     residuals_mm: np.ndarray   # data ↔ surface distances at the end, mm
@@ -94,8 +52,7 @@ class FFDFit:
 
 
 def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 5, smoothness: float = 1e-9,
-            held: np.ndarray | None = None, max_iterations: int = MAX_ITERATIONS,
-            max_seconds: float = 20.0) -> FFDFit:
+            held: np.ndarray | None = None, max_iterations: int = MAX_ITERATIONS) -> FFDFit:
     """Deform the closed surface (vertices, faces; mm) by an n³ lattice to fit data (N, 3) mm.
 
     `held` (V, 3): weight, as a share of the data's total weight, that holds each vertex
@@ -105,9 +62,9 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
     sub = seeded_subset(data, FIT_POINTS)
     lattice = Lattice.around(np.vstack([data, vertices]), n)
     B = lattice.basis(vertices)
-    K = n**3
-    L = lattice.laplacian()
-    LL = np.kron(np.eye(3), L.T @ L) * smoothness * len(sub)   # λ‖L(P − P0)‖², all three coordinates
+    K = lattice.size
+    L = lattice.laplacian()                                # sparse; K ≤ 343, so LL is solved dense
+    LL = sparse.kron(sparse.identity(3), L.T @ L).toarray() * smoothness * len(sub)   # λ‖L(P − P0)‖², x, y, z
     for c in range(3 if held is not None else 0):          # Σ_v held_vc·(B_v (P_c − rest_c))², per coordinate
         h = np.flatnonzero(held[:, c])                     # the held vertices
         LL[c * K:(c + 1) * K, c * K:(c + 1) * K] += len(sub) * (B[h] * held[h, c, None]).T @ B[h]
@@ -121,11 +78,8 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
     target = STOP_RESIDUAL                                 # on the subset; tightened if the whole cloud misses it
     data_norm = np.maximum(np.linalg.norm(data, axis=1), 1e-9)
 
-    def budget() -> bool:
-        return it < max_iterations and time.perf_counter() - start < max_seconds
-
     while True:
-        while residual >= target and not stalled and budget():
+        while residual >= target and not stalled and it < max_iterations:
             it += 1
             step = P + _step(match, sub, damping, LL, P - rest, K)
             trial = B @ step.reshape(3, K).T
@@ -140,7 +94,7 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
                 damping = min(damping * 4, DAMPING[2])
         dist = _closest(current, faces32, data)[1]
         final = float(np.mean(dist / data_norm))
-        if final < STOP_RESIDUAL or residual >= target or stalled or not budget():
+        if final < STOP_RESIDUAL or residual >= target or stalled or it >= max_iterations:
             break
         target *= 0.9
     lattice.points = P.reshape(3, K).T
@@ -171,7 +125,9 @@ def _match(vertices, faces, data, B):
     tri, dist, points, bary = _closest(vertices, faces, data, detail=True)
     corners = faces[tri].astype(np.int64)
     rows = np.einsum("nk,nkc->nc", bary, B[corners])
-    normals = np.einsum("nk,nkc->nc", bary, _vertex_normals(vertices, faces)[corners])
+    vertex_normals = igl.per_vertex_normals(vertices, faces.astype(np.int64),
+                                            igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_AREA)   # unit
+    normals = np.einsum("nk,nkc->nc", bary, vertex_normals[corners])
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
     return rows, normals, points, dist
 
@@ -189,11 +145,3 @@ def _closest(vertices, faces, data, detail: bool = False):
     uv = hit["primitive_uvs"].numpy().astype(float)
     return tri, dist, points, np.column_stack([1 - uv.sum(1), uv[:, 0], uv[:, 1]])
 
-
-def _vertex_normals(vertices, faces) -> np.ndarray:
-    """(V, 3) area-weighted vertex normals of an outward-oriented mesh."""
-    v = vertices[faces.astype(np.int64)]
-    fn = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-    out = np.stack([sum(np.bincount(faces[:, k], fn[:, c], minlength=len(vertices)) for k in range(3))
-                    for c in range(3)], axis=1)
-    return out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)

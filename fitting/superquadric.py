@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
-from threadpoolctl import threadpool_limits
 
 from breastplan import BadInputError, Primitive, to_mm, to_model_units
-from breastplan.deform.global_deformations import KIND_PARAMS, Deformation, apply_kind, beta, gamma
+from breastplan.deform.global_deformations import Deformation, beta
+from breastplan.deform.names import KIND_PARAMS
 
 from .sampling import seeded_subset
 
@@ -91,65 +91,6 @@ def _radial(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...] = ()) -> np.nda
     q = _undone(x, p, kinds)
     f = np.maximum(Primitive(*a, e1, e2).inside_outside(q), 1e-12)
     return np.linalg.norm(q, axis=1) * (1.0 - f ** (-e1 / 2))
-
-
-TABLE_SIZE = 512
-"""Nodes of the lookup tables that invert top-shape and flatten-side while fitting."""
-
-
-def _inverse(q: np.ndarray, deformation: Deformation, primitive: Primitive) -> np.ndarray:
-    """`Deformation.inverse` (docs/model.md §3), fast enough for a fit that calls it hundreds of times:
-    top-shape and flatten-side are undone by interpolating a table of their 1-D forward maps
-    instead of a root solve per point."""
-    q = np.array(q, dtype=float)
-    for kind in reversed(deformation.active()):
-        params = deformation.params(kind)
-        if kind == "top-shape":
-            q = _top_shape_inverse(q, params, primitive)
-        elif kind == "flatten-side":
-            q = _flatten_side_inverse(q, params, primitive)
-        else:                                   # the shears: their closed-form inverses
-            q = apply_kind(q, kind, params, primitive, inverse=True)
-    return q
-
-
-def _top_shape_inverse(q: np.ndarray, params, primitive: Primitive) -> np.ndarray:
-    """Upper half: z ↦ z·β(w) tabulated over latitudes u (where the map is smooth) and inverted.
-
-    With s1 < 0 the map rises to a maximum and folds back to the nipple (docs/model.md §3), so a
-    height has two preimages; each point takes the branch of the primitive's own height at its
-    (x, y), which is where a surface point comes from. Heights beyond a branch's image clip to it.
-    """
-    u = np.linspace(0.0, np.pi / 2, TABLE_SIZE)
-    z = primitive.a5 * np.sin(u) ** primitive.eps1
-    image = z * beta(2 * u / np.pi, *params)
-    falling = np.flatnonzero(np.diff(image) <= 0)
-    top = falling[0] if len(falling) else TABLE_SIZE - 1      # the first maximum of the map
-    out = q.copy()
-    upper = (q[:, 1] > 0) & (q[:, 2] > 0)
-    h = q[upper, 2]
-    rising = np.interp(h, image[:top + 1], z[:top + 1])
-    if top < TABLE_SIZE - 1:
-        fold = np.interp(h, image[top:][::-1], z[top:][::-1])
-        rising = np.where(_height(q[upper], primitive) > z[top], fold, rising)
-    out[upper, 2] = np.where(h < image[top], rising, np.where(rising > 0, rising, h))
-    return out
-
-
-def _height(q: np.ndarray, primitive: Primitive) -> np.ndarray:
-    """Height of the primitive's surface above (x, y) (docs/model.md §2: F = 1 solved for z; 0 outside)."""
-    flat = primitive.inside_outside(q * [1.0, 1.0, 0.0])
-    return primitive.a5 * np.maximum(1.0 - flat, 0.0) ** (primitive.eps1 / 2)
-
-
-def _flatten_side_inverse(q: np.ndarray, params, primitive: Primitive) -> np.ndarray:
-    """Lateral half: w ↦ w·γ(w), w = |x|/a2, tabulated far enough to hold every point, inverted."""
-    w_max = max(1.0, 1.5 * float(np.max(-q[:, 0], initial=0.0)) / primitive.a2)
-    w = np.linspace(0.0, w_max, TABLE_SIZE)
-    out = q.copy()
-    sel = q[:, 0] < 0
-    out[sel, 0] = -primitive.a2 * np.interp(-q[sel, 0] / primitive.a2, w * gamma(w, *params), w)
-    return out
 
 
 def _radial_jacobian(x: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -237,7 +178,7 @@ def initial_guess(p: np.ndarray, kinds: tuple[str, ...] = ()) -> np.ndarray:
 
 
 def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, loss: str = "soft_l1",
-                     f_scale_mm: float = 1.0, x0: np.ndarray | None = None, path=None) -> SuperquadricFit:
+                     f_scale_mm: float = 1.0, x0: np.ndarray | None = None) -> SuperquadricFit:
     """Fit primitive + pose (+ the global `deformations`, e.g. ("top-shape", "ptosis", "turn")) to
     (N, 3) points (mm, breast frame).
 
@@ -249,16 +190,15 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
     if unknown:
         raise ValueError(f"unknown deformations {sorted(unknown)}; choose from {', '.join(KIND_PARAMS)}")
     start = time.perf_counter()
-    everything = to_model_units(_checked(points_mm, path))
+    everything = to_model_units(_checked(points_mm))
     p = seeded_subset(everything, FIT_POINTS)
     solve = _Solver(chest_prior, loss, float(to_model_units(f_scale_mm)))
     nfev = 0
-    with threadpool_limits(1, "blas"):          # small dense solves: threads only add overhead
-        if x0 is None and "top-shape" in kinds:
-            x0, nfev = _top_shape_start(p, kinds, solve)
-        elif x0 is None:
-            x0 = initial_guess(p, kinds)
-        sol = solve(seeded_subset(p, DEFORMED_FIT_POINTS) if kinds else p, kinds, x0)
+    if x0 is None and "top-shape" in kinds:
+        x0, nfev = _top_shape_start(p, kinds, solve)
+    elif x0 is None:
+        x0 = initial_guess(p, kinds)
+    sol = solve(seeded_subset(p, DEFORMED_FIT_POINTS) if kinds else p, kinds, x0)
     a, e1, e2, rot, t = _unpack(sol.x)
     pose = np.eye(4)
     pose[:3, :3] = Rotation.from_rotvec(rot).as_matrix()
@@ -284,7 +224,7 @@ def _top_shape_start(p: np.ndarray, kinds: tuple[str, ...], solve: "_Solver") ->
     a, e1, e2, _, _ = _unpack(x)
     primitive = Primitive(*a, e1, e2)
     upper = q[(q[:, 1] > 0) & (q[:, 2] > 0)]
-    h = _height(upper, primitive)
+    h = primitive.height(upper)
     seen = h > 0.05 * primitive.a5                           # β is undefined where h → 0
     w = primitive.latitude_at(h[seen]) * (2 / np.pi)
     basis = np.column_stack([beta(w, 1, 0, 0, 0), beta(w, 0, 1, 0, 0)]) - 1
@@ -296,7 +236,7 @@ def _undone(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
     """Points p (mu, data frame) taken back through the pose and deformations of x to the primitive."""
     a, e1, e2, rot, t = _unpack(x)
     q = Rotation.from_rotvec(rot).inv().apply(p - t)
-    return _inverse(q, _deformation(x, kinds), Primitive(*a, e1, e2)) if kinds else q
+    return _deformation(x, kinds).inverse(q, Primitive(*a, e1, e2), fast=True) if kinds else q
 
 
 @dataclass(frozen=True)
@@ -339,15 +279,15 @@ def _bounds(x0: np.ndarray, max_turn: float) -> tuple[np.ndarray, np.ndarray]:
     return lower, upper
 
 
-def _checked(points_mm, path) -> np.ndarray:
+def _checked(points_mm) -> np.ndarray:
     p = np.asarray(points_mm, dtype=float)
     if p.ndim != 2 or p.shape[1] != 3:
-        raise BadInputError(path, f"holds points of shape {p.shape}, not (N, 3)")
+        raise BadInputError(None, f"holds points of shape {p.shape}, not (N, 3)")
     if not np.isfinite(p).all():
-        raise BadInputError(path, "has NaN or infinite coordinates")
+        raise BadInputError(None, "has NaN or infinite coordinates")
     if len(p) < 50:
-        raise BadInputError(path, f"has only {len(p)} points; a fit needs at least 50")
+        raise BadInputError(None, f"has only {len(p)} points; a fit needs at least 50")
     s = np.linalg.svd(p - p.mean(0), compute_uv=False)
     if s[2] < 1e-6 * s[0]:
-        raise BadInputError(path, "has coplanar or collinear points: no surface to fit")
+        raise BadInputError(None, "has coplanar or collinear points: no surface to fit")
     return p

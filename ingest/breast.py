@@ -69,19 +69,19 @@ def find_mounds(voxels: np.ndarray, wall: ChestWall, midline_x: float, size: flo
     return [m for _, m in sorted(mounds, key=lambda vm: -vm[0])]
 
 
-def choose_mound(path, mounds: list[Mound], side: str | None, nipple: np.ndarray | None) -> Mound:
+def choose_mound(mounds: list[Mound], side: str | None, nipple: np.ndarray | None) -> Mound:
     """The largest mound on `side` (any side if None), or the one under a given nipple."""
     if nipple is not None:
         near = [m for m in mounds if np.linalg.norm(m.centre - nipple[:2]) <= m.radius]
         if not near:
-            raise BadInputError(path, f"no breast mound lies under the given nipple {np.round(nipple, 1).tolist()} mm")
+            raise BadInputError(None, f"no breast mound lies under the given nipple {np.round(nipple, 1).tolist()} mm")
         return near[0]
     on_side = [m for m in mounds if side in (None, m.side)]
     if not on_side:
         if side is None:
-            raise BadInputError(path, "no breast mound found in the region of interest")
+            raise BadInputError(None, "no breast mound found in the region of interest")
         other = f"; {len(mounds)} found on the other side" if mounds else ""
-        raise BadInputError(path, f"no breast mound found on the {side} side{other}")
+        raise BadInputError(None, f"no breast mound found on the {side} side{other}")
     return on_side[0]
 
 

@@ -18,6 +18,7 @@ import numpy as np
 import open3d as o3d
 
 from breastplan import BadInputError, read_ply, require_file
+from breastplan.case import CAMERA_FRAME
 
 SUPPORTED = (".ply", ".obj", ".stl", ".pcd", ".xyz")
 POINTS_PER_MM2 = 1.0
@@ -27,7 +28,6 @@ SAMPLE_SEED = 0
 METRE_EXTENT = (0.05, 3.0)
 MM_EXTENT = (50.0, 3000.0)
 """Plausible extents of a torso or breast scan in metres and in millimetres."""
-CAMERA_FRAME_TAG = "frame camera-opencv"
 _MAGIC = {b"\x89PNG": "a PNG image", b"\xff\xd8\xff": "a JPEG image", b"\x89MCAP": "an MCAP recording",
           b"PK\x03\x04": "a ZIP or NPZ archive", b"\x93NUMPY": "a NumPy array", b"ply": "a PLY file",
           b"%PDF": "a PDF document"}
@@ -62,7 +62,7 @@ def read_scan_file(path: str | Path, units: str = "auto") -> ScanCloud:
         normals = _unit_normals(path, normals)
         with_normals = " with normals" if normals is not None else ""
         what = f"point cloud, {_count(len(points), 'point')}{with_normals}"
-    hint = "camera-opencv" if any(CAMERA_FRAME_TAG in c for c in comments) else None
+    hint = "camera-opencv" if any(CAMERA_FRAME in c for c in comments) else None
     return ScanCloud(points=_frozen(points), normals=None if normals is None else _frozen(normals),
                      frame_hint=hint, description=f"{path.name}: {what}, {units_text}")
 

@@ -7,15 +7,13 @@ downsampling → outward normals → breast frame. Every step is timed.
 """
 from __future__ import annotations
 
-import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
 import open3d as o3d
-from threadpoolctl import threadpool_limits
-
 from breastplan import BadInputError, transform_points
+from breastplan.clock import Clock
+from breastplan.options import IngestOptions
 
 from . import breast as B
 from .chest_wall import ChestWall, fit_chest_wall
@@ -47,19 +45,6 @@ class Ingested:
     timings_ms: dict = field(default_factory=dict)
 
 
-class Clock:
-    """Milliseconds per named step."""
-
-    def __init__(self):
-        self.ms: dict[str, float] = {}
-
-    @contextmanager
-    def __call__(self, step: str):
-        start = time.perf_counter()
-        yield
-        self.ms[step] = self.ms.get(step, 0.0) + 1e3 * (time.perf_counter() - start)
-
-
 def voxel_centroids(points: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
     """Centroids of the occupied voxels of `size` mm, and each point's voxel index."""
     keys = np.floor(points / size).astype(np.int64)
@@ -77,30 +62,28 @@ def voxel_centroids(points: np.ndarray, size: float) -> tuple[np.ndarray, np.nda
     return sums / counts[:, None], inverse
 
 
-def ingest_frames(frames: DepthFrames, side: str, voxel: float = 2.0, roi=None, nipple=None,
-                  path=None, clock: Clock | None = None) -> Ingested:
-    """Depth frames (camera = viewing frame) → the breast of `side`."""
+def ingest_frames(frames: DepthFrames, options: IngestOptions, clock: Clock | None = None) -> Ingested:
+    """Depth frames (camera = viewing frame) → the breast of `options.side`."""
     clock = clock or Clock()
     with clock("fuse"):
         image = fuse(frames.depth)
     with clock("depth to points (open3d)"):
         near, far = depth_range(image)
         points = to_points(image, frames.K, near, far)
-    return isolate(points, np.eye(4), side, voxel, roi, nipple, path, clock, viewer=np.zeros(3))
+    return isolate(points, np.eye(4), options, clock, viewer=np.zeros(3))
 
 
-def ingest_cloud(cloud: ScanCloud, side: str, voxel: float = 2.0, roi=None, nipple=None, up: str = "+y",
-                 path=None, clock: Clock | None = None) -> Ingested:
-    """A scan file's points → the breast of `side`; the viewing direction comes from the torso's shape."""
+def ingest_cloud(cloud: ScanCloud, options: IngestOptions, clock: Clock | None = None) -> Ingested:
+    """A scan file's points → the breast of `options.side`; the viewing direction comes from the torso's shape."""
     clock = clock or Clock()
     with clock("viewing frame"):
-        view = np.eye(4) if cloud.frame_hint == "camera-opencv" else viewing_frame(cloud.points, up, path)
+        view = np.eye(4) if cloud.frame_hint == "camera-opencv" else viewing_frame(cloud.points, options.up)
         points = transform_points(view, cloud.points)
         viewer = points.mean(0) - [0.0, 0.0, 2000.0]
-    return isolate(points, view, side, voxel, roi, nipple, path, clock, viewer=viewer)
+    return isolate(points, view, options, clock, viewer=viewer)
 
 
-def viewing_frame(points: np.ndarray, up: str, path=None) -> np.ndarray:
+def viewing_frame(points: np.ndarray, up: str) -> np.ndarray:
     """(4, 4) input → viewing frame for a frontal scan: z along the torso's thinnest axis, away
     from the viewer (the torso bulges towards the viewer), y opposite to the input's `up` axis."""
     centred = points - points.mean(0)
@@ -113,7 +96,7 @@ def viewing_frame(points: np.ndarray, up: str, path=None) -> np.ndarray:
     up_vec[UP_AXES[up]] = -1.0 if up.startswith("-") else 1.0
     up_vec -= np.dot(up_vec, anterior) * anterior
     if np.linalg.norm(up_vec) < 0.3:
-        raise BadInputError(path, f"its up axis {up} is nearly its viewing direction; pass another --up")
+        raise BadInputError(None, f"its up axis {up} is nearly its viewing direction; pass another --up")
     y = -up_vec / np.linalg.norm(up_vec)
     z = -anterior
     T = np.eye(4)
@@ -121,41 +104,37 @@ def viewing_frame(points: np.ndarray, up: str, path=None) -> np.ndarray:
     return T
 
 
-def isolate(points: np.ndarray, view_from_camera: np.ndarray, side: str, voxel: float, roi, nipple, path,
-            clock: Clock, viewer: np.ndarray) -> Ingested:
+def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOptions, clock: Clock,
+            viewer: np.ndarray) -> Ingested:
     """The common pipeline on points in the viewing frame (`viewer`: where the camera is)."""
-    with threadpool_limits(1, "blas"):  # small least squares: threads only add contention
-        return _isolate(points, view_from_camera, side, voxel, roi, nipple, path, clock, viewer)
-
-
-def _isolate(points, view_from_camera, side, voxel, roi, nipple, path, clock, viewer) -> Ingested:
+    roi, nipple, side = options.roi_camera_mm, options.nipple_camera_mm, options.side
     to_camera = np.linalg.inv(view_from_camera)
     in_roi = _roi_test(roi, to_camera)
     nipple_view = None if nipple is None else transform_points(view_from_camera, nipple)
     with clock("background: voxels + DBSCAN (open3d)"):
-        torso, coarse = largest_cluster(points, path)
+        torso, coarse = largest_cluster(points)
     with clock("chest wall"):
         wall = fit_chest_wall(coarse, 2)
     with clock("mounds (DBSCAN, open3d)"):
         mounds = B.find_mounds(coarse, wall, float(np.median(coarse[:, 0])), COARSE_MM)
         if in_roi is not None:
             mounds = [m for m in mounds if in_roi(m.voxels).any()]
-        mound = B.choose_mound(path, mounds, side if in_roi is None else None, nipple_view)
+        mound = B.choose_mound(mounds, side if in_roi is None else None, nipple_view)
         wall = B.local_chest_wall(coarse, mound, wall)
     with clock("crop + breast frame"):
         region = B.breast_region(torso, mound, wall, COARSE_MM)
         crop = torso[region & in_roi(torso)] if in_roi is not None else torso[region]
         frame, nipple_view = B.breast_frame(crop, wall, mound.centre, nipple_view)
         crop = crop[frame.to_breast(crop)[:, 2] > 0.0]
-    _enough(path, len(crop), "cropping")
+    _enough(len(crop), "cropping")
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(crop))
     with clock("outliers (open3d)"):
         cloud, _ = cloud.remove_radius_outlier(nb_points=4, radius=5.0)
     with clock("voxel downsampling (open3d)"):
-        cloud = cloud.voxel_down_sample(voxel)
-    _enough(path, len(cloud.points), f"{voxel:g} mm voxel downsampling")
+        cloud = cloud.voxel_down_sample(options.voxel_mm)
+    _enough(len(cloud.points), f"{options.voxel_mm:g} mm voxel downsampling")
     with clock("normals (open3d)"):
-        cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=max(3 * voxel, 5.0), max_nn=16))
+        cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=max(3 * options.voxel_mm, 5.0), max_nn=16))
         cloud.orient_normals_towards_camera_location(viewer)
     with clock("to breast frame (open3d)"):
         cloud.transform(frame.matrix)
@@ -169,12 +148,12 @@ def _isolate(points, view_from_camera, side, voxel, roi, nipple, path, clock, vi
         torso_camera=transform_points(to_camera, torso), timings_ms=clock.ms)
 
 
-def largest_cluster(points: np.ndarray, path) -> tuple[np.ndarray, np.ndarray]:
+def largest_cluster(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The points of the largest connected cluster (DBSCAN on coarse voxels), and its voxel centroids."""
     coarse, which = voxel_centroids(points, COARSE_MM)
     labels = B.dbscan(coarse, 2.5 * COARSE_MM, 4)
     if (labels < 0).all():
-        raise BadInputError(path, "holds no connected surface (only scattered points)")
+        raise BadInputError(None, "holds no connected surface (only scattered points)")
     biggest = np.bincount(labels[labels >= 0]).argmax()
     return points[labels[which] == biggest], coarse[labels == biggest]
 
@@ -191,6 +170,6 @@ def _roi_test(roi, to_camera: np.ndarray):
     return inside
 
 
-def _enough(path, n: int, step: str) -> None:
+def _enough(n: int, step: str) -> None:
     if n < MIN_BREAST_POINTS:
-        raise BadInputError(path, f"only {n} breast points are left after {step}, fewer than {MIN_BREAST_POINTS}")
+        raise BadInputError(None, f"only {n} breast points are left after {step}, fewer than {MIN_BREAST_POINTS}")

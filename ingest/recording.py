@@ -8,13 +8,16 @@ through `dai.node.ReplayMessage`, unpaced (as fast as the host can take the fram
 from __future__ import annotations
 
 import datetime
+import io
 import os
-import struct
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from mcap.data_stream import ReadDataStream
+from mcap.reader import make_reader
+from mcap.stream_reader import MAGIC_SIZE, read_magic
 
 from breastplan import BadInputError, require_file
 
@@ -24,8 +27,6 @@ END_OF_RECORDING = 2**31 - 1
 recorder writes a message only after taking the next one, so the marker flushes the last
 real frame."""
 SETTLE_S = 0.05
-FOOTER_BYTES, OP_FOOTER, OP_STATISTICS = 29, 0x02, 0x0B
-"""MCAP footer record size and the opcodes read to count messages (MCAP specification)."""
 UNPACED_FPS = 1e6
 """Replay rate asked of ReplayMessage: far above any camera's, so replay is not paced."""
 
@@ -135,36 +136,35 @@ def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFram
                                  f"{depth.shape[2]}x{depth.shape[1]}")
 
 
-def _check_mcap(path: Path) -> None:
-    size = require_file(path, "recording").stat().st_size
+def _check_mcap(path: Path) -> int:
+    """The message count of an MCAP recording, read with the `mcap` package from the statistics of
+    its summary section; BadInputError (one sentence) for a file that is not MCAP, is truncated or
+    has no readable summary. No exception of the `mcap` package escapes."""
+    require_file(path, "recording")
     with open(path, "rb") as fh:
-        head = fh.read(len(MCAP_MAGIC))
-        fh.seek(max(0, size - len(MCAP_MAGIC)))
-        tail = fh.read(len(MCAP_MAGIC))
-    if head != MCAP_MAGIC:
-        raise BadInputError(path, "is not an MCAP recording (it lacks the MCAP magic bytes)")
-    if tail != MCAP_MAGIC:
-        raise BadInputError(path, "is a truncated MCAP recording (its end is missing)")
+        try:
+            reader = make_reader(fh)                       # checks the leading magic bytes
+        except Exception:
+            raise BadInputError(path, "is not an MCAP recording (it lacks the MCAP magic bytes)") from None
+        try:
+            fh.seek(-MAGIC_SIZE, io.SEEK_END)             # a whole recording ends with them again
+            read_magic(ReadDataStream(fh))
+        except Exception:
+            raise BadInputError(path, "is a truncated MCAP recording (its end is missing)") from None
+        try:
+            summary = reader.get_summary()
+            stats = None if summary is None else summary.statistics
+            count = None if stats is None else stats.message_count
+        except Exception:
+            raise BadInputError(path, "is a corrupt MCAP recording (its summary section cannot be read)") from None
+    if not isinstance(count, int) or count < 0:
+        raise BadInputError(path, "is a corrupt MCAP recording (its summary holds no message count)")
+    return count
 
 
-def message_count(path: Path) -> int:
-    """Messages in an MCAP file, from the Statistics record of its summary section."""
-    with open(path, "rb") as fh:
-        data = fh.read()
-    footer_at = len(data) - len(MCAP_MAGIC) - FOOTER_BYTES
-    try:
-        opcode, _, summary_start, offsets_start, _ = struct.unpack_from("<BQQQI", data, footer_at)
-        if opcode != OP_FOOTER or summary_start == 0:
-            raise ValueError
-        pos, end = summary_start, offsets_start or footer_at
-        while pos < end:
-            opcode, length = struct.unpack_from("<BQ", data, pos)
-            if opcode == OP_STATISTICS:
-                return struct.unpack_from("<Q", data, pos + 9)[0]
-            pos += 9 + length
-    except (struct.error, ValueError):
-        pass
-    raise BadInputError(path, "is a corrupt MCAP recording (its summary holds no message count)")
+def message_count(path: str | Path) -> int:
+    """Messages in an MCAP recording, from the statistics of its summary section (`_check_mcap`)."""
+    return _check_mcap(Path(path))
 
 
 def _replay(path: Path):

@@ -18,8 +18,10 @@ import open3d as o3d
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from breastplan import PARAM_NAMES, Primitive, load_npz, save_npz, to_mm, transform_points
-from breastplan.deform.global_deformations import KIND_PARAMS, Deformation
+from breastplan import PARAM_NAMES, Primitive, load_npz, save_npz, transform_points
+from breastplan.deform.breast_model import BreastModel
+from breastplan.deform.global_deformations import Deformation
+from breastplan.deform.names import KIND_PARAMS
 
 TRUTH_SCHEMA = "breastplan.scan-truth/1"
 SIDES = ("left", "right")
@@ -54,8 +56,7 @@ class Breast:
 
     def surface(self) -> tuple[np.ndarray, np.ndarray]:
         """Outer surface mesh (V mm breast frame, F), without the base cap."""
-        V, F = self.primitive.mesh(*SURFACE_GRID, closed=False)
-        V = to_mm(self.deformation.apply(V, self.primitive))
+        V, F = BreastModel(self.primitive, self.deformation).mesh(*SURFACE_GRID, closed=False)
         apex = self.apex_mm
         d2 = np.sum(np.square(V[:, :2] - apex[:2]), axis=1)
         V[:, 2] += self.nipple_height_mm * np.exp(-d2 / (2 * NIPPLE_SIGMA_MM**2)) * (V[:, 2] > apex[2] / 2)
@@ -64,8 +65,7 @@ class Breast:
     @property
     def apex_mm(self) -> np.ndarray:
         """The deformed apex (0, 0, a5) of the primitive, mm, breast frame."""
-        apex = np.array([[0.0, 0.0, self.primitive.a5]])
-        return to_mm(self.deformation.apply(apex, self.primitive))[0]
+        return BreastModel(self.primitive, self.deformation).place([[0.0, 0.0, self.primitive.a5]])[0]
 
     @property
     def nipple_mm(self) -> np.ndarray:

@@ -14,9 +14,9 @@ from typing import Callable
 import numpy as np
 from scipy.special import ndtr, ndtri
 
-from breastplan import ArtefactError, Primitive, load_npz, mu3_to_cc, save_npz, to_mm, to_model_units, write_ply
-from breastplan.meshes import mesh_volume
+from breastplan import ArtefactError, Primitive, load_npz, save_npz, to_model_units, write_ply
 from breastplan.deform.degree import GENERIC_SHAPE
+from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.global_deformations import Deformation, changing
 
 SCHEMA = "breastplan.database/1"
@@ -114,10 +114,9 @@ class Database:
         """One PLY per breast (points in mm, breast frame) named after the breast."""
         out = []
         for i, name in enumerate(self.names):
-            comment = " ".join(f"{k}={v:.6g}" for k, v in self.primitive(i).as_dict().items())
             out.append(write_ply(Path(folder) / f"{name}.ply", self.points[i],
                                  comments=[f"breastplan database {self.name} breast {name}",
-                                           f"primitive (model units) {comment}"]))
+                                           self.primitive(i).comment()]))
             if progress:
                 progress()
         return out
@@ -158,13 +157,14 @@ def build_database(name: str, seed: int = 0, n_points: int = 10_000) -> Database
             prim = Primitive(*(10.0 * rng.uniform(1 - jitter, 1 + jitter, size=5)))
             # Top-shape and flatten-side are scale-invariant and the rest are shears, so scaling
             # all semi-axes by s scales the breast volume by s³: scale to the drawn volume.
-            prim = Primitive(*(prim.as_array()[:5] * (vol / _breast_volume_cc(prim, deformation)) ** (1 / 3)))
+            prim = Primitive(*(prim.as_array()[:5] * (vol / BreastModel(prim, deformation).volume_cc()) ** (1 / 3)))
+            model = BreastModel(prim, deformation)
             labels.append(f"{name}-{k:03d}" if len(shapes) == 1 else f"{name}-{shape}-{k:02d}")
             shape_of.append(shape)
             split.append("test" if k in test else "train")
             prims.append(prim)
-            points.append(to_mm(deformation.apply(prim.sample(n_u, n_v), prim)))
-            volumes.append(_breast_volume_cc(prim, deformation))
+            points.append(model.sample(n_u, n_v))
+            volumes.append(model.volume_cc())
     return Database(
         name=name, seed=seed, grid=(n_u, n_v), names=np.array(labels), shape=np.array(shape_of),
         split=np.array(split), semi_axes=np.array([p.as_array()[:5] for p in prims]),
@@ -173,9 +173,3 @@ def build_database(name: str, seed: int = 0, n_points: int = 10_000) -> Database
         volume_cc=np.array(volumes), primitive_volume_cc=np.array([p.volume_cc for p in prims]),
         points=np.stack(points),
     )
-
-
-def _breast_volume_cc(prim: Primitive, deformation: Deformation, n: int = 100) -> float:
-    """Volume (cc) of the deformed primitive's closed n × n grid mesh."""
-    V, F = prim.mesh(n, n, closed=True)
-    return float(mu3_to_cc(mesh_volume(deformation.apply(V, prim), F)))

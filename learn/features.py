@@ -22,12 +22,8 @@ from sklearn.decomposition import PCA
 from breastplan.deform.descriptors import AXES, breast_scalars, scalar_names
 
 from .datasets import Dataset
+from .studies import FEATURE_SETS
 
-FEATURE_SETS = {
-    "REF": ("M0", "Mdisplacement"), "FS1": ("D0",), "FS2": ("D0", "M0"), "FS3": ("M0",),
-    "FS4": (), "FS5": ("d0", "m0"),
-}
-"""Feature set → its features besides DD and v0 (thesis Table 4.3)."""
 VECTOR_BLOCKS = ("M0", "D0", "Mdisplacement")
 MAX_COMPONENTS = 10
 

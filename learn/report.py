@@ -47,7 +47,7 @@ THESIS_RMSE = {  # (condition, family) → feature set → RMSE %, thesis Table 
 
 
 NOTES = [
-    "* **All our distances are 10–40× below the thesis's, its own configuration included.** docs/model.md §3",
+    "* **All our distances are far below the thesis's, its own configuration included.** docs/model.md §3",
     "  normalises the polynomial argument (ζ = z/10, a project decision), so a row of Table 4.2 moves a",
     "  breast by at most b0 + b1 model units (≈ 15 mm at ptosis b0 = 2.25); with the thesis's raw z the same",
     "  row moves it 10× (b0) to 100× (b1) further, and every error scales with the displacement. Compare",
@@ -57,11 +57,11 @@ NOTES = [
     "  on the line is linear in DD; the thesis's degree mapping (§4.1.1) assigned some degrees badly (its",
     "  outliers, §5.1.4.1), which we do not reproduce.",
     "* **The continuous degree (ours) beats the discrete one** wherever breasts differ in shape: the",
-    "  discrete degree quantises the extent to 8 levels, which alone costs the exact solver 0.18–0.42 %",
-    "  Euclidean on database S (its discrete column).",
-    "* **The exact solver is exact** (≈ 1e-14 %) because the continuous degree is not clipped to [1, #dd]",
-    "  (a departure from docs/model.md §5, see `deform.degree.continuous_degree`): 12–34 % of database S's",
-    "  examples lie beyond the reference extents, and clipped they would cost it 0.06–0.12 % Euclidean.",
+    "  discrete degree quantises the extent to 8 levels, which alone costs the exact solver accuracy",
+    "  on database S (its discrete column).",
+    "* **The exact solver is exact** because the continuous degree is not clipped to [1, #dd]",
+    "  (the thesis clips it; docs/model.md §5, `deform.degree.continuous_degree`): many of database S's",
+    "  examples lie beyond the reference extents, and clipped they would all map to the line's end.",
     "* **Top-shape:** thesis Table 5.7 is missing from the extracted thesis text, so no figure stands beside ours.",
 ]
 """Sentences on the large differences, from the measured full study (`evaluate --study all`)."""

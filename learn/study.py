@@ -25,30 +25,15 @@ from breastplan.deform.inverse import solve_degree
 
 from .databases import build_database
 from .datasets import Dataset, build_dataset
-from .features import FEATURE_SETS, VectorReducer, breast_table, example_features
+from .features import VectorReducer, breast_table, example_features
 from .metrics import indirect_metrics, mpe_pct, rmse_pct
 from .regressors import FAMILIES, select
+from .studies import STUDIES, Study
 
 PCA_COMPONENTS = (1, 2, 3, 5, 10)
 """Candidate numbers of PCA scores of a feature set's vector blocks, chosen by cross-validation."""
 QUICK_BREASTS = 4
 """Breasts per shape (and per split) kept by `--quick`, which also runs only FS5 (both degrees)."""
-
-
-@dataclass(frozen=True)
-class Study:
-    database: str
-    conditions: tuple[str, ...]
-    feature_sets: tuple[str, ...]   # the thesis configurations run with the discrete degree
-
-
-STUDIES = {
-    "ptosis-V": Study("V", ("ptosis b0", "ptosis b1", "ptosis b0>b1", "ptosis b1>=b0"), tuple(FEATURE_SETS)),
-    "ptosis-S": Study("S", ("ptosis b0>b1", "ptosis b1>=b0"), ("REF", "FS4", "FS5")),
-    "turn-S": Study("S", ("turn c0>c1", "turn c1>c0"), ("REF", "FS4", "FS5")),
-    "top-shape-S": Study("S", ("top-shape s0->s1+", "top-shape s1->s0+"), ("REF", "FS4", "FS5")),
-}
-"""Database S studies run the thesis's own FS5 (its Tables 5.5–5.7), FS4 and the REF bound."""
 
 
 @dataclass

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from breastplan.deform.by_degree import DD, slug
+from breastplan.deform.by_degree import slug
 from breastplan.deform.conditions import find_condition
+from breastplan.deform.names import DD
 from breastplan.model_file import save_model
 
 from .databases import build_database

@@ -5,7 +5,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from breastplan import read_ply
+from breastplan import Primitive, read_ply, to_mm, to_model_units, write_ply
 
 from clitools import assert_bad_input, run
 
@@ -50,6 +50,29 @@ def test_deform_with_primitive(cli, synth_s, tmp_path):
     assert np.all(np.abs(after[~medial, 0]) <= np.abs(before[~medial, 0]) + 1e-9)
 
 
+def test_deform_reads_the_primitive_a_synth_ply_carries(cli, synth_s, tmp_path):
+    """Truth: top-shape of the database breast's own primitive (docs/model.md §3), applied by hand."""
+    from breastplan.deform.global_deformations import top_shape
+    from breastplan.learn.databases import build_database
+    out, _ = synth_s
+    db_s = build_database("S", n_points=2500)
+    res = run(cli, "deform", out / "S-shape1-00.ply", "--kind", "top-shape", "--param", "s0=-2.5,s1=2",
+              "--out", tmp_path / "t.ply", "--json")
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["primitive"] == "carried by the input"
+    i = db_s.index("S-shape1-00")
+    expected = to_mm(top_shape(to_model_units(db_s.points[i]), -2.5, 2, 0, 0, primitive=db_s.primitive(i)))
+    written = read_ply(tmp_path / "t.ply")
+    assert np.allclose(written.points, expected, atol=1e-9)
+    assert Primitive.from_comments(written.comments) == db_s.primitive(i)      # carried on, for the next deform
+
+
+def test_deform_without_a_primitive_anywhere_is_a_usage_error(cli, tmp_path):
+    write_ply(tmp_path / "bare.ply", np.random.default_rng(0).normal(size=(100, 3)) * 30)
+    res = run(cli, "deform", tmp_path / "bare.ply", "--kind", "top-shape", "--param", "s0=1", "--out", tmp_path / "o.ply")
+    assert res.returncode == 2 and "carries none" in res.stderr and not (tmp_path / "o.ply").exists()
+
+
 def test_dataset_command(cli, synth_s, tmp_path):
     out, _ = synth_s
     res = run(cli, "dataset", "--db", out / "database.npz", "--condition", "ptosis b0>b1", "--dd", 8,
@@ -92,7 +115,7 @@ def test_missing_and_nan_inputs_exit_3(cli, tmp_path):
 
 
 @pytest.mark.parametrize("args", [
-    ["deform", "x.ply", "--kind", "top-shape", "--param", "s0=1", "--out", "o.ply"],       # no primitive
+    ["deform", "x.ply", "--kind", "ptosis", "--param", "b0=1", "--degree", "3", "--out", "o.ply"],  # both
     ["deform", "x.ply", "--kind", "sag", "--out", "o.ply"],                                # unknown kind
     ["deform", "x.ply", "--kind", "ptosis", "--param", "c0=1", "--out", "o.ply"],          # wrong parameter
     ["deform", "x.ply", "--kind", "ptosis", "--param", "b0=lots", "--out", "o.ply"],       # not a number

@@ -97,3 +97,12 @@ def test_invalid_primitive_is_refused():
         Primitive(a1=-1.0)
     with pytest.raises(ValueError):
         Primitive(eps1=float("nan"))
+
+
+@pytest.mark.parametrize("e", [0.1, 0.3, 0.5, 1.0, 1.7, 2.0, 3.5, 60.0, 150.0])
+def test_euler_beta_matches_scipy(e):
+    from scipy.special import beta
+    from breastplan.primitive import euler_beta
+
+    for a, b in ((e / 2 + 1, e), (e / 2, e / 2)):
+        assert euler_beta(a, b) == pytest.approx(beta(a, b), rel=1e-12)

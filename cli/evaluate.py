@@ -1,19 +1,18 @@
-"""`breastplan evaluate` (the thesis study and its report) and `breastplan train` (shipped models)."""
+"""The `evaluate` command: the thesis study of deformation-parameter regressions, and its report."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import typer
 
-from breastplan.learn.report import write_report
-from breastplan.learn.study import STUDIES, configurations, run_studies, study_datasets
-from breastplan.learn.train import DEPLOYED, train_all
+from breastplan.clock import Clock
+from breastplan.learn.studies import STUDIES
 
-from .app import JSON, app
-from .output import Timer, progress, report, usage_error
+from .app import JSON, command
+from .output import progress, report, usage_error
 
 
-@app.command()
+@command()
 def evaluate(
     study: str = typer.Option(..., "--study", help=f"{' | '.join(STUDIES)} | all."),
     dd: int = typer.Option(8, "--dd", help="Number of degrees of deformation: 4 or 8 (thesis)."),
@@ -22,17 +21,21 @@ def evaluate(
     as_json: bool = JSON,
 ):
     """Run the thesis study of deformation-parameter regressions; write its report."""
-    timer = Timer()
+    clock = Clock()
     names = list(STUDIES) if study == "all" else [study]
     if any(n not in STUDIES for n in names):
         raise usage_error(f"'{study}' is not a study; choose one of {', '.join(STUDIES)} or all", "--study")
     if dd not in (4, 8):
         raise usage_error(f"--dd must be 4 or 8 (thesis), got {dd}", "--dd")
+
+    from breastplan.learn.report import write_report
+    from breastplan.learn.study import configurations, run_studies, study_datasets
+
     total = sum(len(STUDIES[n].conditions) * configurations(STUDIES[n], quick) for n in names)
     datasets = study_datasets(names, dd, quick)
     with progress(f"study {study}", total) as advance:
         results = run_studies(datasets, quick, advance)
-    meta = {"study": study, "dd": dd, "quick": quick, "seconds": timer.seconds}
+    meta = {"study": study, "dd": dd, "quick": quick, "seconds": clock.seconds}
     written = write_report(out, results, meta)
     best = {f"{h['study']} {h['condition']}": {"best": h["best"],
                                                "euclidean_mean_pct": round(h["best_learnt"]["euclidean"], 4),
@@ -40,18 +43,4 @@ def evaluate(
                                                "exact_euclidean_mean_pct": round(h["exact_continuous"]["euclidean"], 4)}
             for h in written["best"]}
     report({"report": str(out / "report.md"), "rows": len(written["rows"]), "best": best,
-            "seconds": timer.seconds}, as_json, f"study {study}")
-
-
-@app.command()
-def train(
-    out: Path = typer.Option(Path("models"), "--out", help="Folder for one breastplan.model/1 NPZ per condition."),
-    quick: bool = typer.Option(False, "--quick", help="Small grid and 2500 points (for tests)."),
-    as_json: bool = JSON,
-):
-    """Train the best model of each condition on database S's training split."""
-    timer = Timer()
-    with progress("training", len(DEPLOYED)) as advance:
-        written = train_all(out, quick=quick, n_points=2500 if quick else 10_000, advance=advance)
-    report({"models": {w["condition"]: w for w in written}, "folder": str(out), "seconds": timer.seconds},
-           as_json, "trained models")
+            "seconds": clock.seconds}, as_json, f"study {study}")

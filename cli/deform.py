@@ -1,0 +1,126 @@
+"""The `deform` command: one deformation of a breast PLY, by explicit parameters or by degree."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, List, Optional
+
+import typer
+
+from breastplan import BadInputError
+from breastplan.clock import Clock
+from breastplan.deform.names import DD, DEFAULT_CONDITION, KIND_PARAMS, METHODS, NEEDS_PRIMITIVE
+
+from .app import JSON, command, parse_pairs
+from .output import report, usage_error
+
+if TYPE_CHECKING:
+    from breastplan import Primitive
+
+
+@command()
+def deform(
+    input: Path = typer.Argument(..., help="Breast PLY (points or mesh; mm, breast frame), a fit.npz, or a case "
+                                 "folder with a fit. A fit, or a PLY written by synth, fit or deform, carries its "
+                                 "primitive."),
+    kind: str = typer.Option(..., "--kind", help=f"Deformation: {', '.join(KIND_PARAMS)}."),
+    param: List[str] = typer.Option([], "--param", help="NAME=VALUE, model units (docs/model.md §3); "
+                                    "repeat or comma-separate; unnamed parameters are 0."),
+    degree: Optional[float] = typer.Option(None, "--degree", help=f"Degree of deformation in [1, {DD}] "
+                                           "(instead of --param): ptosis, turn or top-shape."),
+    condition: Optional[str] = typer.Option(None, "--condition", help="Condition of --degree, e.g. \"b0>b1\" "
+                                            f"(defaults: {', '.join(DEFAULT_CONDITION.values())})."),
+    method: str = typer.Option("exact", "--method", help="How --degree finds the parameters: exact (the inverse "
+                               "solver) or learnt (the shipped regression models)."),
+    primitive: Optional[str] = typer.Option(None, "--primitive", help="a1=..,a2=..,a3=..,a4=..,a5=..[,eps1=..,eps2=..] "
+                                            "in model units (1 mu = 6 mm); needed by top-shape, flatten-side, turn-top "
+                                            "when INPUT carries none; overrides the one it carries."),
+    out: Path = typer.Option(..., "--out", help="Output PLY, mm, breast frame, same point order."),
+    as_json: bool = JSON,
+):
+    """Apply one deformation to a breast (PLY or fit), by explicit parameters or by degree."""
+    clock = Clock()
+    if kind not in KIND_PARAMS:
+        raise usage_error(f"'{kind}' is not a deformation; choose one of {', '.join(KIND_PARAMS)}", "--kind")
+    if degree is not None and param:
+        raise usage_error("give either --param or --degree, not both", "--degree")
+    import numpy as np
+
+    from breastplan import to_mm, to_model_units, transform_points, write_ply
+    from breastplan.case import pose_comment
+
+    given = _parse_primitive(primitive)
+    params = parse_pairs(param, f"parameters of {kind}", "--param")
+    unknown = sorted(set(params) - set(KIND_PARAMS[kind]))
+    if unknown:
+        raise usage_error(f"{kind} takes {', '.join(KIND_PARAMS[kind])}, not {', '.join(unknown)}", "--param")
+    if degree is not None and method not in METHODS:
+        raise usage_error(f"'{method}' is not a method; choose one of {', '.join(METHODS)}", "--method")
+    geometry, carried, pose = _breast(input)
+    prim = given or carried
+    if prim is None and kind in NEEDS_PRIMITIVE:
+        raise usage_error(f"{kind} needs the breast primitive, and {input} carries none: "
+                          "--primitive a1=..,a2=..,a3=..,a4=..,a5=..", "--primitive")
+    local = transform_points(np.linalg.inv(pose), geometry.points)      # the primitive's own frame, mm
+    if degree is None:
+        from breastplan.deform.global_deformations import apply_kind
+
+        moved = to_mm(apply_kind(to_model_units(local), kind, params, prim))
+        extra = {"params": {n: params.get(n, 0.0) for n in KIND_PARAMS[kind]}}
+    else:
+        from breastplan.deform.by_degree import deform_by_degree
+
+        try:
+            result = deform_by_degree(local, kind, degree, condition=condition, method=method, primitive=prim)
+        except ValueError as exc:
+            raise usage_error(str(exc), "--degree") from None
+        moved, params = result.points_mm, dict(zip(KIND_PARAMS[kind], result.params))
+        extra = {"condition": result.condition.name, "method": method, "degree": degree,
+                 "degree_reached": round(result.degree_reached, 4), "t": round(result.t, 6),
+                 "params": {k: round(float(v), 6) for k, v in params.items()}}
+    if not np.isfinite(moved).all():
+        raise BadInputError(input, f"{kind} with these parameters sends points to infinity")
+    after = transform_points(pose, moved)
+    carry = [] if prim is None else [prim.comment(), pose_comment(pose)]
+    write_ply(out, after, faces=geometry.faces,
+              comments=[f"breastplan deform {kind} " + " ".join(f"{k}={v:g}" for k, v in params.items()), *carry])
+    moved = np.linalg.norm(after - geometry.points, axis=1)
+    report({"output": str(out), "points": len(after), "kind": kind, **extra,
+            "primitive": "given" if given else "carried by the input" if carried else None,
+            "mean_displacement_mm": float(moved.mean()), "max_displacement_mm": float(moved.max()),
+            "seconds": clock.seconds}, as_json, f"{kind} → {out}")
+
+
+def _breast(input: Path):
+    """(geometry mm breast frame, the primitive it carries or None, the pose it carries or identity) of a
+    PLY, a fit.npz or a case folder holding a fit."""
+    import numpy as np
+
+    from breastplan import Geometry, Primitive, read_ply
+    from breastplan.case import Case, pose_from_comments
+
+    if input.is_dir() or input.name == Case.FIT_NPZ:
+        fit = Case(input if input.is_dir() else input.parent).load_fit()
+        return Geometry(fit.vertices, fit.faces), fit.primitive, fit.pose
+    geometry = read_ply(input)
+    try:
+        carried, pose = Primitive.from_comments(geometry.comments), pose_from_comments(geometry.comments)
+    except ValueError as exc:
+        raise BadInputError(input, str(exc)) from None
+    return geometry, carried, np.eye(4) if pose is None or carried is None else pose
+
+
+def _parse_primitive(text: Optional[str]) -> Optional[Primitive]:
+    from breastplan import PARAM_NAMES, Primitive
+
+    if text is None:
+        return None
+    values = parse_pairs([text], "primitive", "--primitive")
+    missing = [n for n in PARAM_NAMES[:5] if n not in values]
+    unknown = sorted(set(values) - set(PARAM_NAMES))
+    if missing or unknown:
+        raise usage_error(f"the primitive needs a1..a5 (and optionally eps1, eps2); "
+                          f"missing {missing}, unknown {unknown}", "--primitive")
+    try:
+        return Primitive(**values)
+    except ValueError as exc:
+        raise usage_error(str(exc), "--primitive") from None

@@ -1,0 +1,89 @@
+"""The `fit` command: the breast model (superquadric + FFD lattice) fitted to an ingested breast."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Optional
+
+import typer
+
+from breastplan import BadInputError
+from breastplan.clock import Clock
+from breastplan.deform.names import KIND_PARAMS
+from breastplan.errors import about
+from breastplan.options import DEFORMATIONS, FitOptions, OptionError
+
+from .app import JSON, command
+from .output import report, stderr, usage_error
+
+if TYPE_CHECKING:
+    import numpy as np
+
+
+@command()
+def fit(
+    input: Path = typer.Argument(..., help="A case folder from `ingest` (scan.ply, scan.npz) or a breast-frame PLY (mm)."),
+    out: Optional[Path] = typer.Option(None, "--out", help="Folder for fit.npz and fit.ply (default: the case folder, "
+                                       "or the PLY's folder)."),
+    lattice: int = typer.Option(5, "--lattice", help="Control points per lattice axis, 3..7 (5 = 125 CP)."),
+    deformations: str = typer.Option(",".join(DEFORMATIONS), "--deformations", help="Global deformations fitted with the "
+                                     f"primitive, comma-separated from {', '.join(KIND_PARAMS)}; 'none' for the "
+                                     "plain primitive."),
+    max_iterations: int = typer.Option(1000, "--max-iterations", help="FFD iterations before stopping (thesis: "
+                                       "1000); a fit that stops above the stopping rule is written and says so."),
+    as_json: bool = JSON,
+):
+    """Fit the breast primitive, its pose and an FFD lattice to a breast in the breast frame."""
+    clock = Clock()
+    kinds = tuple(k.strip() for k in deformations.split(",") if k.strip() not in ("", "none"))
+    unknown = sorted(set(kinds) - set(KIND_PARAMS))
+    if unknown:
+        raise usage_error(f"unknown deformations {unknown}; choose from {', '.join(KIND_PARAMS)}", "--deformations")
+    try:
+        options = FitOptions(lattice, kinds, max_iterations)
+    except OptionError as exc:
+        raise usage_error(str(exc), {"lattice": "--lattice", "max_iterations": "--max-iterations"}[exc.option]) from None
+
+    from threadpoolctl import threadpool_limits
+
+    from breastplan.case import Case, Provenance
+    from breastplan.fitting.breast_fit import fit_breast
+    from breastplan.fitting.ffd import STOP_RESIDUAL
+
+    points, source, folder = _breast_points(input)
+    with about(source), threadpool_limits(1, "blas"):   # small dense solves: threads only add overhead
+        result = fit_breast(points, options)
+    fit = result.artefact(Provenance.of({source.name: source}, options.as_dict()))
+    paths = Case(out or folder).save_fit(fit)
+    if not fit.stopping_rule_met:
+        why = "stopped improving" if fit.converged else f"used its {max_iterations} iterations"
+        stderr.print(f"warning: {source}: the fit {why} at mean normalised residual {fit.normalised_residual:.4f}, "
+                     f"above the stopping rule {STOP_RESIDUAL}; its artefacts are written.", markup=False,
+                     soft_wrap=True)
+    stats = fit.residuals_mm
+    report({"fit": str(paths[Case.FIT_NPZ]), "mesh": str(paths[Case.FIT_PLY]), "points": len(points),
+            "volume_cc": round(fit.volume_cc_mesh, 2), "volume_cc_primitive": round(fit.volume_cc_primitive, 2),
+            "rms_mm": round(stats["rms"], 4), "residuals_mm": {k: round(v, 4) for k, v in stats.items()},
+            "normalised_residual": round(fit.normalised_residual, 6), "stopping_rule": STOP_RESIDUAL,
+            "stopping_rule_met": fit.stopping_rule_met, "converged": fit.converged,
+            "iterations": {"superquadric": fit.iterations[0], "ffd": fit.iterations[1]},
+            "params": {k: round(v, 5) for k, v in result.params().items()},
+            "seconds": clock.seconds}, as_json, f"fit → {paths[Case.FIT_PLY]}")
+
+
+def _breast_points(input: Path) -> tuple[np.ndarray, Path, Path]:
+    """(points mm, the file they came from, the default output folder) of a case folder or a PLY."""
+    import numpy as np
+
+    from breastplan import read_ply
+    from breastplan.case import Case
+
+    if input.is_dir():
+        points, source, folder = Case(input).load_scan().points, input / Case.SCAN_PLY, input
+    elif input.suffix.lower() == ".ply" or not input.exists():
+        points, source, folder = read_ply(input).points, input, input.parent
+    else:
+        raise BadInputError(input, "is neither a PLY file nor a case folder from `breastplan ingest`")
+    extent = np.ptp(points, axis=0).max() if len(points) else 0.0
+    if 0 < extent < 5.0:
+        raise BadInputError(source, f"spans only {extent:.3g} units: fit takes millimetres (is it in metres?)")
+    return points, source, folder

@@ -1,0 +1,330 @@
+"""The case folder: one owner of a patient's artefacts, their names, typed round trips and provenance.
+
+    case/scan.ply  scan.npz  camera.ply     ingest (breast frame; camera.ply in the camera frame)
+    case/fit.ply   fit.npz                  fit
+    case/plan/  report.html  plan.json      plan
+
+Each artefact set is written all or nothing (`atomic_set`): its PLYs are staged first and its
+NPZ last, and the NPZ records the SHA-256 of each sibling, so a set whose files do not belong
+together (a write killed between two renames) is refused on load. Every NPZ records its
+provenance: the content hashes of its inputs and the options that made it (docs/artefacts.md).
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .artefacts import load_npz, save_npz
+from .atomic import atomic_set
+from .errors import ArtefactError
+from .options import SIDES
+from .ply import read_ply, write_ply
+from .primitive import Primitive
+
+SCAN_SCHEMA, FIT_SCHEMA = "breastplan.scan/1", "breastplan.fit/1"
+CAMERA_FRAME = "frame camera-opencv"
+"""Tag, in a PLY comment, of points in an OpenCV camera frame (x right, y down, z forward; mm)."""
+RESIDUAL_STATS = ("mean", "rms", "p95", "max")
+POSE = "pose (primitive frame to breast frame, mm)"
+"""Start of the PLY header comment that carries a fitted model's pose (16 numbers, row-major)."""
+
+
+def sha256(path: str | Path) -> str:
+    """Hex SHA-256 of a file's content."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """What made an artefact: content hashes of its inputs (name → SHA-256), options, version."""
+
+    inputs: dict[str, str] = field(default_factory=dict)
+    options: dict = field(default_factory=dict)
+    version: str = __version__
+
+    @classmethod
+    def of(cls, inputs: dict[str, str | Path], options: dict) -> "Provenance":
+        """Provenance of files `inputs` (name → path) made with `options`."""
+        return cls({name: sha256(path) for name, path in inputs.items()}, dict(options))
+
+    def as_dict(self) -> dict:
+        return {"inputs": self.inputs, "options": self.options, "version": self.version}
+
+    @classmethod
+    def from_meta(cls, meta: dict) -> "Provenance":
+        p = meta.get("provenance") or {}
+        return cls(dict(p.get("inputs", {})), dict(p.get("options", {})), str(p.get("version", "")))
+
+
+@dataclass(frozen=True)
+class Source:
+    """Where a scan's points came from."""
+
+    kind: str                    # "recording" | "device" | "file"
+    description: str
+    frames: int = 0              # depth frames fused (0 for files)
+    K: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))   # intrinsics, px; zero for files
+    image_size: np.ndarray = field(default_factory=lambda: np.zeros(2, np.int64))  # width, height
+
+
+@dataclass(frozen=True, eq=False)
+class Scan:
+    """An ingested breast: scan.ply (points, normals; mm, breast frame), camera.ply (the
+    background-free torso, mm, input frame) and scan.npz (how they were found)."""
+
+    points: np.ndarray               # (N, 3)
+    normals: np.ndarray              # (N, 3) outward unit normals
+    torso_camera: np.ndarray         # (M, 3)
+    camera_to_breast: np.ndarray     # (4, 4) input frame → breast frame
+    view_from_camera: np.ndarray     # (4, 4) input frame → viewing frame
+    side: str
+    nipple_camera_mm: np.ndarray     # (3,)
+    chest_wall: np.ndarray           # [degree, x0, y0, sigma_mm, coefficients…], viewing frame
+    mound_centre_view_mm: np.ndarray  # (2,)
+    mound_radius_mm: float
+    crop_height_mm: float
+    roi_camera_mm: np.ndarray | None  # (6,) or None
+    voxel_mm: float
+    source: Source
+    timings_ms: dict = field(default_factory=dict)
+    provenance: Provenance = field(default_factory=Provenance)
+
+    @property
+    def nipple_breast_mm(self) -> np.ndarray:
+        T = np.asarray(self.camera_to_breast, float)
+        return T[:3, :3] @ self.nipple_camera_mm + T[:3, 3]
+
+
+@dataclass(frozen=True, eq=False)
+class Fit:
+    """A fitted breast model: fit.ply (closed surface, mm, breast frame) and fit.npz."""
+
+    vertices: np.ndarray             # (V, 3)
+    faces: np.ndarray                # (F, 3)
+    primitive: Primitive             # model units
+    pose: np.ndarray                 # (4, 4) primitive frame → breast frame, mm
+    deformation: np.ndarray          # (12,) s0 s1 t0 t1 h0 h1 g0 g1 b0 b1 c0 c1, model units
+    lattice_shape: np.ndarray        # (3,) control points per axis
+    lattice_box_mm: np.ndarray       # (2, 3) lo, hi
+    control_rest_mm: np.ndarray      # (K, 3)
+    control_fitted_mm: np.ndarray    # (K, 3)
+    residuals_mm: dict               # data ↔ surface distance: mean, rms, p95, max
+    normalised_residual: float       # mean ‖d − m‖ / ‖d‖ (docs/model.md §6)
+    volume_cc_primitive: float
+    volume_cc_mesh: float
+    iterations: tuple[int, int]      # superquadric evaluations, FFD iterations
+    seconds: tuple[float, float]
+    points: int                      # data points fitted
+    converged: bool                  # met the stopping rule or stopped improving (not cut by the budget)
+    stopping_rule_met: bool          # normalised residual < the thesis's stopping rule
+    provenance: Provenance = field(default_factory=Provenance)
+
+
+_SCAN_SPEC = {"transform_camera_to_breast": ("f", (4, 4)), "side": ("U", ()), "nipple_camera_mm": ("f", (3,)),
+              "nipple_breast_mm": ("f", (3,)), "chest_wall": ("f", ("k",)), "view_from_camera": ("f", (4, 4)),
+              "crop_mound_centre_view_mm": ("f", (2,)), "crop_mound_radius_mm": ("f", ()),
+              "crop_height_mm": ("f", ()), "crop_roi_camera_mm": ("f", (6,)),
+              "voxel_mm": ("f", ()), "frames": ("iu", ()), "source": ("U", ()), "source_kind": ("U", ()),
+              "intrinsics": ("f", (3, 3)), "image_size": ("iu", (2,)), "points": ("iu", ())}
+_FIT_SPEC = {"primitive": ("f", (7,)), "pose": ("f", (4, 4)), "deformation": ("f", (12,)),
+             "lattice_shape": ("iu", (3,)), "lattice_box_mm": ("f", (2, 3)),
+             "control_rest_mm": ("f", ("cp", 3)), "control_fitted_mm": ("f", ("cp", 3)),
+             "residuals_mm": ("f", (4,)), "normalised_residual": ("f", ()),
+             "volume_cc_primitive": ("f", ()), "volume_cc_mesh": ("f", ()),
+             "iterations": ("iu", (2,)), "seconds": ("f", (2,))}
+
+
+class Case:
+    """A case folder (created on the first write)."""
+
+    SCAN_PLY, SCAN_NPZ, CAMERA_PLY = "scan.ply", "scan.npz", "camera.ply"
+    FIT_PLY, FIT_NPZ = "fit.ply", "fit.npz"
+    PLAN, REPORT, PLAN_JSON = "plan", "report.html", "plan.json"
+
+    def __init__(self, folder: str | Path):
+        self.folder = Path(folder)
+
+    def __repr__(self) -> str:
+        return f"Case({str(self.folder)!r})"
+
+    def path(self, name: str) -> Path:
+        return self.folder / name
+
+    @classmethod
+    def holds(cls, folder: str | Path) -> bool:
+        """Whether `folder` is a case folder (it holds an ingested scan)."""
+        return (Path(folder) / cls.SCAN_NPZ).is_file()
+
+    # --- scan -------------------------------------------------------------------------
+    def save_scan(self, scan: Scan) -> dict[str, Path]:
+        """Write scan.ply, camera.ply and scan.npz, all or nothing."""
+        src = scan.source
+        header = [f"breastplan ingest: {scan.side} breast, mm, breast frame", f"source {src.description}"]
+        torso_frame = (f"{CAMERA_FRAME} (x right, y down, z forward; mm)" if src.kind != "file"
+                       else "frame input (the scan file's own frame; mm)")
+        roi = scan.roi_camera_mm
+        arrays = {
+            "transform_camera_to_breast": scan.camera_to_breast, "side": np.str_(scan.side),
+            "nipple_camera_mm": scan.nipple_camera_mm, "nipple_breast_mm": scan.nipple_breast_mm,
+            "chest_wall": scan.chest_wall, "view_from_camera": scan.view_from_camera,
+            "crop_mound_centre_view_mm": scan.mound_centre_view_mm,
+            "crop_mound_radius_mm": np.float64(scan.mound_radius_mm),
+            "crop_height_mm": np.float64(scan.crop_height_mm),
+            "crop_roi_camera_mm": np.zeros(6) if roi is None else np.asarray(roi, float),  # all zero: no ROI
+            "voxel_mm": np.float64(scan.voxel_mm), "frames": np.int64(src.frames), "source": np.str_(src.description),
+            "source_kind": np.str_(src.kind), "intrinsics": np.asarray(src.K, float),
+            "image_size": np.asarray(src.image_size, np.int64), "points": np.int64(len(scan.points)),
+        }
+        meta = {"timings_ms": {k: round(v, 2) for k, v in scan.timings_ms.items()},
+                "chest_wall": "z = polynomial(x, y) in the viewing frame: [degree, x0, y0, sigma_mm, coefficients…]",
+                "camera_frame": torso_frame}
+        plys = {self.SCAN_PLY: dict(points=scan.points, normals=scan.normals, comments=header),
+                self.CAMERA_PLY: dict(points=scan.torso_camera, comments=[
+                    f"breastplan ingest: background-free torso, {torso_frame}", f"source {src.description}"])}
+        return self._write_set(plys, self.SCAN_NPZ, SCAN_SCHEMA, arrays, meta, scan.provenance, frame="camera")
+
+    def load_scan(self) -> Scan:
+        """The scan of this case; ArtefactError naming the file for anything missing or inconsistent."""
+        art = self._load_set(self.SCAN_NPZ, SCAN_SCHEMA, _SCAN_SPEC, (self.SCAN_PLY, self.CAMERA_PLY))
+        npz = self.path(self.SCAN_NPZ)
+        side = str(art["side"])
+        if side not in SIDES:
+            raise ArtefactError(npz, f"names side {side}, not left or right")
+        breast, torso = read_ply(self.path(self.SCAN_PLY)), read_ply(self.path(self.CAMERA_PLY))
+        if breast.normals is None or len(breast.points) != int(art["points"]):
+            raise ArtefactError(self.path(self.SCAN_PLY), "does not hold the points and normals scan.npz records")
+        roi = art["crop_roi_camera_mm"]
+        source = Source(str(art["source_kind"]), str(art["source"]), int(art["frames"]), art["intrinsics"],
+                        art["image_size"])
+        return Scan(points=breast.points, normals=breast.normals, torso_camera=torso.points,
+                    camera_to_breast=art["transform_camera_to_breast"], view_from_camera=art["view_from_camera"],
+                    side=side, nipple_camera_mm=art["nipple_camera_mm"], chest_wall=art["chest_wall"],
+                    mound_centre_view_mm=art["crop_mound_centre_view_mm"],
+                    mound_radius_mm=float(art["crop_mound_radius_mm"]), crop_height_mm=float(art["crop_height_mm"]),
+                    roi_camera_mm=None if not roi.any() else roi, voxel_mm=float(art["voxel_mm"]), source=source,
+                    timings_ms=dict(art.meta.get("timings_ms", {})), provenance=Provenance.from_meta(art.meta))
+
+    # --- fit --------------------------------------------------------------------------
+    def save_fit(self, fit: Fit) -> dict[str, Path]:
+        """Write fit.ply and fit.npz, all or nothing."""
+        stats = [fit.residuals_mm[k] for k in RESIDUAL_STATS]
+        arrays = {
+            "primitive": fit.primitive.as_array(), "pose": fit.pose, "deformation": fit.deformation,
+            "lattice_shape": np.asarray(fit.lattice_shape, np.int64), "lattice_box_mm": fit.lattice_box_mm,
+            "control_rest_mm": fit.control_rest_mm, "control_fitted_mm": fit.control_fitted_mm,
+            "residuals_mm": np.array(stats), "normalised_residual": np.float64(fit.normalised_residual),
+            "volume_cc_primitive": np.float64(fit.volume_cc_primitive),
+            "volume_cc_mesh": np.float64(fit.volume_cc_mesh),
+            "iterations": np.array(fit.iterations, dtype=np.int64), "seconds": np.array(fit.seconds, dtype=float),
+        }
+        meta = {"primitive": list(fit.primitive.as_dict()), "residuals_mm": list(RESIDUAL_STATS),
+                "iterations": ["superquadric", "ffd"], "pose": "primitive frame → breast frame, mm",
+                "points": fit.points, "converged": fit.converged, "stopping_rule_met": fit.stopping_rule_met}
+        comments = ["breastplan fit: fitted breast surface, mm, breast frame", fit.primitive.comment(),
+                    pose_comment(fit.pose),
+                    f"volume_cc {fit.volume_cc_mesh:.2f} rms_mm {fit.residuals_mm['rms']:.3f}"]
+        plys = {self.FIT_PLY: dict(points=fit.vertices, faces=fit.faces, comments=comments)}
+        return self._write_set(plys, self.FIT_NPZ, FIT_SCHEMA, arrays, meta, fit.provenance)
+
+    def load_fit(self) -> Fit:
+        """The fit of this case; ArtefactError naming the file for anything missing or inconsistent."""
+        art = self._load_set(self.FIT_NPZ, FIT_SCHEMA, _FIT_SPEC, (self.FIT_PLY,))
+        npz = self.path(self.FIT_NPZ)
+        shape = art["lattice_shape"]
+        if (shape < 2).any() or art["control_rest_mm"].shape[0] != int(np.prod(shape)):
+            raise ArtefactError(npz, "has a lattice whose control points do not match its shape")
+        try:
+            primitive = Primitive.from_array(art["primitive"])
+        except ValueError as exc:
+            raise ArtefactError(npz, f"has an invalid primitive ({exc})") from None
+        mesh = read_ply(self.path(self.FIT_PLY))
+        if mesh.faces is None:
+            raise ArtefactError(self.path(self.FIT_PLY), "holds no faces; a fitted surface is a closed mesh")
+        meta = art.meta
+        return Fit(vertices=mesh.points, faces=mesh.faces, primitive=primitive, pose=art["pose"],
+                   deformation=art["deformation"], lattice_shape=shape, lattice_box_mm=art["lattice_box_mm"],
+                   control_rest_mm=art["control_rest_mm"], control_fitted_mm=art["control_fitted_mm"],
+                   residuals_mm=dict(zip(RESIDUAL_STATS, map(float, art["residuals_mm"]))),
+                   normalised_residual=float(art["normalised_residual"]),
+                   volume_cc_primitive=float(art["volume_cc_primitive"]), volume_cc_mesh=float(art["volume_cc_mesh"]),
+                   iterations=tuple(int(i) for i in art["iterations"]), seconds=tuple(map(float, art["seconds"])),
+                   points=int(meta.get("points", 0)), converged=bool(meta.get("converged", True)),
+                   stopping_rule_met=bool(meta.get("stopping_rule_met", True)),
+                   provenance=Provenance.from_meta(meta))
+
+    # --- provenance -------------------------------------------------------------------
+    def provenance(self, npz_name: str) -> Provenance | None:
+        """The provenance an NPZ of this case records, or None where there is no such file."""
+        if not self.path(npz_name).is_file():
+            return None
+        return Provenance.from_meta(load_npz(self.path(npz_name), _schema_of(npz_name)).meta)
+
+    def is_fresh(self, npz_name: str, wanted: Provenance) -> bool:
+        """Whether the NPZ exists, was made from inputs of the same content with the same options,
+        and its set is whole (a stage that can be reused)."""
+        try:
+            found = self.provenance(npz_name)
+            if found is None or (found.inputs, found.options) != (wanted.inputs, wanted.options):
+                return False
+            self._check_set(npz_name, load_npz(self.path(npz_name), _schema_of(npz_name)).meta)
+        except ArtefactError:
+            return False
+        return True
+
+    # --- sets -------------------------------------------------------------------------
+    def _write_set(self, plys: dict[str, dict], npz: str, schema: str, arrays: dict, meta: dict,
+                   provenance: Provenance, frame: str = "breast") -> dict[str, Path]:
+        with atomic_set() as stage:
+            hashes = {}
+            for name, ply in plys.items():
+                hashes[name] = sha256(write_ply(stage(self.path(name)), **ply))
+            meta = {**meta, "set": hashes, "provenance": provenance.as_dict()}
+            save_npz(stage(self.path(npz)), schema, arrays, units="mm", frame=frame, meta=meta)
+        return {name: self.path(name) for name in (*plys, npz)}
+
+    def _load_set(self, npz: str, schema: str, spec: dict, siblings: tuple[str, ...]):
+        art = load_npz(self.path(npz), schema, spec)
+        self._check_set(npz, art.meta, siblings)
+        return art
+
+    def _check_set(self, npz: str, meta: dict, siblings: tuple[str, ...] | None = None) -> None:
+        """ArtefactError unless every sibling file is the one the NPZ was written with."""
+        recorded = meta.get("set", {})
+        for name in siblings if siblings is not None else tuple(recorded):
+            path = self.path(name)
+            if not path.is_file():
+                raise ArtefactError(path, f"is missing; {npz} was written with it")
+            if name in recorded and sha256(path) != recorded[name]:
+                raise ArtefactError(path, f"is not the file {npz} was written with (an interrupted or "
+                                          f"foreign write); run the stage again")
+
+
+def pose_comment(pose) -> str:
+    """The PLY header comment that carries a pose (read back by `pose_from_comments`)."""
+    return f"{POSE} " + " ".join(f"{v:.17g}" for v in np.ravel(pose))
+
+
+def pose_from_comments(comments) -> np.ndarray | None:
+    """The (4, 4) pose a PLY header comment carries, or None; ValueError if it is malformed."""
+    for line in comments:
+        if line.startswith(POSE):
+            try:
+                pose = np.array([float(v) for v in line[len(POSE):].split()]).reshape(4, 4)
+            except ValueError:
+                raise ValueError(f"its pose comment '{line}' is malformed") from None
+            if not np.isfinite(pose).all():
+                raise ValueError(f"its pose comment '{line}' is malformed")
+            return pose
+    return None
+
+
+def _schema_of(npz_name: str) -> str:
+    return {Case.SCAN_NPZ: SCAN_SCHEMA, Case.FIT_NPZ: FIT_SCHEMA}[npz_name]

@@ -1,0 +1,22 @@
+"""Names and defaults of the deformation stage as plain Python data: the five kinds and their
+parameters, and the defaults of deforming by degree. No numpy, no scipy: the `breastplan`
+command builds its options and help from them without loading the stage (docs/cli.md).
+"""
+
+KIND_PARAMS: dict[str, tuple[str, ...]] = {
+    "top-shape": ("s0", "s1", "t0", "t1"),
+    "flatten-side": ("h0", "h1"),
+    "turn-top": ("g0", "g1"),
+    "ptosis": ("b0", "b1"),
+    "turn": ("c0", "c1"),
+}
+"""Parameter names of each kind, in the order the kinds are applied (docs/model.md §3)."""
+NEEDS_PRIMITIVE = frozenset({"top-shape", "flatten-side", "turn-top"})
+"""Kinds whose formulas need the breast's primitive."""
+
+DD = 8
+"""Degrees of the shipped models and of `deform --degree` (thesis: 8)."""
+DEFAULT_CONDITION = {"ptosis": "ptosis b0>b1", "turn": "turn c0>c1", "top-shape": "top-shape s1->s0+"}
+"""The condition `deform --degree` follows for each kind when none is given."""
+METHODS = ("exact", "learnt")
+"""How `deform --degree` finds the parameters: the inverse solver or the shipped regressions."""

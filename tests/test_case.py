@@ -1,0 +1,224 @@
+"""The case folder: typed round trips, all-or-nothing artefact sets, provenance, file modes; the
+breast model in one place; options; errors named at the boundary."""
+import hashlib
+import os
+import stat
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+from scipy.spatial.transform import Rotation
+
+from breastplan import BadInputError, Primitive, read_ply, to_mm, write_ply
+from breastplan.atomic import atomic_set
+from breastplan.case import Case, Fit, Provenance, Scan, Source, sha256
+from breastplan.deform.breast_model import BreastModel
+from breastplan.deform.global_deformations import Deformation
+from breastplan.errors import ArtefactError, about
+from breastplan.options import FitOptions, IngestOptions
+
+
+def a_scan(n=60, provenance=Provenance()):
+    rng = np.random.default_rng(0)
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix()
+    T[:3, 3] = [10.0, -20.0, -600.0]
+    normals = rng.normal(size=(n, 3))
+    return Scan(points=rng.normal(size=(n, 3)) * 30, normals=normals / np.linalg.norm(normals, axis=1, keepdims=True),
+                torso_camera=rng.normal(size=(5 * n, 3)) * 200, camera_to_breast=T, view_from_camera=np.eye(4),
+                side="right", nipple_camera_mm=np.array([-100.0, 0.0, 650.0]), chest_wall=np.arange(10.0),
+                mound_centre_view_mm=np.array([-90.0, 5.0]), mound_radius_mm=80.0, crop_height_mm=2.0,
+                roi_camera_mm=None, voxel_mm=2.0,
+                source=Source("recording", "rec.mcap: 3 frames", 3, np.diag([450.0, 450.0, 1.0]), np.array([640, 400])),
+                timings_ms={"fuse": 1.5}, provenance=provenance)
+
+
+def a_fit(model=BreastModel(Primitive(10, 11, 9, 10, 8, 0.9, 1.1), Deformation(ptosis=(1.0, 0.2))), **changes):
+    V, F = model.mesh(20, 24)
+    lattice = np.stack(np.meshgrid(*[np.linspace(-90, 90, 3)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    fields = dict(vertices=V, faces=F, primitive=model.primitive, pose=model.pose,
+                  deformation=model.deformation.as_vector(), lattice_shape=np.array([3, 3, 3]),
+                  lattice_box_mm=np.array([[-90.0] * 3, [90.0] * 3]), control_rest_mm=lattice,
+                  control_fitted_mm=lattice + 1.0, residuals_mm={"mean": 0.1, "rms": 0.2, "p95": 0.3, "max": 0.9},
+                  normalised_residual=0.001, volume_cc_primitive=model.primitive.volume_cc,
+                  volume_cc_mesh=model.volume_cc(20), iterations=(40, 3), seconds=(0.2, 0.05), points=3000,
+                  converged=True, stopping_rule_met=True, provenance=Provenance({"scan.ply": "ab" * 32}, {"lattice": 3}))
+    fields.update(changes)
+    return Fit(**fields)
+
+
+def test_scan_round_trip(tmp_path):
+    case = Case(tmp_path / "case")
+    scan = a_scan(provenance=Provenance({"rec.mcap": "0" * 64}, IngestOptions("right").as_dict()))
+    written = case.save_scan(scan)
+    assert set(written) == {"scan.ply", "camera.ply", "scan.npz"} and Case.holds(case.folder)
+    back = case.load_scan()
+    for name in ("points", "normals", "torso_camera", "camera_to_breast", "nipple_camera_mm", "chest_wall"):
+        assert np.array_equal(getattr(back, name), getattr(scan, name)), name
+    assert back.side == "right" and back.roi_camera_mm is None and back.source.frames == 3
+    assert back.source.description == scan.source.description and np.array_equal(back.source.K, scan.source.K)
+    assert back.provenance == scan.provenance
+    T = scan.camera_to_breast                        # the nipple in the breast frame, by hand
+    assert np.allclose(back.nipple_breast_mm, T[:3, :3] @ scan.nipple_camera_mm + T[:3, 3])
+
+
+def test_fit_round_trip_and_the_primitive_and_pose_in_the_ply_header(tmp_path):
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.from_rotvec([0.0, 0.0, 0.2]).as_matrix()
+    pose[:3, 3] = [1.0, -2.0, 0.0]
+    model = BreastModel(Primitive(10, 11, 9, 10, 8, 0.9, 1.1), Deformation(turn=(0.4, 0.1)), pose)
+    fit = a_fit(model, converged=False, stopping_rule_met=False)
+    case = Case(tmp_path)
+    case.save_fit(fit)
+    back = case.load_fit()
+    assert back.primitive == fit.primitive and np.array_equal(back.pose, pose)
+    assert np.array_equal(back.vertices, fit.vertices) and np.array_equal(back.faces, fit.faces)
+    assert back.residuals_mm == fit.residuals_mm and back.iterations == (40, 3)
+    assert back.converged is False and back.stopping_rule_met is False and back.provenance == fit.provenance
+    assert Primitive.from_comments(read_ply(tmp_path / "fit.ply").comments) == fit.primitive
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(0.05, 50.0, allow_nan=False), min_size=7, max_size=7))
+def test_the_primitive_comment_round_trips_exactly(values):
+    p = Primitive(*values)
+    assert Primitive.from_comments(["some other comment", p.comment()]) == p
+    assert Primitive.from_comments(["nothing here"]) is None
+    with pytest.raises(ValueError, match="malformed"):
+        Primitive.from_comments([p.comment().replace("a3=", "a3=x")])
+
+
+def test_a_set_whose_files_do_not_belong_together_is_refused(tmp_path):
+    case = Case(tmp_path)
+    case.save_fit(a_fit())
+    mesh = read_ply(tmp_path / "fit.ply")
+    write_ply(tmp_path / "fit.ply", mesh.points + 1.0, faces=mesh.faces)   # a refit killed before its NPZ
+    with pytest.raises(ArtefactError, match="fit.ply: is not the file fit.npz was written with"):
+        case.load_fit()
+    os.unlink(tmp_path / "fit.ply")
+    with pytest.raises(ArtefactError, match="fit.ply: is missing"):
+        case.load_fit()
+
+
+def test_a_failed_write_leaves_the_previous_set_whole_and_no_part_file(tmp_path, monkeypatch):
+    case = Case(tmp_path)
+    case.save_fit(a_fit())
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    import breastplan.case as case_module
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device", str(args[0]))
+    monkeypatch.setattr(case_module, "save_npz", full_disk)          # the NPZ is written last
+    with pytest.raises(OSError):
+        case.save_fit(a_fit(normalised_residual=0.002))
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    monkeypatch.undo()
+    assert case.load_fit().normalised_residual == 0.001
+
+
+def test_atomic_set_renames_in_staging_order_only_on_success(tmp_path):
+    with atomic_set() as stage:
+        first, second = stage(tmp_path / "a.txt"), stage(tmp_path / "sub" / "b.txt")
+        first.write_text("a")
+        second.write_text("b")
+        assert not (tmp_path / "a.txt").exists()                       # nothing visible before the end
+    assert (tmp_path / "a.txt").read_text() == "a" and (tmp_path / "sub" / "b.txt").read_text() == "b"
+    with pytest.raises(RuntimeError):
+        with atomic_set() as stage:
+            stage(tmp_path / "c.txt").write_text("c")
+            raise RuntimeError
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "sub"]
+
+
+@pytest.mark.parametrize("umask,mode", [(0o022, 0o644), (0o027, 0o640), (0o077, 0o600)])
+def test_files_are_readable_as_the_umask_says(tmp_path, umask, mode):
+    old = os.umask(umask)
+    try:
+        Case(tmp_path).save_fit(a_fit())
+    finally:
+        os.umask(old)
+    for name in ("fit.ply", "fit.npz"):
+        assert stat.S_IMODE((tmp_path / name).stat().st_mode) == mode, name
+
+
+def test_provenance_says_whether_a_stage_can_be_reused(tmp_path):
+    (tmp_path / "scan.ply").write_bytes(b"a scan")
+    made = Provenance.of({"scan.ply": tmp_path / "scan.ply"}, FitOptions().as_dict())
+    assert made.inputs == {"scan.ply": hashlib.sha256(b"a scan").hexdigest()}
+    case = Case(tmp_path / "case")
+    case.save_fit(a_fit(provenance=made))
+    assert case.is_fresh(Case.FIT_NPZ, made)
+    assert not case.is_fresh(Case.FIT_NPZ, Provenance(made.inputs, FitOptions(lattice=4).as_dict()))
+    assert not case.is_fresh(Case.FIT_NPZ, Provenance({"scan.ply": "0" * 64}, made.options))
+    assert not Case(tmp_path / "empty").is_fresh(Case.FIT_NPZ, made)
+
+
+def test_sha256_is_the_standard_digest(tmp_path):
+    (tmp_path / "abc").write_bytes(b"abc")                             # FIPS 180-2 test vector
+    assert sha256(tmp_path / "abc") == "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+
+
+# --- the breast model ---------------------------------------------------------------------
+def test_breast_model_composes_primitive_deformations_and_pose():
+    P = Primitive(10, 11, 9, 10, 8, 0.9, 1.1)
+    D = Deformation(top_shape=(0.5, -0.5, 0, 0), ptosis=(1.0, 0.2), turn=(0.3, 0.1))
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.from_rotvec([0.05, -0.1, 0.2]).as_matrix()
+    pose[:3, 3] = [3.0, -4.0, 1.0]
+    model = BreastModel(P, D, pose)
+    by_hand = to_mm(D.apply(P.sample(30, 40), P)) @ pose[:3, :3].T + pose[:3, 3]
+    assert np.allclose(model.sample(30, 40), by_hand, atol=1e-12)
+    V, F = model.mesh(30, 40, closed=False)
+    assert np.allclose(V[:30 * 40 - 40], by_hand[:-40], atol=1e-12) and F.max() == len(V) - 1
+
+
+def test_breast_model_volume_is_the_closed_form_volume_under_shears_and_pose():
+    P = Primitive(10, 11, 9.5, 10.5, 9, 1.0, 1.0)
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.from_rotvec([0.3, 0.2, -0.1]).as_matrix()
+    model = BreastModel(P, Deformation(ptosis=(1.5, 0.3), turn=(0.4, 0.0)), pose)   # shears keep the volume
+    assert model.volume_cc(200) == pytest.approx(P.volume_cc, rel=1e-3)
+
+
+@settings(max_examples=25, deadline=None)
+@given(b0=st.floats(-1.0, 2.0), c0=st.floats(-1.0, 1.0), h0=st.floats(0.0, 0.2), angle=st.floats(-0.4, 0.4))
+def test_breast_model_inverse_takes_surface_points_back_to_the_primitive(b0, c0, h0, angle):
+    P = Primitive(10, 11, 9.5, 10.5, 9, 0.9, 1.0)
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.from_rotvec([0.0, 0.0, angle]).as_matrix()
+    model = BreastModel(P, Deformation(flatten_side=(h0, 0.0), ptosis=(b0, 0.1), turn=(c0, 0.0)), pose)
+    samples = P.sample(20, 24)
+    assert np.allclose(model.inverse(model.place(samples)), samples, atol=1e-9)
+    assert np.allclose(model.inverse(model.place(samples), fast=True), samples, atol=1e-3)
+
+
+# --- options and errors ---------------------------------------------------------------------
+@pytest.mark.parametrize("bad", [dict(side="middle"), dict(side="left", voxel_mm=0.1), dict(side="left", frames=0),
+                                 dict(side="left", units="inch"), dict(side="left", up="up"),
+                                 dict(side="left", roi_camera_mm=(0, 0, 0, -1, 1, 1)),
+                                 dict(side="left", nipple_camera_mm=(0, float("nan"), 1))])
+def test_ingest_options_refuse_what_no_scan_takes(bad):
+    with pytest.raises(ValueError):
+        IngestOptions(**bad)
+
+
+def test_options_are_frozen_and_plain():
+    opts = IngestOptions("left", roi_camera_mm=np.arange(6.0) * [1, 1, 1, 2, 2, 2] + [0, 0, 0, 1, 1, 1])
+    assert isinstance(opts.roi_camera_mm, tuple)
+    with pytest.raises(AttributeError):
+        opts.side = "right"
+    assert FitOptions().as_dict() == {"lattice": 5, "deformations": ["top-shape", "ptosis", "turn"],
+                                      "max_iterations": 1000}
+    with pytest.raises(ValueError):
+        FitOptions(lattice=9)
+
+
+def test_errors_raised_without_a_path_get_the_command_s_file():
+    with pytest.raises(BadInputError) as caught:
+        with about("scan.ply"):
+            raise BadInputError(None, "has only 3 points")
+    assert str(caught.value) == "scan.ply: has only 3 points."
+    with pytest.raises(ArtefactError) as caught:                 # one that names its own file keeps it
+        with about("scan.ply"):
+            raise ArtefactError("fit.npz", "is corrupt")
+    assert str(caught.value) == "fit.npz: is corrupt."
