@@ -16,7 +16,6 @@ Run:  .venv/bin/python benchmarks/bench_cli.py [--repeats N] [--quick]
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import shutil
@@ -29,7 +28,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from timing import fmt, timed
+from timing import fmt, repeats_argument, timed
 
 PYTHON = sys.executable
 BREASTPLAN = str(Path(PYTHON).with_name("breastplan")) if Path(PYTHON).with_name("breastplan").exists() \
@@ -84,13 +83,9 @@ def print_table(rows: list[dict], repeats: int) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, help="rounds of measurements (default 15)")
-    parser.add_argument("--quick", action="store_true", help="5 rounds")
-    args = parser.parse_args()
+    repeats = repeats_argument(__doc__.splitlines()[0], 15, 5)
     if BREASTPLAN is None:
         sys.exit("bench_cli: the breastplan command is not installed (make test installs it)")
-    repeats = args.repeats or (5 if args.quick else 15)
     start, load_start = time.perf_counter(), os.getloadavg()
     rows = rows_of(measure(repeats))
     print_table(rows, repeats)

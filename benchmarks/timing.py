@@ -5,6 +5,7 @@ pipeline use.
 """
 from __future__ import annotations
 
+import argparse
 import statistics
 
 from breastplan.clock import Clock
@@ -38,3 +39,12 @@ def median_times(fn, baseline, repeats: int) -> tuple[float, float]:
     the calls alternate, so that both see the same load of the (shared, noisy) machine."""
     times = [(timed(fn), timed(baseline)) for _ in range(repeats + 1)][1:]
     return statistics.median(t[0] for t in times), statistics.median(t[1] for t in times)
+
+
+def repeats_argument(description: str, default: int, quick: int) -> int:
+    """Rounds of measurements from the command line: --repeats N, or --quick for `quick` rounds."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--repeats", type=int, help=f"rounds of measurements (default {default})")
+    parser.add_argument("--quick", action="store_true", help=f"{quick} rounds")
+    args = parser.parse_args()
+    return args.repeats or (quick if args.quick else default)

@@ -55,9 +55,11 @@ def fit(
     fit = result.artefact(Provenance.of({source.name: source}, options.as_dict()))
     paths = Case(out or folder).save_fit(fit)
     if not fit.stopping_rule_met:
-        why = "stopped improving" if fit.converged else f"used its {max_iterations} iterations"
-        stderr.print(f"warning: {source}: the fit {why} at mean normalised residual {fit.normalised_residual:.4f}, "
-                     f"above the stopping rule {STOP_RESIDUAL}; its artefacts are written.", markup=False,
+        how = ("stopped improving" if fit.converged else
+               f"stopped after its {max_iterations} FFD iteration{'s' * (max_iterations != 1)} (--max-iterations)")
+        floor = " (noise in the scan can set such a floor)" if fit.converged else ""
+        stderr.print(f"warning: {source}: the fit {how} at mean normalised residual {fit.normalised_residual:.4f}, "
+                     f"above the stopping rule {STOP_RESIDUAL}{floor}; its artefacts are written.", markup=False,
                      soft_wrap=True)
     stats = fit.residuals_mm
     report({"fit": str(paths[Case.FIT_NPZ]), "mesh": str(paths[Case.FIT_PLY]), "points": len(points),

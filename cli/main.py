@@ -15,7 +15,7 @@ from .output import stderr
 
 
 def main() -> None:
-    """Entry point: run the app, mapping deliberate errors to exit codes (docs/design.md)."""
+    """Entry point: run the app, mapping deliberate errors to exit codes (docs/cli.md)."""
     try:
         app()
     except BadInputError as exc:

@@ -1,6 +1,6 @@
 """Command-line plumbing shared by all commands: consoles, JSON results, progress, exit codes.
 
-Exit codes (docs/design.md): 0 ok, 2 usage error, 3 bad input (one sentence, no traceback),
+Exit codes (docs/cli.md): 0 ok, 2 usage error, 3 bad input (one sentence, no traceback),
 1 internal error. The `seconds` a command reports come from `breastplan.clock.Clock`. rich's
 progress bar and table are imported when used: every command's start-up imports this module.
 """

@@ -261,20 +261,17 @@ class Case:
                    provenance=Provenance.from_meta(meta))
 
     # --- provenance -------------------------------------------------------------------
-    def provenance(self, npz_name: str) -> Provenance | None:
-        """The provenance an NPZ of this case records, or None where there is no such file."""
-        if not self.path(npz_name).is_file():
-            return None
-        return Provenance.from_meta(load_npz(self.path(npz_name), _schema_of(npz_name)).meta)
-
     def is_fresh(self, npz_name: str, wanted: Provenance) -> bool:
         """Whether the NPZ exists, was made from inputs of the same content with the same options,
         and its set is whole (a stage that can be reused)."""
+        if not self.path(npz_name).is_file():
+            return False
         try:
-            found = self.provenance(npz_name)
-            if found is None or (found.inputs, found.options) != (wanted.inputs, wanted.options):
+            meta = load_npz(self.path(npz_name), _schema_of(npz_name)).meta
+            found = Provenance.from_meta(meta)
+            if (found.inputs, found.options) != (wanted.inputs, wanted.options):
                 return False
-            self._check_set(npz_name, load_npz(self.path(npz_name), _schema_of(npz_name)).meta)
+            self._check_set(npz_name, meta)
         except ArtefactError:
             return False
         return True

@@ -27,7 +27,8 @@ class BreastModel:
 
     def place(self, points_mu) -> np.ndarray:
         """Primitive-frame points (model units) deformed and posed: breast frame, mm."""
-        return transform_points(self.pose, to_mm(self.deformation.apply(points_mu, self.primitive)))
+        deformed = to_mm(self.deformation.apply(points_mu, self.primitive))
+        return deformed if np.array_equal(self.pose, np.eye(4)) else transform_points(self.pose, deformed)
 
     def inverse(self, points_mm, *, fast: bool = False) -> np.ndarray:
         """Breast-frame points (mm) taken back through the pose and the deformations: primitive

@@ -14,7 +14,6 @@ from scipy.spatial import cKDTree
 
 from breastplan import BadInputError
 from breastplan.case import Fit, Provenance
-from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.names import KIND_PARAMS
 from breastplan.meshes import mesh_volume
 from breastplan.options import FitOptions
@@ -47,12 +46,6 @@ class BreastFit:
     @property
     def vertices(self) -> np.ndarray:
         return self.ffd.vertices
-
-    @property
-    def model(self) -> BreastModel:
-        """The fitted primitive, deformations and pose (without the lattice)."""
-        sq = self.superquadric
-        return BreastModel(sq.primitive, sq.deformation, sq.pose)
 
     @property
     def stopping_rule_met(self) -> bool:
@@ -130,4 +123,4 @@ def smoothness(vertices: np.ndarray, points: np.ndarray) -> float:
 
 def model_mesh(sq: SuperquadricFit, grid: tuple[int, int] = MESH_GRID) -> tuple[np.ndarray, np.ndarray]:
     """Closed mesh (mm, breast frame) of the fitted primitive, deformed and posed."""
-    return BreastModel(sq.primitive, sq.deformation, sq.pose).mesh(*grid, closed=True)
+    return sq.model.mesh(*grid, closed=True)

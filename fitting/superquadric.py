@@ -16,6 +16,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from breastplan import BadInputError, Primitive, to_mm, to_model_units
+from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.global_deformations import Deformation, beta
 from breastplan.deform.names import KIND_PARAMS
 
@@ -55,6 +56,11 @@ class SuperquadricFit:
     iterations: int
     seconds: float
     x: np.ndarray                 # the fitted parameter vector (log a1..a5, eps, rotation vector, t, deformations)
+
+    @property
+    def model(self) -> BreastModel:
+        """The fitted primitive, deformations and pose."""
+        return BreastModel(self.primitive, self.deformation, self.pose)
 
     def summary(self) -> dict[str, float]:
         return {f"{k}_mm": v for k, v in distance_stats(self.residuals_mm).items()}

@@ -109,10 +109,10 @@ def _img_frame(dai, depth: np.ndarray, K: np.ndarray, seq: int, seconds: float):
 def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFrames:
     """Replay the RAW16 depth frames of an MCAP recording (at most `max_frames`)."""
     path = Path(path)
-    _check_mcap(path)
+    count = _check_mcap(path)
     raw16 = depthai().ImgFrame.Type.RAW16
     frames, K, messages = [], None, 0
-    for messages, msg in enumerate(_replay(path), 1):
+    for messages, msg in enumerate(_replay(path, count), 1):
         if (type(msg).__name__ != "ImgFrame" or msg.getType() != raw16
                 or msg.getSequenceNum() == END_OF_RECORDING):
             continue
@@ -162,18 +162,12 @@ def _check_mcap(path: Path) -> int:
     return count
 
 
-def message_count(path: str | Path) -> int:
-    """Messages in an MCAP recording, from the statistics of its summary section (`_check_mcap`)."""
-    return _check_mcap(Path(path))
-
-
-def _replay(path: Path):
+def _replay(path: Path, count: int):
     """Yield the messages of a recording through ReplayMessage, unpaced.
 
-    The replay loops and is stopped after the file's message count: at end of file
+    The replay loops and is stopped after `count` messages (the summary's): at end of file
     ReplayMessage closes the queue at once, and messages not yet taken would be lost.
     """
-    count = message_count(path)
     dai = depthai()
     pipeline = dai.Pipeline(False)
     replay = pipeline.create(dai.node.ReplayMessage)
