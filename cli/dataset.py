@@ -12,6 +12,10 @@ from .app import JSON, command
 from .output import progress, report, usage_error
 
 
+MAX_DD = 64
+"""Degrees of deformation at most (the thesis uses 4 or 8); the dataset grows with #dd."""
+
+
 @command()
 def dataset(
     db: Path = typer.Option(..., "--db", help="database.npz written by `breastplan synth`."),
@@ -26,8 +30,8 @@ def dataset(
         cond = find_condition(condition)
     except ValueError as exc:
         raise usage_error(str(exc), "--condition") from None
-    if dd < 2:
-        raise usage_error(f"--dd must be at least 2, got {dd}", "--dd")
+    if not 2 <= dd <= MAX_DD:
+        raise usage_error(f"--dd must be 2..{MAX_DD}, got {dd}", "--dd")
 
     import numpy as np
 

@@ -64,7 +64,8 @@ def deform(
     if degree is None:
         from breastplan.deform.global_deformations import apply_kind
 
-        moved = to_mm(apply_kind(to_model_units(local), kind, params, prim))
+        with np.errstate(over="ignore", invalid="ignore"):     # an overflow is reported below, once
+            moved = to_mm(apply_kind(to_model_units(local), kind, params, prim))
         extra = {"params": {n: params.get(n, 0.0) for n in KIND_PARAMS[kind]}}
     else:
         from breastplan.deform.by_degree import deform_by_degree

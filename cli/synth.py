@@ -11,6 +11,10 @@ from .app import JSON, command
 from .output import progress, report, usage_error
 
 
+MAX_POINTS = 250_000
+"""Points per breast at most: database V then holds 65 × 250 000 points, about 400 MB."""
+
+
 @command()
 def synth(
     db: str = typer.Option(..., "--db", help="Database to generate: V (65 breasts) or S (60)."),
@@ -24,6 +28,10 @@ def synth(
     clock = Clock()
     if db not in ("V", "S"):
         raise usage_error(f"'{db}' is not a database; choose V or S", "--db")
+    if seed < 0:
+        raise usage_error(f"--seed must be 0 or more, got {seed}", "--seed")
+    if points > MAX_POINTS:
+        raise usage_error(f"--points must be at most {MAX_POINTS:,} per breast, got {points:,}", "--points")
 
     from breastplan.learn.databases import build_database, grid_for
 

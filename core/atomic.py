@@ -14,6 +14,14 @@ from pathlib import Path
 from typing import BinaryIO, Callable, Iterator
 
 
+NAME_KEPT = 200
+"""Bytes of the target's name kept in a temporary name, which must fit in 255 bytes."""
+
+
+def _short(name: str) -> str:
+    return name.encode()[:NAME_KEPT].decode(errors="ignore")
+
+
 def file_mode() -> int:
     """0o666 less the process's umask: the mode `open` gives a new file."""
     try:
@@ -34,7 +42,7 @@ def atomic_open(path: str | Path) -> Iterator[BinaryIO]:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{_short(path.name)}.", suffix=".part", dir=path.parent)
     try:
         os.fchmod(fd, file_mode())
         with os.fdopen(fd, "wb") as fh:
@@ -42,6 +50,12 @@ def atomic_open(path: str | Path) -> Iterator[BinaryIO]:
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
+    except OSError as exc:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        if exc.filename is None:                # a full disk names no file: name the one being written
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
+        raise
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
@@ -61,7 +75,7 @@ def atomic_set() -> Iterator[Callable[[str | Path], Path]]:
     def stage(path: str | Path) -> Path:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.part")
+        tmp = path.with_name(f".{_short(path.name)}.{secrets.token_hex(4)}.part")
         staged.append((tmp, path))
         return tmp
 
@@ -69,8 +83,11 @@ def atomic_set() -> Iterator[Callable[[str | Path], Path]]:
         yield stage
         for tmp, path in staged:
             os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         for tmp, _ in staged:
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(tmp)
+        target = {str(tmp): path for tmp, path in staged}.get(str(getattr(exc, "filename", None)))
+        if isinstance(exc, OSError) and target is not None:   # name the file the user asked for
+            raise OSError(exc.errno, exc.strerror, str(target)) from None
         raise

@@ -165,3 +165,23 @@ def test_ply_round_trip_is_exact(tmp_path_factory, n, seed, with_faces):
     g = read_ply(write_ply(tmp_path_factory.mktemp("ply") / "r.ply", V, faces=F))
     assert np.array_equal(g.points, V)
     assert (g.faces is None) if not with_faces else np.array_equal(g.faces, F)
+
+
+def test_a_long_legal_name_is_written(tmp_path):
+    """A 250-byte name is legal (NAME_MAX 255); the temporary name beside it must fit too."""
+    path = tmp_path / ("b" * 246 + ".ply")
+    write_ply(path, np.zeros((3, 3)))
+    assert read_ply(path).points.shape == (3, 3)
+
+
+def test_a_full_disk_names_the_file_and_leaves_nothing(tmp_path, monkeypatch):
+    import errno
+    import os
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(os, "fsync", full)
+    with pytest.raises(OSError) as caught:
+        write_ply(tmp_path / "scan.ply", np.zeros((3, 3)))
+    assert caught.value.filename == str(tmp_path / "scan.ply") and caught.value.errno == errno.ENOSPC
+    assert list(tmp_path.iterdir()) == []

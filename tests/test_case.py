@@ -109,8 +109,9 @@ def test_a_failed_write_leaves_the_previous_set_whole_and_no_part_file(tmp_path,
     def full_disk(*args, **kwargs):
         raise OSError(28, "No space left on device", str(args[0]))
     monkeypatch.setattr(case_module, "save_npz", full_disk)          # the NPZ is written last
-    with pytest.raises(OSError):
+    with pytest.raises(OSError) as caught:
         case.save_fit(a_fit(normalised_residual=0.002))
+    assert caught.value.filename == str(tmp_path / "fit.npz")         # the file asked for, not a .part
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
     monkeypatch.undo()
     assert case.load_fit().normalised_residual == 0.001

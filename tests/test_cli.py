@@ -121,6 +121,9 @@ def test_missing_and_nan_inputs_exit_3(cli, tmp_path):
     ["deform", "x.ply", "--kind", "ptosis", "--param", "b0=lots", "--out", "o.ply"],       # not a number
     ["synth", "--db", "Q", "--out", "o"],
     ["synth", "--db", "S", "--points", "1000", "--out", "o"],
+    ["synth", "--db", "S", "--seed", "-1", "--out", "o"],
+    ["synth", "--db", "S", "--points", str(10**8), "--out", "o"],                        # 10⁴ × 10⁴ grid
+    ["dataset", "--db", "x.npz", "--condition", "ptosis b0", "--dd", "100000", "--out", "o.npz"],
     ["dataset", "--db", "x.npz", "--condition", "ptosis sideways", "--out", "o.npz"],
 ])
 def test_usage_errors_exit_2(cli, tmp_path, args):
@@ -134,3 +137,11 @@ def test_help_lists_the_commands(cli):
     assert res.returncode == 0
     for command in ("synth", "deform", "dataset"):
         assert command in res.stdout
+
+
+def test_parameters_that_overflow_give_one_sentence_and_no_file(cli, synth_s, tmp_path):
+    out, _ = synth_s
+    res = run(cli, "deform", out / "S-shape1-00.ply", "--kind", "ptosis", "--param", "b0=1e308",
+              "--out", tmp_path / "big.ply")
+    assert_bad_input(res, out / "S-shape1-00.ply", tmp_path)
+    assert "sends points to infinity" in res.stderr
