@@ -47,6 +47,7 @@ def deform(
 
     from breastplan import to_mm, to_model_units, transform_points, write_ply
     from breastplan.case import pose_comment
+    from breastplan.units import breast_units_problem
 
     given = _parse_primitive(primitive)
     params = parse_pairs(param, f"parameters of {kind}", "--param")
@@ -56,6 +57,9 @@ def deform(
     if degree is not None and method not in METHODS:
         raise usage_error(f"'{method}' is not a method; choose one of {', '.join(METHODS)}", "--method")
     geometry, carried, pose = _breast(input)
+    problem = breast_units_problem(geometry.points)
+    if problem:
+        raise BadInputError(input, problem)
     prim = given or carried
     if prim is None and kind in NEEDS_PRIMITIVE:
         raise usage_error(f"{kind} needs the breast primitive, and {input} carries none: "

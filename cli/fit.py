@@ -74,10 +74,9 @@ def fit(
 
 def _breast_points(input: Path) -> tuple[np.ndarray, Path, Path]:
     """(points mm, the file they came from, the default output folder) of a case folder or a PLY."""
-    import numpy as np
-
     from breastplan import read_ply
     from breastplan.case import Case
+    from breastplan.units import breast_units_problem
 
     if input.is_dir():
         points, source, folder = Case(input).load_scan().points, input / Case.SCAN_PLY, input
@@ -85,7 +84,7 @@ def _breast_points(input: Path) -> tuple[np.ndarray, Path, Path]:
         points, source, folder = read_ply(input).points, input, input.parent
     else:
         raise BadInputError(input, "is neither a PLY file nor a case folder from `breastplan ingest`")
-    extent = np.ptp(points, axis=0).max() if len(points) else 0.0
-    if 0 < extent < 5.0:
-        raise BadInputError(source, f"spans only {extent:.3g} units: fit takes millimetres (is it in metres?)")
+    problem = breast_units_problem(points)
+    if problem:
+        raise BadInputError(source, problem)
     return points, source, folder

@@ -158,6 +158,10 @@ def _read_ascii(path: Path, elements: list[_Element], body: bytes) -> dict:
         else:
             arrays[el.name] = {name: table[:, i] for i, (name, _, _) in enumerate(el.props)}
         pos += width * el.count
+    if pos != len(tokens):
+        extra = len(tokens) - pos
+        raise ArtefactError(path, f"is not a valid ASCII PLY file: its data holds {extra} value{'s' * (extra != 1)} "
+                                  f"more than its header declares (a line with too many numbers?)")
     return arrays
 
 

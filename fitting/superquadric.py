@@ -294,6 +294,6 @@ def _checked(points_mm) -> np.ndarray:
     if len(p) < 50:
         raise BadInputError(None, f"has only {len(p)} points; a fit needs at least 50")
     s = np.linalg.svd(p - p.mean(0), compute_uv=False)
-    if s[2] < 1e-6 * s[0]:
+    if s[2] <= 1e-6 * s[0]:                            # all three 0: the points are one point
         raise BadInputError(None, "has coplanar or collinear points: no surface to fit")
     return p

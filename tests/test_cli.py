@@ -145,3 +145,25 @@ def test_parameters_that_overflow_give_one_sentence_and_no_file(cli, synth_s, tm
               "--out", tmp_path / "big.ply")
     assert_bad_input(res, out / "S-shape1-00.ply", tmp_path)
     assert "sends points to infinity" in res.stderr
+
+
+def test_deform_of_a_breast_in_metres_is_bad_input(cli, synth_s, tmp_path):
+    out, _ = synth_s
+    metres = tmp_path / "metres.ply"
+    write_ply(metres, read_ply(out / "S-shape1-00.ply").points / 1000)
+    res = run(cli, "deform", metres, "--kind", "ptosis", "--param", "b0=1", "--out", tmp_path / "outm.ply")
+    assert_bad_input(res, metres, tmp_path)
+    assert "is it in metres" in res.stderr
+
+
+@pytest.mark.parametrize("command", ["deform", "ingest"])
+def test_an_ascii_ply_with_a_line_of_four_numbers_is_bad_input(cli, tmp_path, command):
+    rows = np.random.default_rng(0).uniform(0, 100, (60, 3))
+    text = "\n".join(" ".join(f"{v:.3f}" for v in row) for row in rows).replace("\n", " 5.0\n", 1)
+    bad = tmp_path / "four.ply"
+    bad.write_text("ply\nformat ascii 1.0\nelement vertex 60\nproperty float x\nproperty float y\n"
+                   "property float z\nend_header\n" + text + "\n")
+    args = ["--kind", "ptosis", "--param", "b0=1"] if command == "deform" else ["--side", "left"]
+    res = run(cli, command, bad, *args, "--out", tmp_path / "out_four")
+    assert_bad_input(res, bad, tmp_path)
+    assert "1 value more than its header declares" in res.stderr

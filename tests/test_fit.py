@@ -131,7 +131,8 @@ def _cloud(tmp_path, points):
 
 SENTENCES = {"missing": "no such file", "not a PLY": "neither a PLY file nor a case folder",
              "few": "at least 50", "collinear": "coplanar or collinear", "metres": "is it in metres",
-             "NaN": "NaN or infinite coordinates", "no surface": "found no breast surface"}
+             "NaN": "NaN or infinite coordinates", "no surface": "found no breast surface",
+             "one point": "all its points at one place", "micrometres": "is it in micrometres"}
 
 
 @pytest.mark.parametrize("problem", list(SENTENCES))
@@ -153,6 +154,10 @@ def test_bad_input_exits_3_naming_the_file_and_writes_nothing(cli, tmp_path, pro
         path = _cloud(tmp_path, np.column_stack([np.arange(100.0), np.zeros(100), np.zeros(100)]))
     elif problem == "metres":
         path = _cloud(tmp_path, to_mm(P.sample(40, 40)) / 1000)
+    elif problem == "micrometres":
+        path = _cloud(tmp_path, to_mm(P.sample(40, 40)) * 1000)
+    elif problem == "one point":
+        path = _cloud(tmp_path, np.full((100, 3), 7.0))
     else:                                                     # a box of scattered points: no breast to fit
         path = _cloud(tmp_path, np.random.default_rng(0).uniform(0, 120, (3000, 3)))
     res = run(cli, "fit", path, *args)
