@@ -40,10 +40,14 @@ def synth(
     except ValueError as exc:
         raise usage_error(str(exc), "--points") from None
     database = build_database(db, seed=seed, n_points=points)
-    path = database.save(out / "database.npz")
-    if ply:
-        with progress(f"writing {len(database)} PLYs", len(database)) as advance:
-            database.write_plys(out, advance)
+    from breastplan.atomic import atomic_set
+
+    path = out / "database.npz"
+    with atomic_set() as stage:                        # the database and its PLYs, all or nothing
+        if ply:
+            with progress(f"writing {len(database)} PLYs", len(database)) as advance:
+                database.write_plys(out, advance, stage)
+        database.save(stage(path))
     train = database.split == "train"
     report({"database": str(path), "breasts": len(database), "train": int(train.sum()),
             "test": int((~train).sum()), "points_per_breast": int(database.points.shape[1]),

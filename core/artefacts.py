@@ -60,6 +60,7 @@ def load_npz(path: str | Path, schema: str, spec: Spec | None = None) -> Artefac
     if not zipfile.is_zipfile(path):
         raise ArtefactError(path, f"is not an NPZ file (expected a {schema} artefact)")
     try:
+        _check_sizes(path)
         with np.load(path, allow_pickle=False) as npz:
             raw = {k: npz[k] for k in npz.files}
     except (zipfile.BadZipFile, OSError, EOFError, ValueError, KeyError) as exc:
@@ -84,6 +85,23 @@ def load_npz(path: str | Path, schema: str, spec: Spec | None = None) -> Artefac
     if spec:
         _check_spec(path, art, spec)
     return art
+
+
+def _check_sizes(path: Path) -> None:
+    """ArtefactError for an array whose header declares more data than its member holds: read
+    before loading, so that a forged header cannot make numpy allocate what the file never held."""
+    with zipfile.ZipFile(path) as archive:
+        for info in archive.infolist():
+            if not info.filename.endswith(".npy"):
+                continue
+            with archive.open(info) as fh:
+                major, _ = np.lib.format.read_magic(fh)
+                read = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
+                shape, _, dtype = read(fh)
+                declared = int(np.prod(shape, dtype=object)) * dtype.itemsize
+                if not dtype.hasobject and declared > info.file_size - fh.tell():
+                    raise ArtefactError(path, f"has an array '{info.filename[:-4]}' whose header declares "
+                                              f"{'×'.join(map(str, shape))} values, more than the file holds")
 
 
 def _split_schema(schema: str) -> tuple[str, int | None]:

@@ -91,6 +91,9 @@ def _check_points(path: Path, points: np.ndarray) -> None:
 def _mm_per_unit(path: Path, extent: float, units: str) -> tuple[float, str]:
     """Millimetres per file unit and a phrase saying how the units were chosen."""
     e = np.format_float_positional(extent, precision=3, fractional=False, trim="-")
+    if units != "auto" and extent > MM_EXTENT[1]:       # more than a body in either unit
+        raise BadInputError(path, f"has an extent of {extent:.3g} {units}, more than any body scan spans "
+                                  f"(a point lies far from the others?)")
     if units == "mm" and extent <= METRE_EXTENT[1]:
         raise BadInputError(path, f"is declared mm but its extent of {e} says metres")
     if units == "m" and extent >= MM_EXTENT[0]:

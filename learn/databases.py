@@ -110,13 +110,14 @@ class Database:
             raise ArtefactError(path, "has a point count that does not match its sampling grid")
         return cls.from_arrays(art, art.meta)
 
-    def write_plys(self, folder: str | Path, progress=None) -> list[Path]:
-        """One PLY per breast (points in mm, breast frame) named after the breast."""
+    def write_plys(self, folder: str | Path, progress=None, stage=Path) -> list[Path]:
+        """One PLY per breast (points in mm, breast frame) named after the breast; `stage(path)`
+        gives the path to write each to (an `atomic_set`'s, to write them with others all or nothing)."""
         out = []
         for i, name in enumerate(self.names):
-            out.append(write_ply(Path(folder) / f"{name}.ply", self.points[i],
-                                 comments=[f"breastplan database {self.name} breast {name}",
-                                           self.primitive(i).comment()]))
+            out.append(Path(folder) / f"{name}.ply")
+            write_ply(stage(out[-1]), self.points[i], comments=[f"breastplan database {self.name} breast {name}",
+                                                                self.primitive(i).comment()])
             if progress:
                 progress()
         return out

@@ -1,4 +1,5 @@
 """PLY and NPZ artefacts: round trips, validation, atomic writes (docs/artefacts.md)."""
+import io
 import os
 import zipfile
 
@@ -185,3 +186,15 @@ def test_a_full_disk_names_the_file_and_leaves_nothing(tmp_path, monkeypatch):
         write_ply(tmp_path / "scan.ply", np.zeros((3, 3)))
     assert caught.value.filename == str(tmp_path / "scan.ply") and caught.value.errno == errno.ENOSPC
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_array_header_declaring_more_than_the_file_holds_is_refused(tmp_path):
+    """A member whose header declares 10¹² × 3 float64 values (24 TB) while the file holds 24 bytes."""
+    path = tmp_path / "forged.npz"
+    save_npz(path, "breastplan.dataset/1", {"points": np.zeros((1, 3))})
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (10**12, 3)})
+    with zipfile.ZipFile(path, "a") as archive:
+        archive.writestr("huge.npy", header.getvalue() + b"\0" * 24)   # the header writes its own magic
+    with pytest.raises(ArtefactError, match=r"forged\.npz: has an array 'huge' whose header declares 1000000000000×3"):
+        load_npz(path, "breastplan.dataset/1")

@@ -88,6 +88,10 @@ def bad_inputs(recording, tmp_path_factory):
     box = ",".join(f"{v:.1f}" for v in np.concatenate([nipple - [6, 6, 30], nipple + [6, 6, 5]]))
     cases["fewer than 500 points after cropping"] = (rec, ["--roi", box])
     cases["no mound on the requested side"] = (rec, ["--side", "right"])
+    far = np.random.default_rng(2).normal(0, 100, (2000, 3))
+    far[9] = [1e30, 0.0, 0.0]
+    write_ply(folder / "far.ply", far)
+    cases["one coordinate 1e30 in mm"] = (folder / "far.ply", ["--units", "mm"])
     return folder, cases
 
 
@@ -96,7 +100,8 @@ SENTENCES = {
     "NaN coordinates": "NaN", "not an MCAP": "is not an MCAP recording",
     "MCAP without depth frames": "without RAW16 depth frames", "all-zero depth": "are all zero",
     "frames change size": "change size", "fewer than 500 points after cropping": "fewer than 500",
-    "no mound on the requested side": "no breast mound found on the right side"}
+    "no mound on the requested side": "no breast mound found on the right side",
+    "one coordinate 1e30 in mm": "more than any body scan spans"}
 
 
 @pytest.mark.parametrize("case", list(SENTENCES))

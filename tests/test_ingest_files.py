@@ -254,3 +254,12 @@ def test_bad_files_raise_one_sentence_naming_the_file(tmp_path, capfd):
         assert message.endswith(".") and "\n" not in message, (name, message)
     out, err = capfd.readouterr()
     assert "Open3D" not in out + err  # open3d's warnings are silenced
+
+
+@pytest.mark.parametrize("units", ["mm", "m"])
+def test_one_far_point_under_declared_units_is_bad_input(tmp_path, units):
+    pts = grid_points_mm() / (1000.0 if units == "m" else 1.0)
+    pts[7] = [1e30, 0.0, 0.0]
+    np.savetxt(tmp_path / "far.xyz", pts)
+    with pytest.raises(BadInputError, match=r"far\.xyz: has an extent of 1e\+30 " + units + ", more than any body scan"):
+        read_scan_file(tmp_path / "far.xyz", units=units)
