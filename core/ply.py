@@ -23,6 +23,8 @@ _TYPES = {
 }
 _FORMATS = {"ascii": None, "binary_little_endian": "<", "binary_big_endian": ">"}
 _MAX_HEADER = 1 << 16
+MAX_ELEMENTS = 20_000_000
+"""Vertices (or faces) a PLY may declare: no body scan holds more."""
 
 
 @dataclass
@@ -46,10 +48,16 @@ def read_ply(path: str | Path) -> Geometry:
     """Read a PLY file; raise ArtefactError naming the file and the defect."""
     path = require_file(path, "PLY file", ArtefactError)
     try:
-        data = path.read_bytes()
+        with open(path, "rb") as fh:                  # the header first: a foreign or forged file is
+            head = fh.read(_MAX_HEADER)               # refused before its body is read
+            fmt, elements, comments, body = _parse_header(path, head)
+            too_many = [e for e in elements if e.count > MAX_ELEMENTS]
+            if too_many:
+                raise ArtefactError(path, f"declares {too_many[0].count:,} '{too_many[0].name}' elements, more than "
+                                          f"any body scan holds ({MAX_ELEMENTS:,})")
+            body += fh.read()
     except OSError as exc:
         raise ArtefactError(path, f"cannot be read ({exc.strerror})") from None
-    fmt, elements, comments, body = _parse_header(path, data)
     if fmt is None:
         arrays = _read_ascii(path, elements, body)
     else:

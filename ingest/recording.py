@@ -27,6 +27,8 @@ END_OF_RECORDING = 2**31 - 1
 recorder writes a message only after taking the next one, so the marker flushes the last
 real frame."""
 SETTLE_S = 0.05
+MAX_MESSAGES = 100_000
+"""Messages a recording may hold: an hour of a 30 fps depth stream is 108 000 frames; a scan takes seconds."""
 UNPACED_FPS = 1e6
 """Replay rate asked of ReplayMessage: far above any camera's, so replay is not paced."""
 
@@ -159,6 +161,9 @@ def _check_mcap(path: Path) -> int:
             raise BadInputError(path, "is a corrupt MCAP recording (its summary section cannot be read)") from None
     if not isinstance(count, int) or count < 0:
         raise BadInputError(path, "is a corrupt MCAP recording (its summary holds no message count)")
+    if count > MAX_MESSAGES:
+        raise BadInputError(path, f"is an MCAP recording whose summary claims {count:,} messages, more than any "
+                                  f"body scan holds ({MAX_MESSAGES:,} frames)")
     return count
 
 

@@ -198,3 +198,18 @@ def test_an_array_header_declaring_more_than_the_file_holds_is_refused(tmp_path)
         archive.writestr("huge.npy", header.getvalue() + b"\0" * 24)   # the header writes its own magic
     with pytest.raises(ArtefactError, match=r"forged\.npz: has an array 'huge' whose header declares 1000000000000×3"):
         load_npz(path, "breastplan.dataset/1")
+
+
+def test_a_ply_declaring_more_vertices_than_any_scan_is_refused_before_its_body_is_read(tmp_path):
+    path = tmp_path / "huge.ply"
+    path.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 89000000\nproperty float x\n"
+                     b"property float y\nproperty float z\nend_header\n" + b"\0" * 1200)
+    with pytest.raises(ArtefactError, match=r"huge\.ply: declares 89,000,000 'vertex' elements, more than any body scan"):
+        read_ply(path)
+
+
+def test_a_foreign_file_is_refused_from_its_first_bytes(tmp_path):
+    path = tmp_path / "photo.ply"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + b"\0" * (1 << 20))
+    with pytest.raises(ArtefactError, match="is not a PLY file"):
+        read_ply(path)

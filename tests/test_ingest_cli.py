@@ -140,3 +140,22 @@ def test_live_device_absent_exits_3(cli, tmp_path):
 def test_ingest_usage_errors_exit_2(cli, tmp_path, args):
     res = run(cli, *args)
     assert res.returncode == 2, (res.returncode, res.stderr)
+
+
+def test_a_summary_claiming_ten_million_messages_is_refused(cli, recording, tmp_path):
+    """The MCAP summary's Statistics record (opcode 0x0B) forged to 10⁷ messages, its CRC cleared
+    (0 means none, in the MCAP specification); the frames themselves are intact."""
+    import struct
+    data = bytearray((recording[0] / "rec.mcap").read_bytes())
+    footer = len(data) - 8 - 29                          # footer record before the closing magic
+    _, _, summary_start, offsets_start, _ = struct.unpack_from("<BQQQI", data, footer)
+    pos = summary_start
+    while data[pos] != 0x0B:                              # walk the summary's records to Statistics
+        pos += 9 + struct.unpack_from("<Q", data, pos + 1)[0]
+    struct.pack_into("<Q", data, pos + 9, 10**7)
+    struct.pack_into("<I", data, footer + 25, 0)
+    forged = tmp_path / "forged.mcap"
+    forged.write_bytes(bytes(data))
+    res = run(cli, "ingest", forged, "--side", "left", "--out", tmp_path / "out")
+    assert_bad_input(res, forged, tmp_path)
+    assert "claims 10,000,000 messages" in res.stderr
