@@ -43,13 +43,14 @@ def fit(
     except OptionError as exc:
         raise usage_error(str(exc), {"lattice": "--lattice", "max_iterations": "--max-iterations"}[exc.option]) from None
 
+    points, source, folder = _breast_points(input)     # bad input is refused before the stage loads
+
     from threadpoolctl import threadpool_limits
 
     from breastplan.case import Case, Provenance
     from breastplan.fitting.breast_fit import fit_breast
     from breastplan.fitting.ffd import STOP_RESIDUAL
 
-    points, source, folder = _breast_points(input)
     with about(source), threadpool_limits(1, "blas"):   # small dense solves: threads only add overhead
         result = fit_breast(points, options)
     fit = result.artefact(Provenance.of({source.name: source}, options.as_dict()))
