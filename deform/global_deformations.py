@@ -156,8 +156,9 @@ def flatten_side_inverse(points, h0: float, h1: float, *, primitive: Primitive, 
     def forward(w):
         return w * gamma(w, h0, h1)
 
-    w_max = max(1.0, 1.5 * target.max(initial=0.0))
-    while forward(w_max) < target.max(initial=0.0) and w_max < 2.0**64:
+    reach = target.max(initial=0.0)
+    w_max = max(1.0, 1.5 * reach)
+    while forward(w_max) < reach and w_max < 2.0**64:
         w_max *= 2
     w = np.linspace(0.0, w_max, TABLE_SIZE)
     x[sel] = -a2 * _monotone_inverse(forward, target, w, forward(w), exact=not fast)

@@ -26,7 +26,6 @@ COARSE_MM = 10.0
 DENSE_CELLS = 4_000_000
 """Voxel grids up to this many cells are indexed densely (no sort)."""
 MIN_BREAST_POINTS = 500
-UP_AXES = {"+x": 0, "-x": 0, "+y": 1, "-y": 1, "+z": 2, "-z": 2}
 
 
 @dataclass
@@ -93,7 +92,7 @@ def viewing_frame(points: np.ndarray, up: str) -> np.ndarray:
     radial = np.sum(np.square(centred - np.outer(depth, normal)), axis=1)
     anterior = normal if np.cov(depth, radial)[0, 1] < 0 else -normal  # flanks fall away from the viewer
     up_vec = np.zeros(3)
-    up_vec[UP_AXES[up]] = -1.0 if up.startswith("-") else 1.0
+    up_vec["xyz".index(up[1])] = -1.0 if up.startswith("-") else 1.0     # up: one of options.UP_AXES
     up_vec -= np.dot(up_vec, anterior) * anterior
     if np.linalg.norm(up_vec) < 0.3:
         raise BadInputError(None, f"its up axis {up} is nearly its viewing direction; pass another --up")

@@ -22,9 +22,9 @@ from breastplan import PARAM_NAMES, Primitive, load_npz, save_npz, transform_poi
 from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.global_deformations import Deformation
 from breastplan.deform.names import KIND_PARAMS
+from breastplan.options import SIDES
 
 TRUTH_SCHEMA = "breastplan.scan-truth/1"
-SIDES = ("left", "right")
 WIDTH, HEIGHT = 640, 400
 CHEST_RX, CHEST_RY = 420.0, 900.0
 """Radii of curvature (mm) of the chest wall across (X) and along (Y) the body."""
