@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 import open3d as o3d
-from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from breastplan import PARAM_NAMES, Primitive, load_npz, save_npz, transform_points
@@ -24,16 +23,14 @@ from breastplan.deform.global_deformations import Deformation
 from breastplan.deform.names import KIND_PARAMS
 from breastplan.options import SIDES
 
+from .rendering import GRAZING_DEG, cast_depth, noisy_frames
+
 TRUTH_SCHEMA = "breastplan.scan-truth/1"
 WIDTH, HEIGHT = 640, 400
 CHEST_RX, CHEST_RY = 420.0, 900.0
 """Radii of curvature (mm) of the chest wall across (X) and along (Y) the body."""
 BASE_X = 90.0
 """|X| of the breast-base centres, mm."""
-GRAZING_DEG = 78.0
-"""Surfaces seen at a larger angle of incidence give no depth."""
-NOISE_REF_MM = 600.0
-"""Distance at which the depth noise has its nominal σ; σ grows with distance²."""
 DEFORMATION_NAMES = tuple(n for names in KIND_PARAMS.values() for n in names)
 NIPPLE_SIGMA_MM = 3.0
 """Width (σ) of the nipple bump."""
@@ -209,40 +206,14 @@ def raycasting_scene(scene: Scene) -> o3d.t.geometry.RaycastingScene:
     return rc
 
 
-def pixel_rays(K: np.ndarray, width: int = WIDTH, height: int = HEIGHT) -> np.ndarray:
-    """(H·W, 6) rays from the camera centre through each pixel, directions with z = 1."""
-    v, u = np.mgrid[0:height, 0:width]
-    d = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u, float)], -1).reshape(-1, 3)
-    return np.hstack([np.zeros_like(d), d]).astype(np.float32)
-
-
 def render_depth(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """Noise-free depth (H, W) mm (NaN where nothing is measurable) and the hit geometry ids."""
-    rays = pixel_rays(scene.K)
-    hit = raycasting_scene(scene).cast_rays(o3d.core.Tensor(rays))
-    depth = hit["t_hit"].numpy().astype(float)  # ray directions have z = 1, so t is the depth
-    normals = hit["primitive_normals"].numpy().astype(float)
-    dirs = rays[:, 3:] / np.linalg.norm(rays[:, 3:], axis=1, keepdims=True)
-    grazing = np.abs(np.sum(normals * dirs, axis=1)) < np.cos(np.radians(GRAZING_DEG))
-    depth[~np.isfinite(depth) | grazing] = np.nan
-    return depth.reshape(HEIGHT, WIDTH), hit["geometry_ids"].numpy().reshape(HEIGHT, WIDTH)
+    return cast_depth(raycasting_scene(scene), scene.K, WIDTH, HEIGHT)
 
 
 def depth_frames(scene: Scene, n_frames: int, seed: int = 0) -> np.ndarray:
-    """(N, H, W) uint16 depth in mm: rendered depth + noise σ·(z/600)², quantised; 0 = no depth."""
-    rng = np.random.default_rng(seed)
-    clean, _ = render_depth(scene)
-    sigma = scene.noise_mm * np.square(clean / NOISE_REF_MM)
-    noisy = clean + rng.standard_normal((n_frames, *clean.shape)) * sigma
-    holes = ndimage.binary_dilation(rng.random(noisy.shape) < 4e-4, structure=_hole_disc())
-    noisy[holes | ~np.isfinite(noisy)] = 0.0
-    return np.clip(np.rint(noisy), 0, 65535).astype(np.uint16)
-
-
-def _hole_disc() -> np.ndarray:
-    """A disc of radius 3 px in each frame (holes do not spread across frames)."""
-    y, x = np.mgrid[-3:4, -3:4]
-    return (x * x + y * y <= 9)[None]
+    """(N, H, W) uint16 depth in mm of the scene (see `rendering.noisy_frames`)."""
+    return noisy_frames(render_depth(scene)[0], scene.noise_mm, n_frames, seed)
 
 
 # --- truth ---------------------------------------------------------------------------
