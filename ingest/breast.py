@@ -21,8 +21,16 @@ from .chest_wall import ChestWall, fit_chest_wall
 
 MOUND_MM = 10.0
 """Coarse voxels at least this far in front of the chest wall form mounds."""
-MIN_PEAK_MM = 20.0
+MIN_PEAK_MM = 12.0
 """A mound must rise at least this far: smaller bumps are not breasts."""
+MIN_OFF_MIDLINE_MM = 35.0
+"""A breast mound's centre lies at least this far from the trunk's midline."""
+MIN_BELOW_TOP_MM = 60.0
+"""… and at least this far below the trunk's top (the shoulders, or the chin when it shows)."""
+MAX_LEVEL_MM = 110.0
+"""The two breasts' centres differ in height by at most this much."""
+PAIR_MM = (100.0, 420.0)
+"""… and lie this far apart across the body."""
 CROP_MM = 2.0
 """Breast points lie at least this far in front of the chest wall."""
 APEX_RADIUS_MM = 5.0
@@ -69,20 +77,36 @@ def find_mounds(voxels: np.ndarray, wall: ChestWall, midline_x: float, size: flo
     return [m for _, m in sorted(mounds, key=lambda vm: -vm[0])]
 
 
-def choose_mound(mounds: list[Mound], side: str | None, nipple: np.ndarray | None) -> Mound:
-    """The largest mound on `side` (any side if None), or the one under a given nipple."""
+def find_breasts(mounds: list[Mound], midline_x: float, top_y: float) -> dict[str, Mound]:
+    """Side → breast mound. A breast sits off the trunk's midline and below its top; of such
+    mounds, the largest pair (by summed volume) level with each other and as far apart as
+    breasts are is taken, else the largest one on each side (a patient may have one breast).
+
+    A chin or a belly lies on the midline, shoulders at the top: they are never taken."""
+    x = np.array([m.centre[0] - midline_x for m in mounds]).reshape(-1)
+    y = np.array([m.centre[1] for m in mounds]).reshape(-1)
+    size = np.array([m.voxels.shape[0] * m.peak_mm for m in mounds]).reshape(-1)
+    ok = (np.abs(x) >= MIN_OFF_MIDLINE_MM) & (y >= top_y + MIN_BELOW_TOP_MM)
+    left, right = np.flatnonzero(ok & (x > 0)), np.flatnonzero(ok & (x < 0))
+    L, R = (a.ravel() for a in np.meshgrid(left, right, indexing="ij"))
+    apart = x[L] - x[R]
+    fits = (np.abs(y[L] - y[R]) <= MAX_LEVEL_MM) & (apart >= PAIR_MM[0]) & (apart <= PAIR_MM[1])
+    if fits.any():
+        best = np.argmax(np.where(fits, size[L] + size[R], -np.inf))
+        return {"left": mounds[L[best]], "right": mounds[R[best]]}
+    return {side: mounds[idx[np.argmax(size[idx])]] for side, idx in (("left", left), ("right", right)) if len(idx)}
+
+
+def choose_mound(mounds: list[Mound], nipple: np.ndarray | None) -> Mound:
+    """The mound under a given nipple, else the largest one (of those in a region of interest)."""
     if nipple is not None:
         near = [m for m in mounds if np.linalg.norm(m.centre - nipple[:2]) <= m.radius]
         if not near:
             raise BadInputError(None, f"no breast mound lies under the given nipple {np.round(nipple, 1).tolist()} mm")
         return near[0]
-    on_side = [m for m in mounds if side in (None, m.side)]
-    if not on_side:
-        if side is None:
-            raise BadInputError(None, "no breast mound found in the region of interest")
-        other = f"; {len(mounds)} found on the other side" if mounds else ""
-        raise BadInputError(None, f"no breast mound found on the {side} side{other}")
-    return on_side[0]
+    if not mounds:
+        raise BadInputError(None, "no breast mound found in the region of interest")
+    return mounds[0]
 
 
 def local_chest_wall(voxels: np.ndarray, mound: Mound, wall: ChestWall) -> ChestWall:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from breastplan.options import SIDES
+from breastplan.options import SIDES, OptionError
 
 ASSET = Path(__file__).with_name("assets") / "makehuman.npz"
 LEVELS = ("min", "average", "max")
@@ -38,7 +38,8 @@ MODIFIERS = {
 
 @dataclass(frozen=True)
 class BodyOptions:
-    """A body: macro values in 0..1 (0.5 = MakeHuman's average), modifiers in −1..1, a pose."""
+    """A body: macro values in 0..1 (0.5 = MakeHuman's average), modifiers in −1..1, a pose.
+    A value out of range raises OptionError (a ValueError) naming the field."""
 
     cup: float = 0.5
     firmness: float = 0.5
@@ -50,12 +51,13 @@ class BodyOptions:
     def __post_init__(self):
         for name in ("cup", "firmness", "weight", "muscle"):
             if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"{name} must be 0..1, got {getattr(self, name)}")
+                raise OptionError(name, f"{name} must be 0..1, got {getattr(self, name)}")
         for name, value in self.modifiers.items():
             if name not in MODIFIERS or not -1.0 <= value <= 1.0:
-                raise ValueError(f"modifier {name}={value}: use one of {sorted(MODIFIERS)} with a value −1..1")
+                raise OptionError("modifiers", f"modifier {name}={value}: use one of {', '.join(sorted(MODIFIERS))} "
+                                               f"with a value −1..1")
         if self.pose not in POSES:
-            raise ValueError(f"pose must be one of {sorted(POSES)}, got {self.pose!r}")
+            raise OptionError("pose", f"pose must be one of {', '.join(POSES)}, got {self.pose!r}")
 
     def but(self, **changes) -> "BodyOptions":
         return replace(self, **changes)
@@ -128,11 +130,14 @@ def positive_part_mean(f: np.ndarray) -> np.ndarray:
     s = np.sort(f, axis=1)[:, ::-1]                 # f1 ≥ f2 ≥ f3
     f1, f2, f3 = s.T
     out = s.mean(1)
+    # f1³ / (3 (f1 − f2)(f1 − f3)) and its twin, written as f/3 times two edge fractions in (0, 1]:
+    # cubes and their products under- or overflow (tiny or huge values gave NaN)
     one = (f1 > 0) & (f2 <= 0)                      # only the largest is positive
-    out[one] = f1[one] ** 3 / (3.0 * (f1[one] - f2[one]) * (f1[one] - f3[one]))
+    a = f1[one]
+    out[one] = a / 3.0 * (a / (a - f2[one])) * (a / (a - f3[one]))
     two = (f2 > 0) & (f3 < 0)                       # the smallest is negative
     g = -f3[two]
-    out[two] += g ** 3 / (3.0 * (f1[two] + g) * (f2[two] + g))
+    out[two] += g / 3.0 * (g / (f1[two] + g)) * (g / (f2[two] + g))
     out[f1 <= 0] = 0.0
     return out
 

@@ -1,9 +1,10 @@
 """The ingest pipeline: depth frames or a scan file → the breast of one side in the breast frame.
 
-fusion → depth to points (open3d) → background removal (depth range, largest DBSCAN
-cluster of coarse voxels) → chest wall (robust height field, mounds excluded) → mound of
-the requested side → breast crop → breast frame and nipple → outlier removal → voxel
-downsampling → outward normals → breast frame. Every step is timed.
+fusion → depth to points (open3d) → background removal (depth range, the nearest large
+DBSCAN cluster of coarse voxels) → trunk (head, neck and arms cut off) → chest wall (robust
+height field, mounds excluded) → the breasts among the mounds (a pair placed as breasts
+are), the requested side's → breast crop → breast frame and nipple → outlier removal →
+voxel downsampling → outward normals → breast frame. Every step is timed.
 """
 from __future__ import annotations
 
@@ -20,12 +21,15 @@ from .chest_wall import ChestWall, fit_chest_wall
 from .depth import depth_range, fuse, to_points
 from .files import ScanCloud
 from .recording import DepthFrames
+from .trunk import find_trunk
 
 COARSE_MM = 10.0
 """Voxel size of the coarse cloud used for background removal, chest wall and mounds."""
 DENSE_CELLS = 4_000_000
 """Voxel grids up to this many cells are indexed densely (no sort)."""
 MIN_BREAST_POINTS = 500
+BODY_SHARE = 0.2
+"""Clusters this large relative to the largest may be the body."""
 
 
 @dataclass
@@ -111,14 +115,26 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
     in_roi = _roi_test(roi, to_camera)
     nipple_view = None if nipple is None else transform_points(view_from_camera, nipple)
     with clock("background: voxels + DBSCAN (open3d)"):
-        torso, coarse = largest_cluster(points)
+        body = body_cluster(points)
+    with clock("trunk"):
+        trunk = find_trunk(body)
+        torso = body[trunk.mask]
+        coarse, _ = voxel_centroids(torso, COARSE_MM)
+        coarse = coarse[trunk.chest(coarse)]
     with clock("chest wall"):
         wall = fit_chest_wall(coarse, 2)
     with clock("mounds (DBSCAN, open3d)"):
-        mounds = B.find_mounds(coarse, wall, float(np.median(coarse[:, 0])), COARSE_MM)
+        mounds = B.find_mounds(coarse, wall, trunk.midline_x, COARSE_MM)
         if in_roi is not None:
             mounds = [m for m in mounds if in_roi(m.voxels).any()]
-        mound = B.choose_mound(mounds, side if in_roi is None else None, nipple_view)
+        if in_roi is None and nipple_view is None:
+            breasts = B.find_breasts(mounds, trunk.midline_x, trunk.top_y)
+            if side not in breasts:
+                raise BadInputError(None, f"no breast mound found on the {side} side" + (
+                    f"; one found on the other side" if breasts else f" ({_nothing_found(mounds)})"))
+            mound = breasts[side]
+        else:
+            mound = B.choose_mound(mounds, nipple_view)
         wall = B.local_chest_wall(coarse, mound, wall)
     with clock("crop + breast frame"):
         region = B.breast_region(torso, mound, wall, COARSE_MM)
@@ -147,14 +163,17 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
         torso_camera=transform_points(to_camera, torso), timings_ms=clock.ms)
 
 
-def largest_cluster(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The points of the largest connected cluster (DBSCAN on coarse voxels), and its voxel centroids."""
+def body_cluster(points: np.ndarray) -> np.ndarray:
+    """The points of the body: of the connected clusters (DBSCAN on coarse voxels) with at least
+    BODY_SHARE of the largest one's voxels, the nearest to the viewer (a wall behind is larger)."""
     coarse, which = voxel_centroids(points, COARSE_MM)
     labels = B.dbscan(coarse, 2.5 * COARSE_MM, 4)
     if (labels < 0).all():
         raise BadInputError(None, "holds no connected surface (only scattered points)")
-    biggest = np.bincount(labels[labels >= 0]).argmax()
-    return points[labels[which] == biggest], coarse[labels == biggest]
+    counts = np.bincount(labels[labels >= 0])
+    big = np.flatnonzero(counts >= BODY_SHARE * counts.max())
+    depth = [np.median(coarse[labels == k, 2]) for k in big]
+    return points[labels[which] == big[int(np.argmin(depth))]]
 
 
 def _roi_test(roi, to_camera: np.ndarray):
@@ -167,6 +186,12 @@ def _roi_test(roi, to_camera: np.ndarray):
         camera = transform_points(to_camera, points)
         return np.all((camera >= lo) & (camera <= hi), axis=1)
     return inside
+
+
+def _nothing_found(mounds: list) -> str:
+    if not mounds:
+        return "nothing rises from the chest"
+    return f"{len(mounds)} mound{'s' * (len(mounds) > 1)} found, on the midline or at the shoulders"
 
 
 def _enough(n: int, step: str) -> None:

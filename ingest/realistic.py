@@ -4,31 +4,47 @@ The camera looks at the midpoint of the nipples from `distance_mm`, pitched (pos
 above, looking down) and turned about the body's vertical axis (yaw, positive: from the
 patient's left); a wall may stand behind her. The truth it writes: both nipples, the breast
 regions and the exact volume of each half of the closed body, with the body mesh, all in
-camera mm.
+camera mm. It can also write what the camera sees as a scan file (`write_scan_file`): the
+noise-free depth pixels back-projected (PLY) or the body's visible triangles (OBJ), in the
+body frame turned so that the body's up lies on a chosen axis, in mm or m.
+
+open3d (and the renderer) are imported by the functions that render, so that a command can
+check its camera options without that cost.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import open3d as o3d
 
-from breastplan import load_npz, save_npz, transform_points
-from breastplan.options import SIDES
+from breastplan import load_npz, save_npz, transform_points, write_ply
+from breastplan.atomic import atomic_open
+from breastplan.options import SIDES, UP_AXES, OptionError
 
 from .makehuman import Body, BodyOptions, breast_region, make_body
-from .rendering import cast_depth, noisy_frames
+
+if TYPE_CHECKING:
+    import open3d as o3d
 
 TRUTH_SCHEMA = "breastplan.body-truth/1"
 RESOLUTIONS = {"640x400": (640, 400), "800x600": (800, 600), "1280x800": (1280, 800)}
 HFOV_DEG = 72.0
 """Horizontal field of view of the depth camera (an OAK-D's stereo pair)."""
+WALL_MM = (0.0, 3000.0)
+"""Range of the gap between the back and the wall."""
+SCAN_SUFFIXES = (".ply", ".obj")
+SCAN_UNITS = {"mm": 1.0, "m": 1000.0}
+"""Units of a scan file → millimetres per unit."""
+VISIBLE_TOLERANCE_MM = 1.0
+"""A vertex is visible when the camera's ray towards it hits nothing nearer than this before it."""
 
 
 @dataclass(frozen=True)
 class CameraOptions:
-    """Where the camera stands and what it is: mm, degrees, pixels."""
+    """Where the camera stands and what it is: mm, degrees, pixels. A value out of range raises
+    OptionError (a ValueError) naming the field."""
 
     distance_mm: float = 650.0
     pitch_deg: float = 0.0
@@ -39,13 +55,17 @@ class CameraOptions:
 
     def __post_init__(self):
         if not 400.0 <= self.distance_mm <= 1500.0:
-            raise ValueError(f"distance must be 400..1500 mm, got {self.distance_mm}")
-        if not (-30.0 <= self.pitch_deg <= 30.0 and -30.0 <= self.yaw_deg <= 30.0):
-            raise ValueError("pitch and yaw must be −30..30 degrees")
+            raise OptionError("distance_mm", f"the distance must be 400..1500 mm, got {self.distance_mm}")
+        for name in ("pitch_deg", "yaw_deg"):
+            if not -30.0 <= getattr(self, name) <= 30.0:
+                raise OptionError(name, f"the {name[:-4]} must be −30..30 degrees, got {getattr(self, name)}")
         if self.resolution not in RESOLUTIONS:
-            raise ValueError(f"resolution must be one of {sorted(RESOLUTIONS)}, got {self.resolution!r}")
+            raise OptionError("resolution", f"the resolution must be one of {', '.join(RESOLUTIONS)}, "
+                                            f"got {self.resolution!r}")
         if not 0.0 <= self.noise_mm <= 10.0:
-            raise ValueError(f"noise must be 0..10 mm, got {self.noise_mm}")
+            raise OptionError("noise_mm", f"the noise must be 0..10 mm, got {self.noise_mm}")
+        if self.wall_mm is not None and not WALL_MM[0] <= self.wall_mm <= WALL_MM[1]:
+            raise OptionError("wall_mm", f"the wall must stand 0..3000 mm behind the back, got {self.wall_mm}")
 
     @property
     def size(self) -> tuple[int, int]:
@@ -76,15 +96,25 @@ class BodyScene:
             out.append((transform_points(self.camera_from_body, wall), np.array([[0, 1, 2], [0, 2, 3]])))
         return out
 
-    def render(self) -> tuple[np.ndarray, np.ndarray]:
-        """Noise-free depth (H, W) mm, NaN where nothing is measured, and geometry ids (0 body, 1 wall)."""
+    def raycasting(self) -> o3d.t.geometry.RaycastingScene:
+        """The camera-frame meshes in a ray-casting scene; geometry ids 0 body, 1 wall."""
+        import open3d as o3d
+
         rc = o3d.t.geometry.RaycastingScene()
         for V, F in self.meshes():
             rc.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(F.astype(np.uint32)))
-        return cast_depth(rc, self.camera.K, *self.camera.size)
+        return rc
+
+    def render(self) -> tuple[np.ndarray, np.ndarray]:
+        """Noise-free depth (H, W) mm, NaN where nothing is measured, and geometry ids (0 body, 1 wall)."""
+        from .rendering import cast_depth
+
+        return cast_depth(self.raycasting(), self.camera.K, *self.camera.size)
 
     def frames(self, n_frames: int, seed: int = 0) -> np.ndarray:
         """(N, H, W) uint16 noisy depth frames, mm."""
+        from .rendering import noisy_frames
+
         return noisy_frames(self.render()[0], self.camera.noise_mm, n_frames, seed)
 
     def nipples_camera(self) -> dict[str, np.ndarray]:
@@ -111,6 +141,100 @@ def camera_pose(target: np.ndarray, camera: CameraOptions) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, -R @ centre
     return T
+
+
+# --- what the camera sees, as a scan file ------------------------------------------------
+UP_ROTATIONS = {
+    "+y": ((1, 0, 0), (0, 1, 0), (0, 0, 1)),
+    "-y": ((-1, 0, 0), (0, -1, 0), (0, 0, 1)),      # half a turn about Z
+    "+z": ((1, 0, 0), (0, 0, -1), (0, 1, 0)),       # a quarter turn about X: Y → +Z, Z → −Y
+    "-z": ((1, 0, 0), (0, 0, 1), (0, -1, 0)),       # Y → −Z, Z → +Y
+    "+x": ((0, 1, 0), (-1, 0, 0), (0, 0, 1)),       # a quarter turn about Z: Y → +X, X → −Y
+    "-x": ((0, -1, 0), (1, 0, 0), (0, 0, 1)),       # Y → −X, X → +Y
+}
+"""Up axis of a scan file → the rotation (rows: file axes in body coordinates) that puts the body's up there."""
+assert set(UP_ROTATIONS) == set(UP_AXES)
+_BODY_DIRECTIONS = {(0, 1): "left", (0, -1): "right", (1, 1): "up", (1, -1): "down", (2, 1): "front", (2, -1): "back"}
+
+
+def file_from_body(up: str, units: str) -> np.ndarray:
+    """(4, 4) body frame (mm) → a scan file's frame: turned so that the body's up (Y) lies on `up`
+    (one of options.UP_AXES), scaled to `units` (mm or m)."""
+    T = np.eye(4)
+    T[:3, :3] = np.array(UP_ROTATIONS[up], float) / SCAN_UNITS[units]
+    return T
+
+
+def file_axes(up: str) -> str:
+    """Where a scan file's axes point on the body, e.g. 'x left, y back, z up' for up +z."""
+    rows = np.array(UP_ROTATIONS[up])
+    return ", ".join(f"{axis} {_BODY_DIRECTIONS[int(np.argmax(np.abs(r))), int(r[np.argmax(np.abs(r))])]}"
+                     for axis, r in zip("xyz", rows))
+
+
+def visible_points(scene: BodyScene) -> tuple[np.ndarray, np.ndarray]:
+    """The noise-free depth pixels back-projected: (N, 3) camera mm, row by row, and their
+    geometry ids (0 body, 1 wall)."""
+    depth, ids = scene.render()
+    K = scene.camera.K
+    v, u = np.nonzero(np.isfinite(depth))
+    z = depth[v, u]
+    return np.column_stack([(u - K[0, 2]) * z / K[0, 0], (v - K[1, 2]) * z / K[1, 1], z]), ids[v, u]
+
+
+def visible_faces(scene: BodyScene) -> np.ndarray:
+    """Indices (into body.faces) of the body triangles the camera sees whole: facing it at an
+    incidence under rendering.GRAZING_DEG, their three vertices inside the image and hidden by nothing."""
+    import open3d as o3d
+
+    from .rendering import GRAZING_DEG
+
+    V, F = scene.meshes()[0]
+    dist = np.linalg.norm(V, axis=1)
+    dirs = V / dist[:, None]
+    rays = np.hstack([np.zeros_like(dirs), dirs]).astype(np.float32)
+    first = scene.raycasting().cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()   # inf: nothing hit
+    w, h = scene.camera.size
+    uvw = V @ scene.camera.K.T
+    front = uvw[:, 2] > 0
+    u, v = (uvw[:, :2] / np.where(front, uvw[:, 2], 1.0)[:, None]).T
+    seen = front & (u >= -0.5) & (u <= w - 0.5) & (v >= -0.5) & (v <= h - 0.5) & (first >= dist - VISIBLE_TOLERANCE_MM)
+    tri = V[F]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])     # outward: the body mesh is oriented
+    centre = tri.mean(1)
+    with np.errstate(invalid="ignore", divide="ignore"):               # degenerate triangles: NaN, not seen
+        cos_inc = -np.sum(normal * centre, 1) / (np.linalg.norm(normal, axis=1) * np.linalg.norm(centre, axis=1))
+    return np.flatnonzero(seen[F].all(1) & (cos_inc >= np.cos(np.radians(GRAZING_DEG))))
+
+
+def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: str = "+y") -> dict:
+    """Write what the camera sees as a scan file, atomically: a `.ply` holds the noise-free depth
+    pixels (body and wall) back-projected, an `.obj` the body's visible triangles (`visible_faces`).
+    Coordinates: the body frame turned by `file_from_body(up, units)`. Returns the counts written
+    (points or vertices, faces)."""
+    path = Path(path)
+    if path.suffix.lower() not in SCAN_SUFFIXES:
+        raise OptionError("path", f"a scan file ends in {' or '.join(SCAN_SUFFIXES)}, not '{path.suffix}'")
+    if units not in SCAN_UNITS:
+        raise OptionError("units", f"the units of a scan file are {' or '.join(SCAN_UNITS)}, not '{units}'")
+    if up not in UP_ROTATIONS:
+        raise OptionError("up", f"the up axis is one of {' '.join(UP_AXES)}, not '{up}'")
+    frame = f"units {units}; body frame turned so that its up lies on {up}: {file_axes(up)}"
+    if path.suffix.lower() == ".ply":
+        points, ids = visible_points(scene)
+        to_file = file_from_body(up, units) @ np.linalg.inv(scene.camera_from_body)
+        what = "body and wall" if (ids == 1).any() else "body"
+        write_ply(path, transform_points(to_file, points),
+                  comments=[f"breastplan scan-synth: realistic {what}, noise-free depth pixels back-projected", frame])
+        return {"points": len(points), "faces": 0}
+    used, faces = np.unique(scene.body.faces[visible_faces(scene)], return_inverse=True)
+    V = transform_points(file_from_body(up, units), scene.body.vertices[used])
+    text = (f"# breastplan scan-synth: realistic body, the triangles the camera sees\n# {frame}\n"
+            + ("v {:.6f} {:.6f} {:.6f}\n" * len(V)).format(*V.ravel())
+            + ("f {} {} {}\n" * (faces.size // 3)).format(*(faces.ravel() + 1)))
+    with atomic_open(path) as fh:
+        fh.write(text.encode("ascii"))
+    return {"points": len(V), "faces": faces.size // 3}
 
 
 def save_body_truth(path: str | Path, scene: BodyScene, frames: int) -> Path:
