@@ -31,8 +31,8 @@ follow a database breast closely, the larger carries the seen shape of a frontal
 its unseen side (benchmarks/bench_fit.py measures both)."""
 UNSEEN_MM, UNSEEN_SHARE = 6.0, 0.02
 """A model vertex is unseen with no data point within 6 mm; a breast is partly seen above 2 %."""
-MAX_RESIDUAL = 0.05
-"""A fit whose mean normalised residual stays above 5 % describes no breast surface."""
+MAX_RESIDUAL = 0.03
+"""A fit whose mean normalised residual stays above 3 % describes no breast surface."""
 
 
 @dataclass

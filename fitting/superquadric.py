@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 from breastplan import BadInputError, Primitive, to_mm, to_model_units
 from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.global_deformations import Deformation, beta
-from breastplan.deform.names import KIND_PARAMS
+from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
 
 from .sampling import seeded_subset
 
@@ -267,17 +267,20 @@ class _Solver:
     def __call__(self, p: np.ndarray, kinds: tuple[str, ...], x0: np.ndarray, max_nfev: int = 200,
                  max_turn: float = MAX_TURN_RAD):
         """least_squares from x0: analytic Jacobian for the plain primitive, 2-point with deformations."""
-        lower, upper = _bounds(x0, max_turn)
+        lower, upper = _bounds(x0, max_turn, kinds)
         x0 = np.clip(x0, lower + 1e-9, upper - 1e-9)
         jac = "2-point" if kinds else (lambda x: self.jacobian(x, p))
         return least_squares(lambda x: self.residuals(x, p, kinds), x0, jac=jac, bounds=(lower, upper),
                              loss=self.loss, f_scale=self.f_scale, x_scale="jac", max_nfev=max_nfev)
 
 
-def _bounds(x0: np.ndarray, max_turn: float) -> tuple[np.ndarray, np.ndarray]:
+def _bounds(x0: np.ndarray, max_turn: float, kinds: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
     """eps in EPS_BOUNDS, each rotation-vector component within ±max_turn, semi-axes within
-    SEMI_AXIS_RANGE × the largest initial one; the rest free."""
+    SEMI_AXIS_RANGE × the largest initial one, deformations in their PLAUSIBLE ranges; the
+    translation free."""
     lower, upper = np.full(len(x0), -np.inf), np.full(len(x0), np.inf)
+    names = [n for kind in kinds for n in KIND_PARAMS[kind]]
+    lower[13:], upper[13:] = np.array([PLAUSIBLE[n] for n in names]).reshape(-1, 2).T
     lower[5:7], upper[5:7] = EPS_BOUNDS
     lower[7:10], upper[7:10] = -max_turn, max_turn
     size = np.log(np.exp(x0[:5]).max())

@@ -87,14 +87,20 @@ def ingest_cloud(cloud: ScanCloud, options: IngestOptions, clock: Clock | None =
 
 
 def viewing_frame(points: np.ndarray, up: str) -> np.ndarray:
-    """(4, 4) input → viewing frame for a frontal scan: z along the torso's thinnest axis, away
-    from the viewer (the torso bulges towards the viewer), y opposite to the input's `up` axis."""
+    """(4, 4) input → viewing frame for a frontal scan: z along the cloud's thinnest axis, away
+    from the viewer, y opposite to the input's `up` axis. Of the two senses of z, the viewer's
+    is the one from which the nearest body's trunk bulges towards it (a chest is convex across)."""
     centred = points - points.mean(0)
     _, vecs = np.linalg.eigh(np.cov(centred.T))
-    normal = vecs[:, 0]
-    depth = centred @ normal
-    radial = np.sum(np.square(centred - np.outer(depth, normal)), axis=1)
-    anterior = normal if np.cov(depth, radial)[0, 1] < 0 else -normal  # flanks fall away from the viewer
+    frames = [_frame(sense * vecs[:, 0], up) for sense in (1.0, -1.0)]
+    bulge = [_trunk_bulge(transform_points(T, points)) for T in frames]
+    if max(bulge) == -np.inf:
+        raise BadInputError(None, "shows no trunk: nothing in view is as wide as a chest")
+    return frames[int(np.argmax(bulge))]
+
+
+def _frame(anterior: np.ndarray, up: str) -> np.ndarray:
+    """The viewing frame seen from `anterior` (unit), y opposite to the input's `up` axis."""
     up_vec = np.zeros(3)
     up_vec["xyz".index(up[1])] = -1.0 if up.startswith("-") else 1.0     # up: one of options.UP_AXES
     up_vec -= np.dot(up_vec, anterior) * anterior
@@ -105,6 +111,19 @@ def viewing_frame(points: np.ndarray, up: str) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3] = np.vstack([np.cross(y, z), y, z])
     return T
+
+
+def _trunk_bulge(points: np.ndarray) -> float:
+    """Curvature across (1/mm) with which the trunk of the nearest body in view bulges towards
+    the viewer (viewing frame), −inf without one."""
+    try:
+        body = body_cluster(points)
+        trunk = body[find_trunk(body).mask]
+    except BadInputError:
+        return -np.inf
+    x, y, z = (trunk - trunk.mean(0)).T
+    coef, *_ = np.linalg.lstsq(np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y]), z, rcond=None)
+    return 2.0 * float(coef[3])
 
 
 def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOptions, clock: Clock,

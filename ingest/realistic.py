@@ -168,8 +168,9 @@ def file_from_body(up: str, units: str) -> np.ndarray:
 def file_axes(up: str) -> str:
     """Where a scan file's axes point on the body, e.g. 'x left, y back, z up' for up +z."""
     rows = np.array(UP_ROTATIONS[up])
-    return ", ".join(f"{axis} {_BODY_DIRECTIONS[int(np.argmax(np.abs(r))), int(r[np.argmax(np.abs(r))])]}"
-                     for axis, r in zip("xyz", rows))
+    body_axis = np.abs(rows).argmax(1)                 # each file axis is ± one body axis
+    sign = rows[np.arange(3), body_axis]
+    return ", ".join(f"{axis} {_BODY_DIRECTIONS[int(k), int(s)]}" for axis, k, s in zip("xyz", body_axis, sign))
 
 
 def visible_points(scene: BodyScene) -> tuple[np.ndarray, np.ndarray]:
