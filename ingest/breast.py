@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import open3d as o3d
+from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from breastplan import BadInputError
@@ -23,10 +24,16 @@ MOUND_MM = 10.0
 """Coarse voxels at least this far in front of the chest wall form mounds."""
 MIN_PEAK_MM = 12.0
 """A mound must rise at least this far: smaller bumps are not breasts."""
-MIN_OFF_MIDLINE_MM = 35.0
-"""A breast mound's centre lies at least this far from the trunk's midline."""
-MIN_BELOW_TOP_MM = 60.0
-"""… and at least this far below the trunk's top (the shoulders, or the chin when it shows)."""
+MERGE_MM = 6.0
+"""Basins whose saddle lies within this of the lower summit are one mound."""
+OFF_MIDLINE_MM = (35.0, 140.0)
+"""A breast mound's centre lies this far from the trunk's midline (a chin or a belly nearer,
+a shoulder further; breasts of the realistic test bodies 42–129) …"""
+BELOW_TOP_MM = (85.0, 340.0)
+"""… and this far below the shoulders (a shoulder's own mound higher; breasts 100–300) …"""
+RISE = (0.24, 2.5)
+"""… and rises this share of its radius (breasts 0.29–0.83; a back's shoulder blades 0.18, a
+hand standing out from the hips 5 and more)."""
 MAX_LEVEL_MM = 110.0
 """The two breasts' centres differ in height by at most this much."""
 PAIR_MM = (100.0, 420.0)
@@ -59,14 +66,15 @@ class Mound:
 
 
 def find_mounds(voxels: np.ndarray, wall: ChestWall, midline_x: float, size: float) -> list[Mound]:
-    """Mounds among voxel centroids (size mm), largest volume first."""
+    """Mounds among voxel centroids (size mm), largest volume first: the basins of the height
+    above the chest wall (a breast and a shoulder beside it are two, parted at their saddle)."""
     h = wall.height(voxels)
-    high = h > MOUND_MM
-    if high.sum() < 3:
+    high = np.flatnonzero(h > MOUND_MM)
+    if len(high) < 3:
         return []
-    labels = dbscan(voxels[high], 1.6 * size, 3)
+    labels = height_basins(voxels[high], h[high], size)
     mounds = []
-    for k in range(labels.max() + 1):
+    for k in range(1, labels.max() + 1):
         pts, hk = voxels[high][labels == k], h[high][labels == k]
         if len(pts) < 6 or hk.max() < MIN_PEAK_MM:
             continue
@@ -77,16 +85,72 @@ def find_mounds(voxels: np.ndarray, wall: ChestWall, midline_x: float, size: flo
     return [m for _, m in sorted(mounds, key=lambda vm: -vm[0])]
 
 
-def find_breasts(mounds: list[Mound], midline_x: float, top_y: float) -> dict[str, Mound]:
-    """Side → breast mound. A breast sits off the trunk's midline and below its top; of such
-    mounds, the largest pair (by summed volume) level with each other and as far apart as
-    breasts are is taken, else the largest one on each side (a patient may have one breast).
+def height_basins(points: np.ndarray, height: np.ndarray, size: float) -> np.ndarray:
+    """(N,) basin label (1…) of points (x, y) by height: each cell of the height map (cells of
+    `size` mm) climbs its steepest ascent to a summit; basins whose saddle lies within MERGE_MM
+    of the lower summit are merged (a breast has one summit, whatever the noise)."""
+    ij = np.floor((points[:, :2] - points[:, :2].min(0)) / size).astype(np.int64) + 1   # a border of empty cells
+    H = np.full(tuple(ij.max(0) + 2), -np.inf)
+    np.maximum.at(H, (ij[:, 0], ij[:, 1]), height)
+    rows, cols = H.shape
+    flat = H.ravel()
+    inner = np.flatnonzero(np.isfinite(flat))
+    steps = np.array([di * cols + dj for di in (-1, 0, 1) for dj in (-1, 0, 1)])
+    up = inner[:, None] + steps[None, :]
+    ascent = np.arange(flat.size)
+    ascent[inner] = up[np.arange(len(inner)), np.argmax(flat[up], axis=1)]
+    while True:                                           # pointer jumping: each cell to its summit
+        jumped = ascent[ascent]
+        if np.array_equal(jumped, ascent):
+            break
+        ascent = jumped
+    _, label = np.unique(ascent[inner], return_inverse=True)
+    basins = np.zeros(flat.size, np.int64)
+    basins[inner] = label + 1
+    basins = _merge_shallow(basins.reshape(H.shape), H)
+    return basins[ij[:, 0], ij[:, 1]]
 
-    A chin or a belly lies on the midline, shoulders at the top: they are never taken."""
+
+def _merge_shallow(basins: np.ndarray, H: np.ndarray) -> np.ndarray:
+    """Basins merged across saddles within MERGE_MM of the lower summit, highest saddles first
+    (a merged basin's summit is its highest), so that noise never chains two mounds."""
+    k = int(basins.max())
+    peak = np.full(k + 1, -np.inf)
+    np.maximum.at(peak, basins.ravel(), H.ravel())
+    saddle = np.full((k + 1, k + 1), -np.inf)
+    for a, b, ha, hb in ((basins[1:], basins[:-1], H[1:], H[:-1]), (basins[:, 1:], basins[:, :-1], H[:, 1:], H[:, :-1])):
+        touch = (a > 0) & (b > 0) & (a != b)
+        np.maximum.at(saddle, (np.minimum(a, b)[touch], np.maximum(a, b)[touch]), np.minimum(ha, hb)[touch])
+    root = np.arange(k + 1)
+
+    def find(i):
+        while root[i] != i:
+            i = root[i]
+        return i
+    pairs = np.argwhere(np.isfinite(saddle))
+    for a, b in pairs[np.argsort(-saddle[pairs[:, 0], pairs[:, 1]])]:   # one edge per touching pair of basins
+        ra, rb = find(a), find(b)
+        if ra != rb and saddle[a, b] >= min(peak[ra], peak[rb]) - MERGE_MM:
+            root[rb] = ra
+            peak[ra] = max(peak[ra], peak[rb])
+    roots = np.array([find(i) for i in range(k + 1)])
+    _, compact = np.unique(roots, return_inverse=True)
+    return compact[basins]
+
+
+def find_breasts(mounds: list[Mound], midline_x: float, top_y: float) -> dict[str, Mound]:
+    """Side → breast mound. A breast sits off the trunk's midline, below its shoulders, and
+    rises as breasts do (RISE); of such mounds, the largest pair (by summed volume) level with
+    each other and as far apart as breasts are is taken, else the largest one on each side (a
+    patient may have one breast).
+
+    A chin or a belly lies on the midline, a shoulder high and lateral, a hand on the hip
+    stands out steeply, and a back's shoulder blades are broad and low: they are never taken."""
     x = np.array([m.centre[0] - midline_x for m in mounds]).reshape(-1)
     y = np.array([m.centre[1] for m in mounds]).reshape(-1)
+    rise = np.array([m.peak_mm / m.radius for m in mounds]).reshape(-1)
     size = np.array([m.voxels.shape[0] * m.peak_mm for m in mounds]).reshape(-1)
-    ok = (np.abs(x) >= MIN_OFF_MIDLINE_MM) & (y >= top_y + MIN_BELOW_TOP_MM)
+    ok = (_within(np.abs(x), OFF_MIDLINE_MM) & _within(y - top_y, BELOW_TOP_MM) & _within(rise, RISE))
     left, right = np.flatnonzero(ok & (x > 0)), np.flatnonzero(ok & (x < 0))
     L, R = (a.ravel() for a in np.meshgrid(left, right, indexing="ij"))
     apart = x[L] - x[R]
@@ -95,6 +159,10 @@ def find_breasts(mounds: list[Mound], midline_x: float, top_y: float) -> dict[st
         best = np.argmax(np.where(fits, size[L] + size[R], -np.inf))
         return {"left": mounds[L[best]], "right": mounds[R[best]]}
     return {side: mounds[idx[np.argmax(size[idx])]] for side, idx in (("left", left), ("right", right)) if len(idx)}
+
+
+def _within(values: np.ndarray, bounds: tuple[float, float]) -> np.ndarray:
+    return (values >= bounds[0]) & (values <= bounds[1])
 
 
 def choose_mound(mounds: list[Mound], nipple: np.ndarray | None) -> Mound:

@@ -28,8 +28,8 @@ COARSE_MM = 10.0
 DENSE_CELLS = 4_000_000
 """Voxel grids up to this many cells are indexed densely (no sort)."""
 MIN_BREAST_POINTS = 500
-BODY_SHARE = 0.2
-"""Clusters this large relative to the largest may be the body."""
+BODY_VOXELS = 1000
+"""Clusters of this many coarse voxels (0.1 m² of surface) or more may be the body."""
 
 
 @dataclass
@@ -183,14 +183,15 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
 
 
 def body_cluster(points: np.ndarray) -> np.ndarray:
-    """The points of the body: of the connected clusters (DBSCAN on coarse voxels) with at least
-    BODY_SHARE of the largest one's voxels, the nearest to the viewer (a wall behind is larger)."""
+    """The points of the body: of the connected clusters (DBSCAN on coarse voxels) as large as a
+    trunk's front (BODY_VOXELS, or the largest if none is), the nearest to the viewer (a wall
+    behind may be larger)."""
     coarse, which = voxel_centroids(points, COARSE_MM)
     labels = B.dbscan(coarse, 2.5 * COARSE_MM, 4)
     if (labels < 0).all():
         raise BadInputError(None, "holds no connected surface (only scattered points)")
     counts = np.bincount(labels[labels >= 0])
-    big = np.flatnonzero(counts >= BODY_SHARE * counts.max())
+    big = np.flatnonzero(counts >= min(BODY_VOXELS, counts.max()))
     depth = [np.median(coarse[labels == k, 2]) for k in big]
     return points[labels[which] == big[int(np.argmin(depth))]]
 
@@ -210,7 +211,7 @@ def _roi_test(roi, to_camera: np.ndarray):
 def _nothing_found(mounds: list) -> str:
     if not mounds:
         return "nothing rises from the chest"
-    return f"{len(mounds)} mound{'s' * (len(mounds) > 1)} found, on the midline or at the shoulders"
+    return f"{len(mounds)} mound{'s' * (len(mounds) > 1)} found, none placed or shaped as a breast is"
 
 
 def _enough(n: int, step: str) -> None:

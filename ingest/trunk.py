@@ -24,6 +24,8 @@ SIDE_STEP_MM = 30.0
 """A depth step this large between horizontal neighbours parts an arm from the flank it hangs by."""
 REGROW_CELLS = 3
 """The trunk regrows this many cells over the steps and the opening's trim."""
+SHOULDER_SHARE = 0.6
+"""The shoulders are the highest part of the trunk this wide relative to its widest part."""
 MIN_TRUNK_MM2 = 200.0 * 200.0
 """A trunk covers at least this frontal area."""
 
@@ -34,11 +36,12 @@ class Trunk:
 
     mask: np.ndarray          # (N,) bool over the body's points
     midline_x: float          # mm, x of the trunk's vertical axis at chest height
-    top_y: float              # mm, the highest point of the trunk (shoulders)
+    top_y: float              # mm, the shoulders: the highest row of the trunk at least
+                              # SHOULDER_SHARE as wide as its widest
     width_mm: float           # widest extent across x
 
     def chest(self, points: np.ndarray) -> np.ndarray:
-        """Mask of the points (viewing frame) within CHEST_MM below the trunk's top."""
+        """Mask of the points (viewing frame) from above the shoulders to CHEST_MM below them."""
         return points[:, 1] < self.top_y + CHEST_MM
 
 
@@ -67,9 +70,9 @@ def find_trunk(points: np.ndarray) -> Trunk:
     trunk = labels == 1 + np.bincount(labels.ravel())[1:].argmax()
     trunk = ndimage.binary_dilation(trunk, iterations=REGROW_CELLS) & seen     # back over the steps it cut
     mask = trunk[ij[:, 1], ij[:, 0]]
-    rows = np.flatnonzero(trunk.any(1))
+    width = trunk.sum(1)
+    top = int(np.argmax(width >= SHOULDER_SHARE * width.max()))   # a head or a chin above is narrower
     cols = np.flatnonzero(trunk.any(0))
-    chest = trunk[rows[0]: rows[0] + int(250 / CELL_MM)]       # the upper 250 mm
-    xs = np.nonzero(chest)[1]
+    xs = np.nonzero(trunk[top: top + int(250 / CELL_MM)])[1]      # the upper 250 mm of the chest
     midline = x0 + (0.5 * (np.percentile(xs, 5) + np.percentile(xs, 95)) + 0.5) * CELL_MM
-    return Trunk(mask, float(midline), float(y0 + rows[0] * CELL_MM), float((cols[-1] - cols[0] + 1) * CELL_MM))
+    return Trunk(mask, float(midline), float(y0 + top * CELL_MM), float((cols[-1] - cols[0] + 1) * CELL_MM))
