@@ -60,7 +60,8 @@ def fit(
                f"stopped after its {max_iterations} FFD iteration{'s' * (max_iterations != 1)} (--max-iterations)")
         floor = " (noise in the scan can set such a floor)" if fit.converged else ""
         stderr.print(f"warning: {source}: the fit {how} at mean normalised residual {fit.normalised_residual:.4f}, "
-                     f"above the stopping rule {STOP_RESIDUAL}{floor}; its artefacts are written.", markup=False,
+                     f"above the stopping rule {STOP_RESIDUAL}{floor}; its artefacts are written, and fit.npz maps "
+                     f"each point's residual (residual_map_mm).", markup=False,
                      soft_wrap=True)
     stats = fit.residuals_mm
     report({"fit": str(paths[Case.FIT_NPZ]), "mesh": str(paths[Case.FIT_PLY]), "points": len(points),

@@ -123,6 +123,7 @@ class Fit:
     iterations: tuple[int, int]      # superquadric evaluations, FFD iterations
     seconds: tuple[float, float]
     points: int                      # data points fitted
+    residual_map_mm: np.ndarray      # (points,) each data point's distance to the fitted surface, in input order
     converged: bool                  # met the stopping rule or stopped improving (not cut by the budget)
     stopping_rule_met: bool          # normalised residual < the thesis's stopping rule
     provenance: Provenance = field(default_factory=Provenance)
@@ -139,7 +140,7 @@ _FIT_SPEC = {"primitive": ("f", (7,)), "pose": ("f", (4, 4)), "deformation": ("f
              "control_rest_mm": ("f", ("cp", 3)), "control_fitted_mm": ("f", ("cp", 3)),
              "residuals_mm": ("f", (4,)), "normalised_residual": ("f", ()),
              "volume_cc_primitive": ("f", ()), "volume_cc_mesh": ("f", ()),
-             "iterations": ("iu", (2,)), "seconds": ("f", (2,))}
+             "iterations": ("iu", (2,)), "seconds": ("f", (2,)), "residual_map_mm": ("f", ("n",))}
 
 
 class Case:
@@ -224,6 +225,7 @@ class Case:
             "volume_cc_primitive": np.float64(fit.volume_cc_primitive),
             "volume_cc_mesh": np.float64(fit.volume_cc_mesh),
             "iterations": np.array(fit.iterations, dtype=np.int64), "seconds": np.array(fit.seconds, dtype=float),
+            "residual_map_mm": np.asarray(fit.residual_map_mm, np.float32),
         }
         meta = {"primitive": list(fit.primitive.as_dict()), "residuals_mm": list(RESIDUAL_STATS),
                 "iterations": ["superquadric", "ffd"], "pose": "primitive frame → breast frame, mm",
@@ -256,7 +258,8 @@ class Case:
                    normalised_residual=float(art["normalised_residual"]),
                    volume_cc_primitive=float(art["volume_cc_primitive"]), volume_cc_mesh=float(art["volume_cc_mesh"]),
                    iterations=tuple(int(i) for i in art["iterations"]), seconds=tuple(map(float, art["seconds"])),
-                   points=int(meta.get("points", 0)), converged=bool(meta.get("converged", True)),
+                   points=int(meta.get("points", 0)), residual_map_mm=art["residual_map_mm"],
+                   converged=bool(meta.get("converged", True)),
                    stopping_rule_met=bool(meta.get("stopping_rule_met", True)),
                    provenance=Provenance.from_meta(meta))
 

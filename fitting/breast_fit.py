@@ -82,6 +82,7 @@ class BreastFit:
                    normalised_residual=float(self.ffd.residual), volume_cc_primitive=sq.primitive.volume_cc,
                    volume_cc_mesh=self.volume_cc, iterations=(sq.iterations, self.ffd.iterations),
                    seconds=(sq.seconds, self.ffd.seconds), points=len(self.ffd.residuals_mm),
+                   residual_map_mm=self.ffd.residuals_mm,
                    converged=bool(self.ffd.converged), stopping_rule_met=self.stopping_rule_met,
                    provenance=provenance)
 
@@ -90,8 +91,9 @@ def fit_breast(points_mm: np.ndarray, options: FitOptions = FitOptions()) -> Bre
     """Fit the breast model to (N, 3) points (mm, breast frame, base on z = 0).
 
     A fit that runs out of iterations before the stopping rule is returned as it is (its
-    `ffd.converged` and `stopping_rule_met` say so); BadInputError for unusable points or a fit
-    that finds no breast surface (mean normalised residual above MAX_RESIDUAL).
+    `ffd.converged` and `stopping_rule_met` say so; `ffd.residuals_mm` maps where it misses);
+    BadInputError for unusable points or a fit that finds no breast surface (mean normalised
+    residual above MAX_RESIDUAL, or no enclosed volume).
     """
     sq = fit_superquadric(points_mm, deformations=options.deformations)
     vertices, faces = model_mesh(sq)
@@ -102,7 +104,11 @@ def fit_breast(points_mm: np.ndarray, options: FitOptions = FitOptions()) -> Bre
         raise BadInputError(None, f"gives a fit that found no breast surface: mean normalised residual "
                                   f"{ffd.residual:.4f} after {ffd.iterations} FFD iterations "
                                   f"(stopping rule {STOP_RESIDUAL})")
-    return BreastFit(sq, ffd, faces)
+    fit = BreastFit(sq, ffd, faces)
+    if not fit.volume_cc > 0.0:
+        raise BadInputError(None, f"gives a fitted surface that encloses no volume ({fit.volume_cc:.0f} cc): "
+                                  "its points do not hold a breast")
+    return fit
 
 
 def held_weights(vertices: np.ndarray) -> np.ndarray:

@@ -42,6 +42,7 @@ def a_fit(model=BreastModel(Primitive(10, 11, 9, 10, 8, 0.9, 1.1), Deformation(p
                   control_fitted_mm=lattice + 1.0, residuals_mm={"mean": 0.1, "rms": 0.2, "p95": 0.3, "max": 0.9},
                   normalised_residual=0.001, volume_cc_primitive=model.primitive.volume_cc,
                   volume_cc_mesh=model.volume_cc(20), iterations=(40, 3), seconds=(0.2, 0.05), points=3000,
+                  residual_map_mm=np.linspace(0.0, 0.9, 3000),
                   converged=True, stopping_rule_met=True, provenance=Provenance({"scan.ply": "ab" * 32}, {"lattice": 3}))
     fields.update(changes)
     return Fit(**fields)
@@ -75,6 +76,7 @@ def test_fit_round_trip_and_the_primitive_and_pose_in_the_ply_header(tmp_path):
     assert np.array_equal(back.vertices, fit.vertices) and np.array_equal(back.faces, fit.faces)
     assert back.residuals_mm == fit.residuals_mm and back.iterations == (40, 3)
     assert back.converged is False and back.stopping_rule_met is False and back.provenance == fit.provenance
+    assert np.allclose(back.residual_map_mm, fit.residual_map_mm, atol=1e-6)   # stored as float32
     assert Primitive.from_comments(read_ply(tmp_path / "fit.ply").comments) == fit.primitive
 
 

@@ -180,6 +180,9 @@ def test_a_fit_that_misses_the_stopping_rule_is_written_and_says_so(cli, tmp_pat
     assert res.stderr.count("\n") == 1 and "warning:" in res.stderr and str(path) in res.stderr
     fit = Case(tmp_path).load_fit()
     assert fit.stopping_rule_met is False and fit.iterations[1] == out["iterations"]["ffd"]
+    assert fit.residual_map_mm.shape == (len(noisy),)          # where it misses, point by point
+    assert np.mean(fit.residual_map_mm) == pytest.approx(out["residuals_mm"]["mean"], abs=1e-3)
+    assert 0.5 < np.sqrt(np.mean(np.square(fit.residual_map_mm))) < 3.0   # the 1 mm noise, not a failed fit
 
 
 def test_deform_of_a_fit_uses_its_primitive_and_pose(cli, tmp_path):
