@@ -21,11 +21,16 @@ CHEST_MM = 450.0
 LIMB_MM = 65.0
 """Radius of the opening disc: necks and arms are narrower than its diameter, a trunk is wider."""
 SIDE_STEP_MM = 30.0
-"""A depth step this large between horizontal neighbours parts an arm from the flank it hangs by."""
+"""A depth step this large between horizontal neighbours, the lateral one nearer, parts an arm
+from the flank it hangs by."""
+ARM_EDGE_MM = 40.0
+"""… along at least this length down the body (a breast's lower edge is shorter and curved)."""
 REGROW_CELLS = 3
 """The trunk regrows this many cells over the steps and the opening's trim."""
 SHOULDER_SHARE = 0.6
-"""The shoulders are the highest part of the trunk this wide relative to its widest part."""
+UPPER_MM = 350.0
+"""The shoulders are the highest part of the trunk at least SHOULDER_SHARE as wide as its widest
+part within UPPER_MM of its top (lower down, hips and hanging arms may be wider)."""
 MIN_TRUNK_MM2 = 200.0 * 200.0
 """A trunk covers at least this frontal area."""
 
@@ -36,8 +41,7 @@ class Trunk:
 
     mask: np.ndarray          # (N,) bool over the body's points
     midline_x: float          # mm, x of the trunk's vertical axis at chest height
-    top_y: float              # mm, the shoulders: the highest row of the trunk at least
-                              # SHOULDER_SHARE as wide as its widest
+    top_y: float              # mm, the shoulders (see SHOULDER_SHARE)
     width_mm: float           # widest extent across x
 
     def chest(self, points: np.ndarray) -> np.ndarray:
@@ -55,9 +59,15 @@ def find_trunk(points: np.ndarray) -> Trunk:
     np.minimum.at(nearest, (ij[:, 1], ij[:, 0]), points[:, 2])
     seen = np.isfinite(nearest)
     seen |= ndimage.binary_closing(seen, iterations=2)
+    # an arm hanging by the flank is nearer than the flank beside it, on the side away from the
+    # body's axis; a breast is nearer than what lies beside it towards the axis: only the first parts
+    axis = np.median(ij[:, 0]) + 0.5
     with np.errstate(invalid="ignore"):
-        step = np.abs(np.diff(nearest, axis=1)) > SIDE_STEP_MM
-    step &= np.isfinite(nearest[:, 1:]) & np.isfinite(nearest[:, :-1])   # a hole is not a step
+        outward_nearer = np.where(np.arange(shape[1] - 1) + 1 > axis,       # the right-hand cell is lateral
+                                  nearest[:, :-1] - nearest[:, 1:], nearest[:, 1:] - nearest[:, :-1])
+    step = np.nan_to_num(outward_nearer, nan=0.0, posinf=0.0, neginf=0.0) > SIDE_STEP_MM   # a hole is not a step
+    step = ndimage.binary_dilation(step, structure=np.ones((1, 3), bool))           # an arm's edge runs down
+    step = ndimage.binary_opening(step, structure=np.ones((int(ARM_EDGE_MM / CELL_MM), 1), bool))   # a breast's is short
     occupied = seen.copy()
     occupied[:, 1:] &= ~step
     occupied[:, :-1] &= ~step
@@ -71,7 +81,9 @@ def find_trunk(points: np.ndarray) -> Trunk:
     trunk = ndimage.binary_dilation(trunk, iterations=REGROW_CELLS) & seen     # back over the steps it cut
     mask = trunk[ij[:, 1], ij[:, 0]]
     width = trunk.sum(1)
-    top = int(np.argmax(width >= SHOULDER_SHARE * width.max()))   # a head or a chin above is narrower
+    first = int(np.argmax(width > 0))
+    upper = width[first: first + int(UPPER_MM / CELL_MM)]              # head, neck and shoulders
+    top = first + int(np.argmax(upper >= SHOULDER_SHARE * upper.max()))  # a head or a chin is narrower
     cols = np.flatnonzero(trunk.any(0))
     xs = np.nonzero(trunk[top: top + int(250 / CELL_MM)])[1]      # the upper 250 mm of the chest
     midline = x0 + (0.5 * (np.percentile(xs, 5) + np.percentile(xs, 95)) + 0.5) * CELL_MM
