@@ -63,12 +63,16 @@ def fit(
                      f"above the stopping rule {STOP_RESIDUAL}{floor}; its artefacts are written, and fit.npz maps "
                      f"each point's residual (residual_map_mm).", markup=False,
                      soft_wrap=True)
+    at_bounds = result.at_bounds()
+    if at_bounds:
+        stderr.print(f"warning: {source}: the fitted {', '.join(at_bounds)} reached the end of their plausible range: "
+                     f"the breast model holds this breast only roughly.", markup=False, soft_wrap=True)
     stats = fit.residuals_mm
     report({"fit": str(paths[Case.FIT_NPZ]), "mesh": str(paths[Case.FIT_PLY]), "points": len(points),
             "volume_cc": round(fit.volume_cc_mesh, 2), "volume_cc_primitive": round(fit.volume_cc_primitive, 2),
             "rms_mm": round(stats["rms"], 4), "residuals_mm": {k: round(v, 4) for k, v in stats.items()},
             "normalised_residual": round(fit.normalised_residual, 6), "stopping_rule": STOP_RESIDUAL,
-            "stopping_rule_met": fit.stopping_rule_met, "converged": fit.converged,
+            "stopping_rule_met": fit.stopping_rule_met, "converged": fit.converged, "at_bounds": at_bounds,
             "iterations": {"superquadric": fit.iterations[0], "ffd": fit.iterations[1]},
             "params": {k: round(v, 5) for k, v in result.params().items()},
             "seconds": clock.seconds}, as_json, f"fit → {paths[Case.FIT_PLY]}")

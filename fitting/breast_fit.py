@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 
 from breastplan import BadInputError
 from breastplan.case import Fit, Provenance
-from breastplan.deform.names import KIND_PARAMS
+from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
 from breastplan.meshes import mesh_volume
 from breastplan.options import FitOptions
 
@@ -71,6 +71,12 @@ class BreastFit:
         names = [n for kind in KIND_PARAMS.values() for n in kind]
         out.update({n: float(v) for n, v in zip(names, self.superquadric.deformation.as_vector()) if v != 0.0})
         return out
+
+    def at_bounds(self) -> list[str]:
+        """Fitted deformation parameters at an end of their plausible range (deform.names.PLAUSIBLE):
+        the shape asked for more than the thesis's breasts ever do, so the model holds it only roughly."""
+        params = self.params()
+        return [n for n, (lo, hi) in PLAUSIBLE.items() if n in params and min(params[n] - lo, hi - params[n]) < 1e-6]
 
     def artefact(self, provenance: Provenance = Provenance()) -> Fit:
         """The case's record of this fit (`Case.save_fit` writes it)."""

@@ -31,9 +31,9 @@ OFF_MIDLINE_MM = (35.0, 140.0)
 a shoulder further; breasts of the realistic test bodies 42–129) …"""
 BELOW_TOP_MM = (85.0, 340.0)
 """… and this far below the shoulders (a shoulder's own mound higher; breasts 100–300) …"""
-RISE = (0.24, 2.5)
-"""… and rises this share of its radius (breasts 0.29–0.83; a back's shoulder blades 0.18, a
-hand standing out from the hips 5 and more)."""
+RISE = (0.5, 3.0)
+"""… and rises this share of its footprint's radius (`Mound.rise`; breasts 0.56–1.29, a back's
+shoulder blades where breasts would be 0.30–0.44, a hand standing out from the hips 5 and more)."""
 MAX_LEVEL_MM = 110.0
 """The two breasts' centres differ in height by at most this much."""
 PAIR_MM = (100.0, 420.0)
@@ -63,6 +63,12 @@ class Mound:
     radius: float              # mm, in x, y
     peak_mm: float             # greatest height above the chest wall
     voxels: np.ndarray         # (M, 3) the mound's voxel centroids
+    footprint_mm2: float       # area it covers seen from the viewer
+
+    @property
+    def rise(self) -> float:
+        """Peak height over the radius of a disc of the mound's footprint: how steeply it stands out."""
+        return self.peak_mm / np.sqrt(self.footprint_mm2 / np.pi)
 
 
 def find_mounds(voxels: np.ndarray, wall: ChestWall, midline_x: float, size: float) -> list[Mound]:
@@ -80,8 +86,9 @@ def find_mounds(voxels: np.ndarray, wall: ChestWall, midline_x: float, size: flo
             continue
         centre = (pts[:, :2] * hk[:, None]).sum(0) / hk.sum()
         radius = float(np.linalg.norm(pts[:, :2] - centre, axis=1).max() + size)
+        footprint = len(np.unique(np.floor(pts[:, :2] / size), axis=0)) * size * size
         mounds.append((float(hk.sum()), Mound("left" if centre[0] > midline_x else "right", centre, radius,
-                                              float(hk.max()), pts)))
+                                              float(hk.max()), pts, footprint)))
     return [m for _, m in sorted(mounds, key=lambda vm: -vm[0])]
 
 
@@ -89,7 +96,8 @@ def height_basins(points: np.ndarray, height: np.ndarray, size: float) -> np.nda
     """(N,) basin label (1…) of points (x, y) by height: each cell of the height map (cells of
     `size` mm) climbs its steepest ascent to a summit; basins whose saddle lies within MERGE_MM
     of the lower summit are merged (a breast has one summit, whatever the noise)."""
-    ij = np.floor((points[:, :2] - points[:, :2].min(0)) / size).astype(np.int64) + 1   # a border of empty cells
+    ij = np.floor(points[:, :2] / size).astype(np.int64)          # the voxels' own grid
+    ij += 1 - ij.min(0)                                               # a border of empty cells
     H = np.full(tuple(ij.max(0) + 2), -np.inf)
     np.maximum.at(H, (ij[:, 0], ij[:, 1]), height)
     rows, cols = H.shape
@@ -148,7 +156,7 @@ def find_breasts(mounds: list[Mound], midline_x: float, top_y: float) -> dict[st
     stands out steeply, and a back's shoulder blades are broad and low: they are never taken."""
     x = np.array([m.centre[0] - midline_x for m in mounds]).reshape(-1)
     y = np.array([m.centre[1] for m in mounds]).reshape(-1)
-    rise = np.array([m.peak_mm / m.radius for m in mounds]).reshape(-1)
+    rise = np.array([m.rise for m in mounds]).reshape(-1)
     size = np.array([m.voxels.shape[0] * m.peak_mm for m in mounds]).reshape(-1)
     ok = (_within(np.abs(x), OFF_MIDLINE_MM) & _within(y - top_y, BELOW_TOP_MM) & _within(rise, RISE))
     left, right = np.flatnonzero(ok & (x > 0)), np.flatnonzero(ok & (x < 0))

@@ -142,7 +142,7 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
         coarse = coarse[trunk.chest(coarse)]
     with clock("chest wall"):
         wall = fit_chest_wall(coarse, 2)
-    with clock("mounds (DBSCAN, open3d)"):
+    with clock("mounds (height basins) + breasts"):
         mounds = B.find_mounds(coarse, wall, trunk.midline_x, COARSE_MM)
         if in_roi is not None:
             mounds = [m for m in mounds if in_roi(m.voxels).any()]
