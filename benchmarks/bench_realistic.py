@@ -1,0 +1,633 @@
+"""Breast isolation and fitting on realistic bodies (MakeHuman), with the Chen torso as the baseline.
+
+Realistic scenes: 4 pairs of MakeHuman bodies (`ingest.makehuman.BodyOptions`), each pair differing
+in one thing only — two in cup (0.3 vs 0.8, 0.2 vs 1.0), two in firmness (0 vs 1) — with weights
+0.2–0.9, muscle 0.3–0.7 and modifiers (asymmetry ±, breast_trans, torso_width). Each pair is seen
+from 3 of the 8 views of VIEWS (pose a-pose / arms-down / hands-on-hips; camera 500–900 mm, pitch
+−15..15°, yaw −10..10°, 640×400 / 800×600 / 1280×800, wall at 400 mm or none): 8 bodies × 3 views =
+24 scenes, 8 noisy depth frames each (`ingest.realistic.make_body_scene(...).frames(8, view)`; both
+bodies of a pair share the view and its noise seed). Each scene goes through `ingest_frames` for the
+left and the right side (automatic isolation, no nipple given); a side that returns is fitted with
+`fit_breast(points, FitOptions())`. Baseline scenes, in the same run and interleaved with the
+realistic ones (so that both see the same load): 6 Chen torsos (`ingest.synthetic.make_scene`),
+seeds 0, 1, 2 as drawn and with all five semi-axes × CHEN_SCALE (a known volume change), 8 frames
+(640×400), through the same calls.
+
+Figures (a side is *isolated* when ingest returns and its nipple lies within ISOLATED_MM of the truth;
+a BadInputError counts as not isolated; a fit is made whenever ingest returns, and used for the
+volume and ptosis figures only when its side is isolated):
+
+1. both breasts isolated: share of scenes with both sides isolated (target 100 %);
+2. nipple error, 3-D, over the isolated sides: median (≤ 3 mm) and worst (≤ 8 mm). Truth: the
+   centroid of MakeHuman's nipple ring (`scene.nipples_camera()`); Chen: the tip of the nipple bump;
+3. nipple asymmetry: per scene with both sides isolated, (left − right) nipple offsets in the body
+   frame (found nipples taken there by the inverse of `scene.camera_from_body`), horizontal (X) and
+   vertical (Y), minus the true offsets: worst |error| ≤ 4 mm;
+4. cup change: per cup pair × view × side, fitted volume change vs the true change (difference of
+   `body.half_volumes_cc()` of that side); worst relative error ≤ 10 %. Baseline: the same on the
+   Chen pairs (truth: `Primitive.volume_cc`);
+5. firmness pairs (same cup, firmness 0 vs 1), per view × side: (a) the fitted ptosis b0 (docs/model.md
+   §3, `BreastFit.superquadric.deformation.params("ptosis")`) is larger for firmness 0 (target: every
+   case; baseline: on the Chen torsos, the share of scenes whose fitted left/right b0 order matches the
+   true order, where the true b0 differ by ≥ 0.2); (b) the fitted volumes differ by ≤ 5 % of their mean
+   (baseline: the true difference, in % of the same mean);
+6. fit seconds per breast (the whole `fit_breast` call, one call per breast): median over the realistic
+   breasts ≤ 1 s; baseline: the median over the Chen breasts;
+7. ingest time of 8 frames at 800×600 (`ingest_frames`, frames already in memory): median ≤ 1 s, over
+   the 800×600 scenes (up to TIMING_CASES scene × side cases), each a median of `repeats` calls after
+   one warm-up, alternating with the baseline: the Chen scene's ingest (640×400, 8 frames, same side).
+   A call that raises BadInputError is timed as it is (until it raises) and counted.
+
+Every fit runs under `threadpool_limits(1, "blas")`, as `breastplan fit` runs it. Nothing is asserted:
+the script prints tables, then one line of JSON per figure ({"figure", "value", "target", "baseline",
+"unit", "met", ...}) and a last line with everything.
+
+Run:  .venv/bin/python benchmarks/bench_realistic.py [--repeats N] [--quick]
+      (default 5 repeats for 7., 24 scenes + 6 Chen scenes, about 3–4 minutes on 2 cores; --quick:
+      2 repeats, one cup pair and one firmness pair seen from 2 views (8 scenes) + 2 Chen scenes)
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+from threadpoolctl import threadpool_limits
+
+from breastplan import BadInputError, transform_points
+from breastplan.fitting.breast_fit import fit_breast
+from breastplan.ingest import synthetic
+from breastplan.ingest.makehuman import BodyOptions
+from breastplan.ingest.pipeline import ingest_frames
+from breastplan.ingest.realistic import CameraOptions, make_body_scene
+from breastplan.ingest.recording import DepthFrames
+from breastplan.options import SIDES, FitOptions, IngestOptions
+
+from timing import fmt, median_times
+
+FRAMES = 8
+ISOLATED_MM = 30.0
+CHEN_SEEDS, CHEN_TILTS_DEG = (0, 1, 2), (0.0, 10.0, 5.0)
+CHEN_SCALE = 1.12
+"""The Chen pairs' second member: all five semi-axes × 1.12 (volume × 1.40)."""
+CHEN_B0_GAP = 0.2
+"""Chen scenes whose true left/right ptosis b0 differ by less than this are left out of 5a's baseline."""
+TIMING_RESOLUTION, TIMING_CASES = "800x600", 4
+TARGETS = {"both_isolated_pct": 100.0, "nipple_median_mm": 3.0, "nipple_worst_mm": 8.0, "asymmetry_worst_mm": 4.0,
+           "cup_change_worst_pct": 10.0, "firmness_order_pct": 100.0, "firmness_volume_pct": 5.0,
+           "fit_s": 1.0, "ingest_800x600_s": 1.0}
+
+# --- scenes -----------------------------------------------------------------------------------
+VIEWS = (
+    ("a-pose", CameraOptions(650.0, 0.0, 0.0, "800x600", wall_mm=400.0)),
+    ("arms-down", CameraOptions(800.0, 10.0, -5.0, "640x400", wall_mm=None)),
+    ("hands-on-hips", CameraOptions(550.0, -10.0, 8.0, "1280x800", wall_mm=400.0)),
+    ("a-pose", CameraOptions(900.0, 15.0, 10.0, "800x600", wall_mm=None)),
+    ("arms-down", CameraOptions(500.0, -15.0, -10.0, "1280x800", wall_mm=400.0)),
+    ("hands-on-hips", CameraOptions(700.0, 5.0, -8.0, "640x400", wall_mm=400.0)),
+    ("a-pose", CameraOptions(750.0, -5.0, 5.0, "1280x800", wall_mm=None)),
+    ("hands-on-hips", CameraOptions(600.0, 12.0, 0.0, "800x600", wall_mm=None)),
+)
+"""(pose, camera) of each view; noise 1 mm (the CameraOptions default)."""
+
+
+@dataclass(frozen=True)
+class Pair:
+    """Two bodies differing only in `varies` (cup or firmness): values (lo, hi)."""
+
+    name: str
+    varies: str
+    values: tuple[float, float]
+    base: BodyOptions
+    views: tuple[int, ...]
+    quick_views: tuple[int, ...] = ()
+
+    def body(self, member: int, pose: str) -> BodyOptions:
+        return self.base.but(**{self.varies: self.values[member], "pose": pose})
+
+
+PAIRS = (
+    Pair("cup-1", "cup", (0.3, 0.8), BodyOptions(firmness=0.5, weight=0.5, muscle=0.5), (0, 1, 2), (0, 2)),
+    Pair("cup-2", "cup", (0.2, 1.0), BodyOptions(firmness=0.7, weight=0.8, muscle=0.4, modifiers={"asymmetry": 0.8}),
+         (2, 3, 4)),
+    Pair("firm-1", "firmness", (0.0, 1.0), BodyOptions(cup=0.7, weight=0.2, muscle=0.7,
+                                                       modifiers={"breast_trans": -0.5}), (4, 5, 6), (0, 2)),
+    Pair("firm-2", "firmness", (0.0, 1.0), BodyOptions(cup=0.9, weight=0.9, muscle=0.3,
+                                                       modifiers={"asymmetry": -0.6, "torso_width": 0.5}), (6, 7, 0)),
+)
+MEMBERS = ("lo", "hi")
+
+
+@dataclass
+class Side:
+    """One side of one scene: what ingest and fit gave, and the errors against the truth."""
+
+    status: str = "raised"             # "isolated", "far" (nipple > ISOLATED_MM off), "raised"
+    error: str | None = None
+    ingest_s: float = 0.0
+    nipple_mm: float | None = None
+    nipple_camera: np.ndarray | None = None
+    points: int = 0
+    fit_status: str | None = None      # None (no fit), "fitted", "rejected"
+    fit_error: str | None = None
+    fit_s: float | None = None
+    volume_cc: float | None = None
+    b0: float | None = None
+    b1: float | None = None
+    residual: float | None = None      # FFD mean normalised residual
+    iterations: tuple | None = None    # (superquadric nfev, FFD iterations)
+    stage_s: tuple | None = None       # (superquadric, FFD) seconds as the fit reports them
+    converged: bool | None = None      # FFD met the stopping rule or stopped improving (not cut at max_iterations)
+
+    @property
+    def isolated(self) -> bool:
+        return self.status == "isolated"
+
+    def as_dict(self) -> dict:
+        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
+
+
+@dataclass
+class SceneResult:
+    kind: str                          # "realistic" or "chen"
+    label: str
+    meta: dict
+    sides: dict = field(default_factory=dict)
+    asymmetry_mm: dict | None = None   # {"horizontal": err, "vertical": err} when both sides are isolated
+    truth: dict = field(default_factory=dict)
+    wall_s: float = 0.0
+
+    @property
+    def both_isolated(self) -> bool:
+        return all(self.sides[s].isolated for s in SIDES)
+
+    def as_dict(self) -> dict:
+        return {"kind": self.kind, "label": self.label, "meta": self.meta, "truth": self.truth,
+                "sides": {s: v.as_dict() for s, v in self.sides.items()}, "asymmetry_mm": self.asymmetry_mm,
+                "both_isolated": self.both_isolated, "wall_s": self.wall_s}
+
+
+def realistic_specs(quick: bool) -> list[dict]:
+    """One spec per realistic scene: pair, member, view."""
+    specs = []
+    for pair in PAIRS:
+        views = pair.quick_views if quick else pair.views
+        for view in views:
+            for member in (0, 1):
+                specs.append({"pair": pair, "member": member, "view": view})
+    return specs
+
+
+def chen_specs(quick: bool) -> list[dict]:
+    seeds = CHEN_SEEDS[:1] if quick else CHEN_SEEDS
+    return [{"seed": s, "tilt_deg": CHEN_TILTS_DEG[k], "scaled": scaled}
+            for k, s in enumerate(seeds) for scaled in (False, True)]
+
+
+def chen_scene(spec: dict) -> synthetic.Scene:
+    scene = synthetic.make_scene(spec["seed"], tilt_deg=spec["tilt_deg"])
+    if not spec["scaled"]:
+        return scene
+    overrides = {side: {a: CHEN_SCALE * getattr(scene.breasts[side].primitive, a) for a in ("a1", "a2", "a3", "a4", "a5")}
+                 for side in SIDES}
+    return synthetic.make_scene(spec["seed"], tilt_deg=spec["tilt_deg"], overrides=overrides)
+
+
+def chen_nipples_body(scene: synthetic.Scene) -> dict[str, np.ndarray]:
+    return {s: transform_points(synthetic.body_from_breast(s), scene.breasts[s].nipple_mm[None])[0] for s in SIDES}
+
+
+# --- one scene through ingest and fit ---------------------------------------------------------
+def run_side(frames: DepthFrames, side: str, truth_camera: np.ndarray) -> Side:
+    out = Side()
+    t0 = time.perf_counter()
+    try:
+        ingested = ingest_frames(frames, IngestOptions(side=side))
+    except BadInputError as exc:
+        out.ingest_s, out.error = time.perf_counter() - t0, str(exc)
+        return out
+    out.ingest_s = time.perf_counter() - t0
+    out.nipple_camera = np.asarray(ingested.nipple_camera, float)
+    out.nipple_mm = float(np.linalg.norm(out.nipple_camera - truth_camera))
+    out.status = "isolated" if out.nipple_mm <= ISOLATED_MM else "far"
+    out.points = int(len(ingested.points))
+    t0 = time.perf_counter()
+    try:
+        fit = fit_breast(ingested.points, FitOptions())
+    except BadInputError as exc:
+        out.fit_s, out.fit_status, out.fit_error = time.perf_counter() - t0, "rejected", str(exc)
+        return out
+    out.fit_s, out.fit_status = time.perf_counter() - t0, "fitted"
+    out.volume_cc, out.residual = float(fit.volume_cc), float(fit.ffd.residual)
+    out.b0, out.b1 = (float(v) for v in fit.superquadric.deformation.params("ptosis"))
+    out.iterations = (int(fit.superquadric.iterations), int(fit.ffd.iterations))
+    out.stage_s = (float(fit.superquadric.seconds), float(fit.ffd.seconds))
+    out.converged = bool(fit.ffd.converged)
+    return out
+
+
+def asymmetry(sides: dict[str, Side], body_from_camera: np.ndarray, truth_body: dict) -> dict | None:
+    """(left − right) found nipple offset minus the true one, body frame: X horizontal, Y vertical (mm)."""
+    if not all(sides[s].isolated for s in SIDES):
+        return None
+    found = {s: transform_points(body_from_camera, sides[s].nipple_camera[None])[0] for s in SIDES}
+    d = (found["left"] - found["right"]) - (truth_body["left"] - truth_body["right"])
+    return {"horizontal": float(d[0]), "vertical": float(d[1])}
+
+
+def run_realistic(spec: dict) -> tuple[SceneResult, DepthFrames]:
+    start = time.perf_counter()
+    pair, member, view = spec["pair"], spec["member"], spec["view"]
+    pose, camera = VIEWS[view]
+    scene = make_body_scene(pair.body(member, pose), camera)
+    frames = DepthFrames(scene.frames(FRAMES, view), scene.camera.K, "synthetic")
+    truth_camera = scene.nipples_camera()
+    sides = {s: run_side(frames, s, truth_camera[s]) for s in SIDES}
+    volumes = scene.body.half_volumes_cc()
+    result = SceneResult("realistic", f"{pair.name}/{MEMBERS[member]} v{view}",
+                         {"pair": pair.name, "varies": pair.varies, "member": MEMBERS[member],
+                          "value": pair.values[member], "view": view, "pose": pose, "resolution": camera.resolution,
+                          "distance_mm": camera.distance_mm, "pitch_deg": camera.pitch_deg, "yaw_deg": camera.yaw_deg,
+                          "wall_mm": camera.wall_mm, "body": {**pair.body(member, pose).__dict__}},
+                         sides, asymmetry(sides, np.linalg.inv(scene.camera_from_body), scene.body.nipples),
+                         {"half_volume_cc": volumes})
+    result.wall_s = time.perf_counter() - start
+    return result, frames
+
+
+def run_chen(spec: dict) -> tuple[SceneResult, DepthFrames]:
+    start = time.perf_counter()
+    scene = chen_scene(spec)
+    frames = DepthFrames(synthetic.depth_frames(scene, FRAMES, spec["seed"]), scene.K, "synthetic")
+    truth_body = chen_nipples_body(scene)
+    truth_camera = {s: transform_points(scene.camera_from_body, truth_body[s][None])[0] for s in SIDES}
+    sides = {s: run_side(frames, s, truth_camera[s]) for s in SIDES}
+    truth = {"volume_cc": {s: scene.breasts[s].primitive.volume_cc for s in SIDES},
+             "b0": {s: float(scene.breasts[s].deformation.params("ptosis")[0]) for s in SIDES}}
+    result = SceneResult("chen", f"chen s{spec['seed']}{' ×' + format(CHEN_SCALE, 'g') if spec['scaled'] else ''}",
+                         {**spec, "distance_mm": float(scene.meta["distance_mm"]), "resolution": "640x400"},
+                         sides, asymmetry(sides, np.linalg.inv(scene.camera_from_body), truth_body), truth)
+    result.wall_s = time.perf_counter() - start
+    return result, frames
+
+
+def run_all(quick: bool, console: Console) -> tuple[list[SceneResult], list[SceneResult], list, DepthFrames]:
+    """Realistic scenes with the Chen scenes interleaved (one every len(real)/len(chen) scenes).
+    Returns both lists of results, the 800×600 cases kept for the ingest timing (7.) and the frames
+    of the first Chen scene (its baseline)."""
+    real_specs, chen_list = realistic_specs(quick), chen_specs(quick)
+    every = max(1, len(real_specs) // len(chen_list))
+    real, chen, timing_frames, chen_frames = [], [], [], None
+    ci = 0
+    for k, spec in enumerate(real_specs):
+        if k % every == 0 and ci < len(chen_list):
+            r, frames = run_chen(chen_list[ci])
+            chen.append(r)
+            if ci == 0:
+                chen_frames = frames
+            ci += 1
+            console.log(f"{r.label}: {r.wall_s:.1f} s")
+        r, frames = run_realistic(spec)
+        real.append(r)
+        if r.meta["resolution"] == TIMING_RESOLUTION and len(timing_frames) < TIMING_CASES:
+            timing_frames.append((r.label, SIDES[len(timing_frames) % 2], frames))
+        console.log(f"{r.label}: {r.wall_s:.1f} s")
+    for spec in chen_list[ci:]:
+        r, _ = run_chen(spec)
+        chen.append(r)
+        console.log(f"{r.label}: {r.wall_s:.1f} s")
+    return real, chen, timing_frames, chen_frames
+
+
+# --- figures ----------------------------------------------------------------------------------
+def median_or_none(values):
+    values = list(values)
+    return statistics.median(values) if values else None
+
+
+def max_or_none(values):
+    values = list(values)
+    return max(values) if values else None
+
+
+def isolation_figures(scenes: list[SceneResult]) -> dict:
+    nipples = [s.sides[side].nipple_mm for s in scenes for side in SIDES if s.sides[side].isolated]
+    asym = [max(abs(s.asymmetry_mm["horizontal"]), abs(s.asymmetry_mm["vertical"])) for s in scenes if s.asymmetry_mm]
+    return {"scenes": len(scenes), "both_isolated": sum(s.both_isolated for s in scenes),
+            "both_isolated_pct": 100.0 * sum(s.both_isolated for s in scenes) / len(scenes),
+            "sides_isolated": len(nipples), "sides": 2 * len(scenes),
+            "sides_raised": sum(s.sides[side].status == "raised" for s in scenes for side in SIDES),
+            "sides_far": sum(s.sides[side].status == "far" for s in scenes for side in SIDES),
+            "nipple_median_mm": median_or_none(nipples), "nipple_worst_mm": max_or_none(nipples),
+            "asymmetry_scenes": len(asym), "asymmetry_worst_mm": max_or_none(asym)}
+
+
+def usable(side: Side) -> bool:
+    return side.isolated and side.fit_status == "fitted"
+
+
+def realistic_pairs(scenes: list[SceneResult], varies: str) -> list[dict]:
+    """One case per pair × view × side of the pairs varying `varies` (both members present)."""
+    index = {(s.meta["pair"], s.meta["view"], s.meta["member"]): s for s in scenes}
+    cases = []
+    for pair in PAIRS:
+        if pair.varies != varies:
+            continue
+        for view in sorted({s.meta["view"] for s in scenes if s.meta["pair"] == pair.name}):
+            lo, hi = index.get((pair.name, view, "lo")), index.get((pair.name, view, "hi"))
+            if lo is None or hi is None:
+                continue
+            for side in SIDES:
+                a, b = lo.sides[side], hi.sides[side]
+                case = {"pair": pair.name, "view": view, "side": side, "values": list(pair.values),
+                        "true_change_cc": hi.truth["half_volume_cc"][side] - lo.truth["half_volume_cc"][side],
+                        "fitted": usable(a) and usable(b), "volume_cc": [a.volume_cc, b.volume_cc],
+                        "b0": [a.b0, b.b0], "b1": [a.b1, b.b1]}
+                if case["fitted"]:
+                    case["fitted_change_cc"] = b.volume_cc - a.volume_cc
+                    mean = 0.5 * (a.volume_cc + b.volume_cc)
+                    if varies == "cup":
+                        case["relative_error_pct"] = 100.0 * (case["fitted_change_cc"] / case["true_change_cc"] - 1.0)
+                    else:
+                        case["order_ok"] = bool(a.b0 > b.b0)          # firmness 0 sags more: larger b0
+                        case["volume_difference_pct"] = 100.0 * abs(case["fitted_change_cc"]) / mean
+                        case["true_difference_pct"] = 100.0 * abs(case["true_change_cc"]) / mean
+                cases.append(case)
+    return cases
+
+
+def chen_pairs(chen: list[SceneResult]) -> list[dict]:
+    """Cup-change baseline: each Chen seed as drawn vs scaled, per side."""
+    index = {(s.meta["seed"], s.meta["scaled"]): s for s in chen}
+    cases = []
+    for seed in sorted({s.meta["seed"] for s in chen}):
+        lo, hi = index.get((seed, False)), index.get((seed, True))
+        if lo is None or hi is None:
+            continue
+        for side in SIDES:
+            a, b = lo.sides[side], hi.sides[side]
+            case = {"seed": seed, "side": side, "true_change_cc": hi.truth["volume_cc"][side] - lo.truth["volume_cc"][side],
+                    "fitted": usable(a) and usable(b), "volume_cc": [a.volume_cc, b.volume_cc]}
+            if case["fitted"]:
+                case["fitted_change_cc"] = b.volume_cc - a.volume_cc
+                case["relative_error_pct"] = 100.0 * (case["fitted_change_cc"] / case["true_change_cc"] - 1.0)
+            cases.append(case)
+    return cases
+
+
+def chen_ptosis_order(chen: list[SceneResult]) -> dict:
+    """Baseline of 5a: Chen scenes whose fitted left/right b0 order matches the true order."""
+    cases = []
+    for s in chen:
+        t = s.truth["b0"]
+        if abs(t["left"] - t["right"]) < CHEN_B0_GAP or not all(usable(s.sides[x]) for x in SIDES):
+            continue
+        fitted = {x: s.sides[x].b0 for x in SIDES}
+        cases.append({"scene": s.label, "true_b0": t, "fitted_b0": fitted,
+                      "order_ok": bool((t["left"] > t["right"]) == (fitted["left"] > fitted["right"]))})
+    return {"cases": cases, "order_ok_pct": 100.0 * sum(c["order_ok"] for c in cases) / len(cases) if cases else None}
+
+
+def ingest_timing(timing_frames: list, chen_frames: DepthFrames, repeats: int) -> list[dict]:
+    """7. Each 800×600 case alternating with the Chen scene's ingest of the same side."""
+    rows = []
+    for label, side, frames in timing_frames:
+        raised = {"realistic": 0, "chen": 0}
+
+        def call(which, frames, side=side, raised=raised):
+            def run():
+                try:
+                    ingest_frames(frames, IngestOptions(side=side))
+                except BadInputError:
+                    raised[which] += 1
+            return run
+        median, baseline = median_times(call("realistic", frames), call("chen", chen_frames), repeats)
+        rows.append({"scene": label, "side": side, "size": list(frames.size), "frames": int(frames.depth.shape[0]),
+                     "repeats": repeats, "median_s": median, "baseline_s": baseline, "ratio": median / baseline,
+                     "raised": raised["realistic"], "baseline_raised": raised["chen"], "calls": repeats + 1})
+    return rows
+
+
+def fit_times(scenes: list[SceneResult]) -> list[float]:
+    return [s.sides[x].fit_s for s in scenes for x in SIDES if s.sides[x].fit_status is not None]
+
+
+# --- tables -----------------------------------------------------------------------------------
+def new_table(title: str, columns: tuple[str, ...], caption: str | None = None) -> Table:
+    table = Table(title=title, caption=caption and escape(caption), caption_justify="left")
+    for i, col in enumerate(columns):
+        table.add_column(col, justify="left" if i == 0 else "right")
+    return table
+
+
+def side_cell(side: Side) -> str:
+    if side.status == "raised":
+        return "raised"
+    text = f"{side.nipple_mm:.1f} mm" + ("" if side.isolated else " (far)")
+    return text
+
+
+def fit_cell(side: Side) -> str:
+    if side.fit_status is None:
+        return "–"
+    if side.fit_status == "rejected":
+        return f"rejected {side.fit_s:.2f} s"
+    cut = "" if side.converged else " cut"
+    return f"{side.volume_cc:.0f} cc b0 {side.b0:+.2f} {side.fit_s:.2f} s {side.iterations[1]} it{cut}"
+
+
+def print_scenes(real: list[SceneResult], chen: list[SceneResult], console: Console) -> None:
+    caption = (f"Nipple: 3-D distance of the found nipple from the truth (camera mm); 'raised' = ingest raised "
+               f"BadInputError, '(far)' = farther than {ISOLATED_MM:g} mm (not isolated). Asymmetry: (left − right) "
+               f"found offset minus the true offset in the body frame, X horizontal / Y vertical. Fit: fitted volume, "
+               f"ptosis b0, seconds of fit_breast (made whenever ingest returned) and FFD iterations ('cut': stopped at max_iterations). Chen rows are the baseline scenes "
+               f"(640×400), run interleaved with the realistic ones.")
+    table = new_table(f"bench_realistic — scenes ({FRAMES} frames each)",
+                      ("scene", "pose", "camera", "ingest L / R", "nipple L", "nipple R", "asymmetry X / Y",
+                       "fit L", "fit R", "wall"), caption=caption)
+    for s in [*real, *chen]:
+        m = s.meta
+        if s.kind == "realistic":
+            wall = "wall" if m["wall_mm"] is not None else "no wall"
+            camera = f"{m['distance_mm']:.0f} mm {m['pitch_deg']:+.0f}°/{m['yaw_deg']:+.0f}° {m['resolution']} {wall}"
+            pose = m["pose"]
+        else:
+            camera, pose = f"{m['distance_mm']:.0f} mm tilt {m['tilt_deg']:g}° 640x400", "Chen torso"
+        asym = (f"{s.asymmetry_mm['horizontal']:+.1f} / {s.asymmetry_mm['vertical']:+.1f} mm" if s.asymmetry_mm else "–")
+        table.add_row(s.label, pose, camera, f"{s.sides['left'].ingest_s:.2f} / {s.sides['right'].ingest_s:.2f} s",
+                      side_cell(s.sides["left"]), side_cell(s.sides["right"]), asym, fit_cell(s.sides["left"]),
+                      fit_cell(s.sides["right"]), f"{s.wall_s:.1f} s")
+        if s is real[-1]:
+            table.add_section()
+    console.print(table)
+    errors = {}
+    for s in [*real, *chen]:
+        for x in SIDES:
+            for msg in (s.sides[x].error, s.sides[x].fit_error):
+                if msg:
+                    errors.setdefault(msg, []).append(f"{s.label} {x}")
+    if errors:
+        table = new_table("bench_realistic — errors raised (BadInputError)", ("message", "count", "where"))
+        for msg, where in sorted(errors.items(), key=lambda kv: -len(kv[1])):
+            table.add_row(escape(msg), str(len(where)), escape(", ".join(where[:4]) + (" …" if len(where) > 4 else "")))
+        console.print(table)
+
+
+def print_pairs(cup: list[dict], firm: list[dict], chen_cup: list[dict], console: Console) -> None:
+    table = new_table("bench_realistic 4 — cup change: fitted volume change vs the true change",
+                      ("pair", "view", "side", "volume lo → hi", "fitted change", "true change", "relative error"),
+                      caption=f"True change: difference of the half-body volumes (body.half_volumes_cc) of that side; "
+                              f"Chen: semi-axes × {CHEN_SCALE:g}, truth Primitive.volume_cc. '–': a side not isolated "
+                              f"or its fit rejected in either member.")
+    for c in cup:
+        vol = f"{c['volume_cc'][0]:.0f} → {c['volume_cc'][1]:.0f} cc" if c["fitted"] else "–"
+        table.add_row(f"{c['pair']} ({c['values'][0]:g} → {c['values'][1]:g})", str(c["view"]), c["side"], vol,
+                      f"{c['fitted_change_cc']:+.0f} cc" if c["fitted"] else "–", f"{c['true_change_cc']:+.0f} cc",
+                      f"{c['relative_error_pct']:+.1f} %" if c["fitted"] else "–")
+    table.add_section()
+    for c in chen_cup:
+        vol = f"{c['volume_cc'][0]:.0f} → {c['volume_cc'][1]:.0f} cc" if c["fitted"] else "–"
+        table.add_row(f"chen s{c['seed']} (×{CHEN_SCALE:g})", "", c["side"], vol,
+                      f"{c['fitted_change_cc']:+.0f} cc" if c["fitted"] else "–", f"{c['true_change_cc']:+.0f} cc",
+                      f"{c['relative_error_pct']:+.1f} %" if c["fitted"] else "–")
+    console.print(table)
+    table = new_table("bench_realistic 5 — firmness pairs (firmness 0 → 1): fitted ptosis and volumes",
+                      ("pair", "view", "side", "b0 (0 → 1)", "b1 (0 → 1)", "b0 order", "volume (0 → 1)",
+                       "fitted |Δ|", "true |Δ|"),
+                      caption="b0 order: 'yes' when firmness 0 has the larger fitted b0. |Δ|: volume difference in % "
+                              "of the mean fitted volume; true: the half-body volume difference in % of the same mean.")
+    for c in firm:
+        if not c["fitted"]:
+            table.add_row(c["pair"], str(c["view"]), c["side"], "–", "–", "–", "–", "–",
+                          f"{abs(c['true_change_cc']):.0f} cc")
+            continue
+        table.add_row(c["pair"], str(c["view"]), c["side"], f"{c['b0'][0]:+.2f} → {c['b0'][1]:+.2f}",
+                      f"{c['b1'][0]:+.2f} → {c['b1'][1]:+.2f}", "yes" if c["order_ok"] else "no",
+                      f"{c['volume_cc'][0]:.0f} → {c['volume_cc'][1]:.0f} cc", f"{c['volume_difference_pct']:.1f} %",
+                      f"{c['true_difference_pct']:.1f} %")
+    console.print(table)
+
+
+def print_timing(rows: list[dict], console: Console) -> None:
+    table = new_table(f"bench_realistic 7 — ingest of {FRAMES} frames (medians after one warm-up; alternating with "
+                      f"the baseline)", ("scene", "side", "size", "median", "Chen 640×400 (baseline)", "ratio",
+                                         "calls raising"),
+                      caption="A call raising BadInputError is timed until it raises; 'calls raising' counts them "
+                              "(realistic / Chen) among all calls, warm-up included.")
+    for r in rows:
+        table.add_row(r["scene"], r["side"], f"{r['size'][0]}×{r['size'][1]}", fmt(r["median_s"]), fmt(r["baseline_s"]),
+                      f"{r['ratio']:.1f}", f"{r['raised']} / {r['baseline_raised']} of {r['calls']}")
+    console.print(table)
+
+
+def figure(name, value, target, baseline, unit, at_most=True, **extra) -> dict:
+    met = None if value is None else bool(value <= target if at_most else value >= target)
+    return {"figure": name, "value": value, "target": target, "target_is": "max" if at_most else "min",
+            "baseline": baseline, "unit": unit, "met": met, **extra}
+
+
+def print_figures(figures: list[dict], console: Console) -> None:
+    table = new_table("bench_realistic — figures (realistic bodies; baseline: the Chen torso, same run)",
+                      ("figure", "value", "target", "baseline", "met", "over"))
+    for f in figures:
+        unit = f["unit"]
+        show = lambda v: "–" if v is None else f"{v:.3g} {unit}"  # noqa: E731
+        table.add_row(f["figure"], show(f["value"]), f"{'≤' if f['target_is'] == 'max' else '≥'} {f['target']:g} {unit}",
+                      show(f["baseline"]), "–" if f["met"] is None else ("yes" if f["met"] else "no"), f.get("over", ""))
+    console.print(table)
+
+
+def rounded(x, digits: int = 5):
+    if isinstance(x, float):
+        return float(f"{x:.{digits}g}")
+    if isinstance(x, dict):
+        return {k: rounded(v, digits) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [rounded(v, digits) for v in x]
+    return x
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, help="rounds of the ingest timing (default 5)")
+    parser.add_argument("--quick", action="store_true", help="8 realistic + 2 Chen scenes, 2 rounds")
+    args = parser.parse_args()
+    repeats = args.repeats or (2 if args.quick else 5)
+    console = Console(width=200)
+    start, load_start = time.perf_counter(), os.getloadavg()
+
+    with threadpool_limits(1, "blas"):      # as `breastplan fit` runs
+        real, chen, timing_frames, chen_frames = run_all(args.quick, console)
+        scenes_s = time.perf_counter() - start
+        timing_start = time.perf_counter()
+        timing = ingest_timing(timing_frames, chen_frames, repeats)
+        timing_s = time.perf_counter() - timing_start
+
+    print_scenes(real, chen, console)
+    cup, firm, chen_cup = realistic_pairs(real, "cup"), realistic_pairs(real, "firmness"), chen_pairs(chen)
+    chen_order = chen_ptosis_order(chen)
+    print_pairs(cup, firm, chen_cup, console)
+    print_timing(timing, console)
+
+    iso, iso_chen = isolation_figures(real), isolation_figures(chen)
+    cup_errors = [abs(c["relative_error_pct"]) for c in cup if c["fitted"]]
+    chen_cup_errors = [abs(c["relative_error_pct"]) for c in chen_cup if c["fitted"]]
+    firm_fitted = [c for c in firm if c["fitted"]]
+    fits, chen_fits = fit_times(real), fit_times(chen)
+    T = TARGETS
+    figures = [
+        figure("both_isolated", iso["both_isolated_pct"], T["both_isolated_pct"], iso_chen["both_isolated_pct"], "%",
+               at_most=False, over=f"{iso['both_isolated']}/{iso['scenes']} scenes (Chen {iso_chen['both_isolated']}/"
+               f"{iso_chen['scenes']}); sides raised {iso['sides_raised']}, far {iso['sides_far']}"),
+        figure("nipple_error_median", iso["nipple_median_mm"], T["nipple_median_mm"], iso_chen["nipple_median_mm"], "mm",
+               over=f"{iso['sides_isolated']}/{iso['sides']} isolated sides (Chen {iso_chen['sides_isolated']})"),
+        figure("nipple_error_worst", iso["nipple_worst_mm"], T["nipple_worst_mm"], iso_chen["nipple_worst_mm"], "mm",
+               over=f"{iso['sides_isolated']}/{iso['sides']} isolated sides"),
+        figure("nipple_asymmetry_worst", iso["asymmetry_worst_mm"], T["asymmetry_worst_mm"],
+               iso_chen["asymmetry_worst_mm"], "mm",
+               over=f"{iso['asymmetry_scenes']} scenes with both sides isolated (Chen {iso_chen['asymmetry_scenes']})"),
+        figure("cup_change_relative_error_worst", max_or_none(cup_errors), T["cup_change_worst_pct"],
+               max_or_none(chen_cup_errors), "%", median=median_or_none(cup_errors),
+               over=f"{len(cup_errors)}/{len(cup)} pair × view × side cases (Chen {len(chen_cup_errors)}/{len(chen_cup)})"),
+        figure("firmness_ptosis_order", 100.0 * sum(c["order_ok"] for c in firm_fitted) / len(firm_fitted)
+               if firm_fitted else None, T["firmness_order_pct"], chen_order["order_ok_pct"], "%", at_most=False,
+               over=f"{len(firm_fitted)}/{len(firm)} cases (Chen: {len(chen_order['cases'])} scenes, left/right b0 order)"),
+        figure("firmness_volume_difference_worst", max_or_none(c["volume_difference_pct"] for c in firm_fitted),
+               T["firmness_volume_pct"], max_or_none(c["true_difference_pct"] for c in firm_fitted), "%",
+               baseline_is="the true difference (half-body volumes) in % of the same mean",
+               over=f"{len(firm_fitted)}/{len(firm)} cases"),
+        figure("fit_seconds_median", median_or_none(fits), T["fit_s"], median_or_none(chen_fits), "s",
+               over=f"{len(fits)} realistic fits, {len(chen_fits)} Chen fits, one call each"),
+        figure("ingest_800x600_seconds_median", median_or_none(r["median_s"] for r in timing), T["ingest_800x600_s"],
+               median_or_none(r["baseline_s"] for r in timing), "s",
+               ratio=(statistics.median(r["median_s"] for r in timing) / statistics.median(r["baseline_s"] for r in timing)
+                      if timing else None),
+               over=f"{len(timing)} cases × {repeats} repeats; baseline Chen 640×400"),
+    ]
+    print_figures(figures, console)
+    wall = time.perf_counter() - start
+    per_scene = statistics.mean(s.wall_s for s in real)
+    console.print(f"Wall time {wall:.0f} s: scenes {scenes_s:.0f} s ({len(real)} realistic, mean {per_scene:.1f} s; "
+                  f"{len(chen)} Chen, mean {statistics.mean(s.wall_s for s in chen):.1f} s), ingest timing "
+                  f"{timing_s:.0f} s; load average {load_start[0]:.1f} → {os.getloadavg()[0]:.1f}.")
+    for f in figures:
+        print(json.dumps(rounded(f)))
+    print(json.dumps(rounded({
+        "benchmark": "bench_realistic", "quick": bool(args.quick), "repeats": repeats, "frames": FRAMES,
+        "isolated_mm": ISOLATED_MM, "targets": TARGETS, "figures": {f["figure"]: f for f in figures},
+        "isolation": iso, "isolation_chen": iso_chen, "cup_pairs": cup, "firmness_pairs": firm, "chen_cup_pairs": chen_cup,
+        "chen_ptosis_order": chen_order, "ingest_timing": timing,
+        "scenes": [s.as_dict() for s in real], "chen_scenes": [s.as_dict() for s in chen],
+        "met": all(f["met"] for f in figures), "loadavg_start": load_start, "loadavg_end": os.getloadavg(),
+        "wall_s": wall})))
+
+
+if __name__ == "__main__":
+    main()
