@@ -38,6 +38,10 @@ demo: $(STAMP)
 	$(BIN)/breastplan fit $(DEMO)/S-shape1-00-ptosis.ply --out $(DEMO)/fit-S-shape1-00-ptosis
 	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind ptosis --degree 5.5 --out $(DEMO)/S-shape1-00-ptosis-5.5.ply
 	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind ptosis --degree 5.5 --method learnt --out $(DEMO)/S-shape1-00-ptosis-5.5-learnt.ply
+	$(BIN)/breastplan scan-synth --body makehuman --cup 0.8 --firmness 0.3 --modifier asymmetry=0.4 --pose arms-down --pitch 8 --yaw -6 --frames 8 --out $(DEMO)/patient.mcap --truth $(DEMO)/patient-truth.npz
+	$(BIN)/breastplan ingest $(DEMO)/patient.mcap --side left --out $(DEMO)/patient-left
+	$(BIN)/breastplan ingest $(DEMO)/patient.mcap --side right --out $(DEMO)/patient-right
+	$(BIN)/breastplan fit $(DEMO)/patient-left
 	$(BIN)/breastplan evaluate --study all --quick --out $(DEMO)/study
 	@echo "demo written to $(abspath $(DEMO))"
 
@@ -50,6 +54,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_ingest.py
 	$(BIN)/python benchmarks/bench_fit.py
 	$(BIN)/python benchmarks/bench_learn.py
+	$(BIN)/python benchmarks/bench_realistic.py
 
 clean:
 	rm -rf $(VENV) out
