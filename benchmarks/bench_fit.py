@@ -73,7 +73,7 @@ from breastplan.ingest.recording import DepthFrames
 from breastplan.learn.databases import build_database
 from breastplan.learn.datasets import build_dataset
 
-from timing import fmt, median_times, timed
+from timing import fmt, median_times, rounded, timed
 
 CLOUD_GRIDS = {1_000: (25, 40), 10_000: (100, 100), 100_000: (250, 400)}
 """(n_u, n_v) sampling grid of each cloud size; (100, 100) is database S's own grid."""
@@ -97,17 +97,6 @@ SQ_NOTE = ("Clouds: each breast is its primitive (db.primitive(i)) deformed by i
            "(which is the 100 × 100 grid), only denser or sparser. fit_superquadric optimises on a "
            "3 000-point subset and reports residuals of all points. Baseline: one "
            "Primitive.radial_distance over the same points (model units); ratio = fit / baseline.")
-
-
-def rounded(x, digits: int = 5):
-    """x (nested dicts/lists) with floats to `digits` significant figures, for a JSON line of sane length."""
-    if isinstance(x, float):
-        return float(f"{x:.{digits}g}")
-    if isinstance(x, dict):
-        return {k: rounded(v, digits) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [rounded(v, digits) for v in x]
-    return x
 
 
 def yes_no(flag: bool) -> str:

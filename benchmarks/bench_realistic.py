@@ -70,7 +70,7 @@ from breastplan.ingest.realistic import CameraOptions, make_body_scene
 from breastplan.ingest.recording import DepthFrames
 from breastplan.options import SIDES, FitOptions, IngestOptions
 
-from timing import fmt, median_times
+from timing import fmt, median_times, rounded
 
 FRAMES = 8
 ISOLATED_MM = 30.0
@@ -542,16 +542,6 @@ def print_figures(figures: list[dict], console: Console) -> None:
         table.add_row(f["figure"], show(f["value"]), f"{'≤' if f['target_is'] == 'max' else '≥'} {f['target']:g} {unit}",
                       show(f["baseline"]), "–" if f["met"] is None else ("yes" if f["met"] else "no"), f.get("over", ""))
     console.print(table)
-
-
-def rounded(x, digits: int = 5):
-    if isinstance(x, float):
-        return float(f"{x:.{digits}g}")
-    if isinstance(x, dict):
-        return {k: rounded(v, digits) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [rounded(v, digits) for v in x]
-    return x
 
 
 def main() -> None:

@@ -1,4 +1,4 @@
-"""Timing helpers shared by the benchmarks: wall-clock seconds and medians after a warm-up.
+"""Helpers shared by the benchmarks: wall-clock seconds, medians after a warm-up, rounded JSON.
 
 The clock is breastplan's own (`breastplan.clock.Clock`), the one the commands and the ingest
 pipeline use.
@@ -48,3 +48,14 @@ def repeats_argument(description: str, default: int, quick: int) -> int:
     parser.add_argument("--quick", action="store_true", help=f"{quick} rounds")
     args = parser.parse_args()
     return args.repeats or (quick if args.quick else default)
+
+
+def rounded(x, digits: int = 5):
+    """x (nested dicts/lists) with floats to `digits` significant figures, for a JSON line of sane length."""
+    if isinstance(x, float):
+        return float(f"{x:.{digits}g}")
+    if isinstance(x, dict):
+        return {k: rounded(v, digits) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [rounded(v, digits) for v in x]
+    return x
