@@ -117,7 +117,7 @@ def _trunk_bulge(points: np.ndarray) -> float:
     """Curvature across (1/mm) with which the trunk of the nearest body in view bulges towards
     the viewer (viewing frame), −inf without one."""
     try:
-        body = body_cluster(points)
+        body = body_cluster(points)[0]
         trunk = body[find_trunk(body).mask]
     except BadInputError:
         return -np.inf
@@ -134,11 +134,11 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
     in_roi = _roi_test(roi, to_camera)
     nipple_view = None if nipple is None else transform_points(view_from_camera, nipple)
     with clock("background: voxels + DBSCAN (open3d)"):
-        body = body_cluster(points)
+        body, voxels, which = body_cluster(points)
     with clock("trunk"):
         trunk = find_trunk(body)
         torso = body[trunk.mask]
-        coarse, _ = voxel_centroids(torso, COARSE_MM)
+        coarse = voxels[np.bincount(which[trunk.mask], minlength=len(voxels)) > 0]   # the trunk's voxels
         coarse = coarse[trunk.chest(coarse)]
     with clock("chest wall"):
         wall = fit_chest_wall(coarse, 2)
@@ -182,10 +182,10 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
         torso_camera=transform_points(to_camera, torso), timings_ms=clock.ms)
 
 
-def body_cluster(points: np.ndarray) -> np.ndarray:
-    """The points of the body: of the connected clusters (DBSCAN on coarse voxels) as large as a
-    trunk's front (BODY_VOXELS, or the largest if none is), the nearest to the viewer (a wall
-    behind may be larger)."""
+def body_cluster(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The points of the body, its coarse voxels' centroids and each point's voxel: of the
+    connected clusters (DBSCAN on coarse voxels) as large as a trunk's front (BODY_VOXELS, or the
+    largest if none is), the nearest to the viewer (a wall behind may be larger)."""
     coarse, which = voxel_centroids(points, COARSE_MM)
     labels = B.dbscan(coarse, 2.5 * COARSE_MM, 4)
     if (labels < 0).all():
@@ -193,7 +193,11 @@ def body_cluster(points: np.ndarray) -> np.ndarray:
     counts = np.bincount(labels[labels >= 0])
     big = np.flatnonzero(counts >= min(BODY_VOXELS, counts.max()))
     depth = [np.median(coarse[labels == k, 2]) for k in big]
-    return points[labels[which] == big[int(np.argmin(depth))]]
+    voxels = np.flatnonzero(labels == big[int(np.argmin(depth))])
+    rank = np.full(len(coarse), -1)
+    rank[voxels] = np.arange(len(voxels))
+    inside = rank[which] >= 0
+    return points[inside], coarse[voxels], rank[which[inside]]
 
 
 def _roi_test(roi, to_camera: np.ndarray):
