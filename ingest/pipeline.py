@@ -144,16 +144,7 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
         wall = fit_chest_wall(coarse, 2)
     with clock("mounds (height basins) + breasts"):
         mounds = B.find_mounds(coarse, wall, trunk.midline_x, COARSE_MM)
-        if in_roi is not None:
-            mounds = [m for m in mounds if in_roi(m.voxels).any()]
-        if in_roi is None and nipple_view is None:
-            breasts = B.find_breasts(mounds, trunk.midline_x, trunk.top_y)
-            if side not in breasts:
-                raise BadInputError(None, f"no breast mound found on the {side} side" + (
-                    f"; one found on the other side" if breasts else f" ({_nothing_found(mounds)})"))
-            mound = breasts[side]
-        else:
-            mound = B.choose_mound(mounds, nipple_view)
+        mound = _breast_mound(mounds, trunk, side, nipple_view, in_roi)
         wall = B.local_chest_wall(coarse, mound, wall)
     with clock("crop + breast frame"):
         region = B.breast_region(torso, mound, wall, COARSE_MM)
@@ -212,10 +203,23 @@ def _roi_test(roi, to_camera: np.ndarray):
     return inside
 
 
-def _nothing_found(mounds: list) -> str:
-    if not mounds:
-        return "nothing rises from the chest"
-    return f"{len(mounds)} mound{'s' * (len(mounds) > 1)} found, none placed or shaped as a breast is"
+def _breast_mound(mounds: list, trunk, side: str, nipple_view, in_roi) -> B.Mound:
+    """The requested breast's mound: the one under a given nipple, the largest in a region of
+    interest, else the breast of `side` (docs/isolation.md §4); BadInputError saying why if none."""
+    if in_roi is not None:
+        mounds = [m for m in mounds if in_roi(m.voxels).any()]
+    if in_roi is not None or nipple_view is not None:
+        return B.choose_mound(mounds, nipple_view)
+    breasts = B.find_breasts(mounds, trunk.midline_x, trunk.top_y)
+    if side in breasts:
+        return breasts[side]
+    if breasts:
+        why = "; one found on the other side"
+    elif mounds:
+        why = f" ({len(mounds)} mound{'s' * (len(mounds) > 1)} found, none placed or shaped as a breast is)"
+    else:
+        why = " (nothing rises from the chest)"
+    raise BadInputError(None, f"no breast mound found on the {side} side{why}")
 
 
 def _enough(n: int, step: str) -> None:

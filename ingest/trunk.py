@@ -1,9 +1,10 @@
-"""The patient's trunk in a frontal view: the body apart from the background, head, neck and arms.
+"""The patient's trunk in a frontal view: the body apart from head, neck, arms and hands.
 
 Works in the viewing frame (camera convention: x to the image's right, y down, z away from
-the viewer; mm). The body is the nearest large connected cluster (a wall behind her is a
-larger one); the trunk is what a disc wider than a neck or an arm keeps of the body's front
-silhouette (a morphological opening of its orthographic occupancy map), its largest part.
+the viewer; mm) on the body's points (the pipeline has removed the background). The trunk
+is what a disc wider than a neck or an arm keeps of the body's frontal silhouette (a
+morphological opening of its orthographic occupancy map), its largest part; arms hanging by
+the flanks are first parted from them at the depth steps they make (docs/isolation.md §2).
 """
 from __future__ import annotations
 
@@ -42,7 +43,6 @@ class Trunk:
     mask: np.ndarray          # (N,) bool over the body's points
     midline_x: float          # mm, x of the trunk's vertical axis at chest height
     top_y: float              # mm, the shoulders (see SHOULDER_SHARE)
-    width_mm: float           # widest extent across x
 
     def chest(self, points: np.ndarray) -> np.ndarray:
         """Mask of the points (viewing frame) from above the shoulders to CHEST_MM below them."""
@@ -62,37 +62,44 @@ def find_trunk(points: np.ndarray) -> Trunk:
     """The trunk of a body's points (N, 3), viewing frame."""
     ij = np.floor(points[:, :2] / CELL_MM).astype(np.int64)
     lo = ij.min(0)
-    x0, y0 = lo * CELL_MM
     ij -= lo
-    shape = tuple(ij.max(0)[::-1] + 1)                      # rows = y, cols = x
-    nearest = np.full(shape, np.inf)
+    nearest = np.full(tuple(ij.max(0)[::-1] + 1), np.inf)                 # rows = y, cols = x
     np.minimum.at(nearest, (ij[:, 1], ij[:, 0]), points[:, 2])
     seen = np.isfinite(nearest)
     seen |= ndimage.binary_closing(seen, iterations=2)
-    # an arm hanging by the flank is nearer than the flank beside it, on the side away from the
-    # body's axis; a breast is nearer than what lies beside it towards the axis: only the first parts
-    axis = np.median(ij[:, 0]) + 0.5
-    with np.errstate(invalid="ignore"):
-        outward_nearer = np.where(np.arange(shape[1] - 1) + 1 > axis,       # the right-hand cell is lateral
-                                  nearest[:, :-1] - nearest[:, 1:], nearest[:, 1:] - nearest[:, :-1])
-    step = np.nan_to_num(outward_nearer, nan=0.0, posinf=0.0, neginf=0.0) > SIDE_STEP_MM   # a hole is not a step
-    step = ndimage.binary_dilation(step, structure=np.ones((1, 3), bool))           # an arm's edge runs down
-    step = ndimage.binary_opening(step, structure=np.ones((int(ARM_EDGE_MM / CELL_MM), 1), bool))   # a breast's is short
+    edges = arm_edges(nearest, axis=np.median(ij[:, 0]) + 0.5)
     occupied = seen.copy()
-    occupied[:, 1:] &= ~step
-    occupied[:, :-1] &= ~step
-    opened = disc_opening(occupied, LIMB_MM / CELL_MM)
-    labels, n = ndimage.label(opened)
-    if n == 0 or np.bincount(labels.ravel())[1:].max() * CELL_MM**2 < MIN_TRUNK_MM2:
+    occupied[:, 1:] &= ~edges
+    occupied[:, :-1] &= ~edges
+    labels, n = ndimage.label(disc_opening(occupied, LIMB_MM / CELL_MM))
+    sizes = np.bincount(labels.ravel())[1:]
+    if n == 0 or sizes.max() * CELL_MM**2 < MIN_TRUNK_MM2:
         raise BadInputError(None, "shows no trunk: nothing in view is as wide as a chest")
-    trunk = labels == 1 + np.bincount(labels.ravel())[1:].argmax()
-    trunk = ndimage.binary_dilation(trunk, iterations=REGROW_CELLS) & seen     # back over the steps it cut
-    mask = trunk[ij[:, 1], ij[:, 0]]
+    trunk = ndimage.binary_dilation(labels == 1 + sizes.argmax(), iterations=REGROW_CELLS) & seen
+    top, midline = _landmarks(trunk)
+    x0, y0 = lo * CELL_MM
+    return Trunk(trunk[ij[:, 1], ij[:, 0]], float(x0 + midline * CELL_MM), float(y0 + top * CELL_MM))
+
+
+def arm_edges(nearest: np.ndarray, axis: float) -> np.ndarray:
+    """(rows, cols − 1) where an arm hangs in front of the flank, between horizontal cells of the
+    nearest-depth map (inf: empty): a step over SIDE_STEP_MM with the cell away from the body's
+    `axis` (a column) nearer, running ARM_EDGE_MM down the body. A breast is nearer than what
+    lies beside it towards the axis, and its lower edge is short: it makes no edge."""
+    lateral_right = np.arange(nearest.shape[1] - 1) + 1 > axis
+    with np.errstate(invalid="ignore"):
+        outward_nearer = np.where(lateral_right, nearest[:, :-1] - nearest[:, 1:], nearest[:, 1:] - nearest[:, :-1])
+    step = np.nan_to_num(outward_nearer, nan=0.0, posinf=0.0, neginf=0.0) > SIDE_STEP_MM   # a hole is not a step
+    step = ndimage.binary_dilation(step, structure=np.ones((1, 3), bool))
+    return ndimage.binary_opening(step, structure=np.ones((int(ARM_EDGE_MM / CELL_MM), 1), bool))
+
+
+def _landmarks(trunk: np.ndarray) -> tuple[int, float]:
+    """(row of the shoulders, column of the midline) of a trunk mask (see SHOULDER_SHARE; the
+    midline is the middle of the outline over the 250 mm below the shoulders)."""
     width = trunk.sum(1)
     first = int(np.argmax(width > 0))
-    upper = width[first: first + int(UPPER_MM / CELL_MM)]              # head, neck and shoulders
-    top = first + int(np.argmax(upper >= SHOULDER_SHARE * upper.max()))  # a head or a chin is narrower
-    cols = np.flatnonzero(trunk.any(0))
-    xs = np.nonzero(trunk[top: top + int(250 / CELL_MM)])[1]      # the upper 250 mm of the chest
-    midline = x0 + (0.5 * (np.percentile(xs, 5) + np.percentile(xs, 95)) + 0.5) * CELL_MM
-    return Trunk(mask, float(midline), float(y0 + top * CELL_MM), float((cols[-1] - cols[0] + 1) * CELL_MM))
+    upper = width[first: first + int(UPPER_MM / CELL_MM)]                  # head, neck and shoulders
+    top = first + int(np.argmax(upper >= SHOULDER_SHARE * upper.max()))   # a head or a chin is narrower
+    xs = np.nonzero(trunk[top: top + int(250 / CELL_MM)])[1]
+    return top, 0.5 * (np.percentile(xs, 5) + np.percentile(xs, 95)) + 0.5
