@@ -204,7 +204,12 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
         x0, nfev = _top_shape_start(p, kinds, solve)
     elif x0 is None:
         x0 = initial_guess(p, kinds)
-    sol = solve(seeded_subset(p, DEFORMED_FIT_POINTS) if kinds else p, kinds, x0)
+    fitted = seeded_subset(p, DEFORMED_FIT_POINTS) if kinds else p
+    bounded = not _plausible(x0, kinds)       # a breast the model cannot hold starts out of range
+    sol = solve(fitted, kinds, x0, plausible=bounded)
+    if not _plausible(sol.x, kinds):          # … or ends there: again, within bounds
+        nfev += sol.nfev
+        sol = solve(fitted, kinds, sol.x, plausible=True)
     a, e1, e2, rot, t = _unpack(sol.x)
     pose = np.eye(4)
     pose[:3, :3] = Rotation.from_rotvec(rot).as_matrix()
@@ -238,6 +243,13 @@ def _top_shape_start(p: np.ndarray, kinds: tuple[str, ...], solve: "_Solver") ->
     return np.concatenate([x[:13], s, [0.0, 0.0], x[13:]]), nfev
 
 
+def _plausible(x: np.ndarray, kinds: tuple[str, ...]) -> bool:
+    """Whether the deformation parameters of x lie in their PLAUSIBLE ranges."""
+    names = [n for kind in kinds for n in KIND_PARAMS[kind]]
+    lo, hi = np.array([PLAUSIBLE[n] for n in names]).reshape(-1, 2).T
+    return bool(np.all((x[13:] >= lo) & (x[13:] <= hi)))
+
+
 def _undone(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
     """Points p (mu, data frame) taken back through the pose and deformations of x to the primitive."""
     a, e1, e2, rot, t = _unpack(x)
@@ -265,22 +277,24 @@ class _Solver:
         return CHEST_PRIOR_WEIGHT * np.sqrt(len(p))
 
     def __call__(self, p: np.ndarray, kinds: tuple[str, ...], x0: np.ndarray, max_nfev: int = 200,
-                 max_turn: float = MAX_TURN_RAD):
-        """least_squares from x0: analytic Jacobian for the plain primitive, 2-point with deformations."""
-        lower, upper = _bounds(x0, max_turn, kinds)
+                 max_turn: float = MAX_TURN_RAD, plausible: bool = False):
+        """least_squares from x0: analytic Jacobian for the plain primitive, 2-point with deformations;
+        `plausible` bounds the deformations to their PLAUSIBLE ranges (free otherwise)."""
+        lower, upper = _bounds(x0, max_turn, kinds if plausible else ())
         x0 = np.clip(x0, lower + 1e-9, upper - 1e-9)
         jac = "2-point" if kinds else (lambda x: self.jacobian(x, p))
         return least_squares(lambda x: self.residuals(x, p, kinds), x0, jac=jac, bounds=(lower, upper),
                              loss=self.loss, f_scale=self.f_scale, x_scale="jac", max_nfev=max_nfev)
 
 
-def _bounds(x0: np.ndarray, max_turn: float, kinds: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+def _bounds(x0: np.ndarray, max_turn: float, bounded: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
     """eps in EPS_BOUNDS, each rotation-vector component within ±max_turn, semi-axes within
-    SEMI_AXIS_RANGE × the largest initial one, deformations in their PLAUSIBLE ranges; the
-    translation free."""
+    SEMI_AXIS_RANGE × the largest initial one, the deformations of the `bounded` kinds (all the
+    fitted ones, or none) in their PLAUSIBLE ranges; the rest free."""
     lower, upper = np.full(len(x0), -np.inf), np.full(len(x0), np.inf)
-    names = [n for kind in kinds for n in KIND_PARAMS[kind]]
-    lower[13:], upper[13:] = np.array([PLAUSIBLE[n] for n in names]).reshape(-1, 2).T
+    names = [n for kind in bounded for n in KIND_PARAMS[kind]]
+    if names:
+        lower[13:], upper[13:] = np.array([PLAUSIBLE[n] for n in names]).reshape(-1, 2).T
     lower[5:7], upper[5:7] = EPS_BOUNDS
     lower[7:10], upper[7:10] = -max_turn, max_turn
     size = np.log(np.exp(x0[:5]).max())
