@@ -21,8 +21,9 @@ DEFAULT_CONDITION = {"ptosis": "ptosis b0>b1", "turn": "turn c0>c1", "top-shape"
 METHODS = ("exact", "learnt")
 """How `deform --degree` finds the parameters: the inverse solver or the shipped regressions."""
 
-PLAUSIBLE = {"s0": (-4.0, 4.0), "s1": (-10.0, 4.0), "t0": (-2.0, 2.0), "t1": (-8.0, 2.0),
+PLAUSIBLE = {"s0": (-4.0, 4.0), "s1": (-10.0, 4.0), "t0": (-8.0, 8.0), "t1": (-8.0, 2.0),
              "h0": (-0.5, 0.5), "h1": (-0.5, 0.5), "g0": (-1.0, 1.0), "g1": (-1.0, 1.0),
              "b0": (-1.0, 3.0), "b1": (-0.5, 1.0), "c0": (-1.5, 1.5), "c1": (-1.0, 1.0)}
 """The range a fit may give each deformation parameter (model units): what the thesis's breast
-shapes and deformation conditions span, with a margin (docs/model.md §4, §6)."""
+shapes and deformation conditions span, with a margin (docs/model.md §4, §6). t0 (β″(0), which
+barely moves the surface) is wide: free fits of database breasts put it anywhere up to 6.8."""
