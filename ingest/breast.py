@@ -1,9 +1,10 @@
 """Breast isolation and the breast frame (docs/model.md §1) from a torso cloud and its chest wall.
 
 All inputs are in the viewing frame (camera convention: x to the image's right = the
-patient's left, y down, z away from the viewer; mm). A mound is a connected patch of
-coarse voxels well in front of the chest wall; the breast is the fine points in front of
-the (locally refitted) chest wall around it. The breast frame has its origin at the foot of
+patient's left, y down, z away from the viewer; mm). A mound is a basin of the height of
+coarse voxels above the chest wall; the breasts are the mounds placed and shaped as breasts
+are (docs/isolation.md); a breast is the fine points in front of the (locally refitted)
+chest wall around its mound. The breast frame has its origin at the foot of
 the nipple on the chest wall (see `breast_frame`), z along the chest normal (anterior), y
 superior.
 """
@@ -13,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import open3d as o3d
-from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from breastplan import BadInputError
@@ -100,7 +100,7 @@ def height_basins(points: np.ndarray, height: np.ndarray, size: float) -> np.nda
     ij += 1 - ij.min(0)                                               # a border of empty cells
     H = np.full(tuple(ij.max(0) + 2), -np.inf)
     np.maximum.at(H, (ij[:, 0], ij[:, 1]), height)
-    rows, cols = H.shape
+    cols = H.shape[1]
     flat = H.ravel()
     inner = np.flatnonzero(np.isfinite(flat))
     steps = np.array([di * cols + dj for di in (-1, 0, 1) for dj in (-1, 0, 1)])
