@@ -53,7 +53,7 @@ import json
 import os
 import statistics
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from rich.console import Console
@@ -110,7 +110,7 @@ class Pair:
     quick_views: tuple[int, ...] = ()
 
     def body(self, member: int, pose: str) -> BodyOptions:
-        return self.base.but(**{self.varies: self.values[member], "pose": pose})
+        return replace(self.base, **{self.varies: self.values[member], "pose": pose})
 
 
 PAIRS = (

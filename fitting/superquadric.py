@@ -243,10 +243,16 @@ def _top_shape_start(p: np.ndarray, kinds: tuple[str, ...], solve: "_Solver") ->
     return np.concatenate([x[:13], s, [0.0, 0.0], x[13:]]), nfev
 
 
-def _plausible(x: np.ndarray, kinds: tuple[str, ...]) -> bool:
-    """Whether the deformation parameters of x lie in their PLAUSIBLE ranges."""
+def _plausible_range(kinds: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) PLAUSIBLE values of the deformation parameters of `kinds`, in x's order."""
     names = [n for kind in kinds for n in KIND_PARAMS[kind]]
     lo, hi = np.array([PLAUSIBLE[n] for n in names]).reshape(-1, 2).T
+    return lo, hi
+
+
+def _plausible(x: np.ndarray, kinds: tuple[str, ...]) -> bool:
+    """Whether the deformation parameters of x lie in their PLAUSIBLE ranges."""
+    lo, hi = _plausible_range(kinds)
     return bool(np.all((x[13:] >= lo) & (x[13:] <= hi)))
 
 
@@ -292,9 +298,7 @@ def _bounds(x0: np.ndarray, max_turn: float, bounded: tuple[str, ...]) -> tuple[
     SEMI_AXIS_RANGE × the largest initial one, the deformations of the `bounded` kinds (all the
     fitted ones, or none) in their PLAUSIBLE ranges; the rest free."""
     lower, upper = np.full(len(x0), -np.inf), np.full(len(x0), np.inf)
-    names = [n for kind in bounded for n in KIND_PARAMS[kind]]
-    if names:
-        lower[13:], upper[13:] = np.array([PLAUSIBLE[n] for n in names]).reshape(-1, 2).T
+    lower[13:], upper[13:] = _plausible_range(bounded) if bounded else (-np.inf, np.inf)
     lower[5:7], upper[5:7] = EPS_BOUNDS
     lower[7:10], upper[7:10] = -max_turn, max_turn
     size = np.log(np.exp(x0[:5]).max())

@@ -10,7 +10,7 @@ exact volume of each half of the closed body.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
@@ -59,9 +59,6 @@ class BodyOptions:
         if self.pose not in POSES:
             raise OptionError("pose", f"pose must be one of {', '.join(POSES)}, got {self.pose!r}")
 
-    def but(self, **changes) -> "BodyOptions":
-        return replace(self, **changes)
-
 
 @lru_cache(maxsize=1)
 def _asset() -> dict:
@@ -71,8 +68,8 @@ def _asset() -> dict:
     off = asset["target_offsets"]
     asset["targets"] = {n: (asset["target_index"][a:b], asset["target_delta"][a:b].astype(float))
                         for n, a, b in zip(names, off[:-1], off[1:])}
-    asset["joints"] = {str(n): len(asset["vertices"]) - len(asset["joint_names"]) + k
-                       for k, n in enumerate(asset["joint_names"])}
+    asset["n_body"] = len(asset["vertices"]) - len(asset["joint_names"])   # the joint centres follow the body
+    asset["joints"] = {str(n): asset["n_body"] + k for k, n in enumerate(asset["joint_names"])}
     return asset
 
 
@@ -150,9 +147,8 @@ def make_body(options: BodyOptions = BodyOptions()) -> Body:
         index, delta = asset["targets"][name]
         V[index] += weight * delta
     V = _pose(V, asset, *POSES[options.pose])
-    n_body = len(V) - len(asset["joint_names"])
     joints = {name: V[k] for name, k in asset["joints"].items()}
-    return Body(V[:n_body], asset["faces"], joints, options)
+    return Body(V[:asset["n_body"]], asset["faces"], joints, options)
 
 
 def _turn(points: np.ndarray, pivot: np.ndarray, degrees: float) -> np.ndarray:
@@ -178,8 +174,7 @@ def _pose(V: np.ndarray, asset: dict, shoulder_deg: float, elbow_deg: float) -> 
 def breast_region(side: str) -> np.ndarray:
     """Body vertices of the `side` breast: those MakeHuman's cup and firmness targets move by over 1 mm."""
     asset = _asset()
-    n_body = len(asset["vertices"]) - len(asset["joint_names"])
-    moved = [index[(np.linalg.norm(delta, axis=1) > 1.0) & (index < n_body)]
+    moved = [index[(np.linalg.norm(delta, axis=1) > 1.0) & (index < asset["n_body"])]
              for name, (index, delta) in asset["targets"].items() if name.startswith("breast/female-young")]
     region = np.unique(np.concatenate(moved))
     x = asset["vertices"][region, 0]

@@ -13,7 +13,7 @@ check its camera options without that cost.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -250,13 +250,7 @@ def save_body_truth(path: str | Path, scene: BodyScene, frames: int) -> Path:
         arrays[f"{side}_nipple_camera_mm"] = nipples[side]
         arrays[f"{side}_half_volume_cc"] = np.array(volumes[side])
         arrays[f"{side}_breast_vertices"] = breast_region(side).astype(np.int32)
-    options = scene.body.options
-    meta = dict(scene.meta, frames=frames, body={"cup": options.cup, "firmness": options.firmness,
-                "weight": options.weight, "muscle": options.muscle, "modifiers": dict(options.modifiers),
-                "pose": options.pose},
-                camera={"distance_mm": scene.camera.distance_mm, "pitch_deg": scene.camera.pitch_deg,
-                        "yaw_deg": scene.camera.yaw_deg, "resolution": scene.camera.resolution,
-                        "noise_mm": scene.camera.noise_mm, "wall_mm": scene.camera.wall_mm},
+    meta = dict(scene.meta, frames=frames, body=asdict(scene.body.options), camera=asdict(scene.camera),
                 body_frame="MakeHuman: X the body's left, Y up, Z anterior")
     return save_npz(path, TRUTH_SCHEMA, arrays, units="mm", frame="camera", meta=meta, compress=True)
 
