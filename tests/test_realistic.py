@@ -14,11 +14,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from breastplan import BadInputError, transform_points
+from breastplan import BadInputError, transform_points, write_ply
 from breastplan.ingest import breast
 from breastplan.ingest.makehuman import BodyOptions, make_body
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import BodyScene, CameraOptions, file_axes, load_body_truth, make_body_scene
+from breastplan.ingest.realistic import (BodyScene, CameraOptions, file_axes, load_body_truth, make_body_scene,
+                                          write_scan_file)
 from breastplan.ingest.recording import DepthFrames, write_recording
 from breastplan.ingest.rendering import noisy_frames
 from breastplan.options import IngestOptions
@@ -182,6 +183,29 @@ def test_ingest_of_a_recorded_back_exits_3(cli, tmp_path):
     write_recording(recording, frames.depth, frames.K)
     res = run(cli, "ingest", recording, "--side", "left", "--out", tmp_path / "out", "--json")
     assert_bad_input(res, recording, tmp_path)
+    assert NO_BREAST.search(res.stderr), res.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_ingest_of_a_scanned_back_as_a_mesh_file_exits_3(cli, tmp_path):
+    """A torso without breasts as a mesh file (her back's visible triangles, OBJ, metres, z up)."""
+    scene, _ = back_scene("arms down, no wall, 640x400 at 650 mm")
+    scan = tmp_path / "back.obj"
+    assert write_scan_file(scan, scene, units="m", up="+z")["faces"] > 1000
+    res = run(cli, "ingest", scan, "--side", "right", "--units", "m", "--up", "+z", "--out", tmp_path / "out")
+    assert_bad_input(res, scan, tmp_path)
+    assert NO_BREAST.search(res.stderr), res.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_ingest_of_a_board_as_a_point_file_exits_3(cli, tmp_path):
+    """A flat board 600 × 400 mm, 2 mm apart, 0.5 mm noise, as a PLY in millimetres."""
+    x, y = np.meshgrid(np.arange(-300.0, 300.0, 2.0), np.arange(-200.0, 200.0, 2.0))
+    z = np.random.default_rng(0).normal(0.0, 0.5, x.shape)
+    scan = tmp_path / "board.ply"
+    write_ply(scan, np.column_stack([x.ravel(), y.ravel(), z.ravel()]))
+    res = run(cli, "ingest", scan, "--side", "left", "--units", "mm", "--out", tmp_path / "out")
+    assert_bad_input(res, scan, tmp_path)
     assert NO_BREAST.search(res.stderr), res.stderr
     assert not (tmp_path / "out").exists()
 
