@@ -34,6 +34,9 @@ MAX_ITERATIONS = 1000
 STALL = 1e-3
 """Relative improvement below which a least-damped step counts as no progress (the fit has
 converged); a damped step that gains little is a short step, not convergence."""
+CREEP = (20, 0.01)
+"""(iterations, relative gain): a fit whose residual gained less than 1 % over its last 20
+iterations has converged too — it is creeping towards a shape the lattice cannot hold."""
 FIT_POINTS = 2000
 """Data points per solve (a seeded subset): 2000 surface points pin 375 lattice coordinates."""
 DAMPING = (0.01, 0.03, 1.0)
@@ -75,6 +78,7 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
     P, current, damping = rest.copy(), vertices.copy(), DAMPING[1]
     match = _match(current, faces32, sub, B)
     residual, it, stalled = np.mean(match[3] / norm), 0, False
+    history = [residual]                                   # the residual after each iteration
     target = STOP_RESIDUAL                                 # on the subset; tightened if the whole cloud misses it
     data_norm = np.maximum(np.linalg.norm(data, axis=1), 1e-9)
 
@@ -92,6 +96,8 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
             else:
                 stalled = damping >= DAMPING[2]
                 damping = min(damping * 4, DAMPING[2])
+            history.append(residual)
+            stalled = stalled or (it >= CREEP[0] and residual > (1 - CREEP[1]) * history[it - CREEP[0]])
         dist = _closest(current, faces32, data)[1]
         final = float(np.mean(dist / data_norm))
         if final < STOP_RESIDUAL or residual >= target or stalled or it >= max_iterations:
