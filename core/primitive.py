@@ -7,7 +7,7 @@ z = 0 → nipple), y superior, x lateral–medial. Latitude u ∈ [0, π/2] (0 =
 from __future__ import annotations
 
 import math
-from dataclasses import astuple, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -52,7 +52,7 @@ class Primitive:
     eps2: float = 1.0
 
     def __post_init__(self):
-        values = np.array(astuple(self), dtype=float)
+        values = self.as_array()
         if not np.isfinite(values).all() or (values <= 0).any():
             raise ValueError(f"primitive parameters must be finite and positive, got {self.as_dict()}")
 
@@ -62,10 +62,10 @@ class Primitive:
         return cls(*map(float, np.asarray(values, dtype=float).ravel()))
 
     def as_array(self) -> np.ndarray:
-        return np.array(astuple(self), dtype=float)
+        return np.array([getattr(self, n) for n in PARAM_NAMES], dtype=float)
 
     def as_dict(self) -> dict[str, float]:
-        return dict(zip(PARAM_NAMES, astuple(self)))
+        return {n: getattr(self, n) for n in PARAM_NAMES}
 
     def comment(self) -> str:
         """The PLY header comment that carries this primitive (read back by `from_comments`)."""

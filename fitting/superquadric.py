@@ -259,7 +259,7 @@ def _plausible(x: np.ndarray, kinds: tuple[str, ...]) -> bool:
 def _undone(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
     """Points p (mu, data frame) taken back through the pose and deformations of x to the primitive."""
     a, e1, e2, rot, t = _unpack(x)
-    q = Rotation.from_rotvec(rot).inv().apply(p - t)
+    q = (p - t) @ Rotation.from_rotvec(rot).as_matrix()
     return _deformation(x, kinds).inverse(q, Primitive(*a, e1, e2), fast=True) if kinds else q
 
 
