@@ -13,6 +13,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, List
 
+import inspect
+
 import typer
 from typer.core import TyperCommand, TyperGroup
 
@@ -47,8 +49,17 @@ app = typer.Typer(cls=Group, add_completion=False, no_args_is_help=True, pretty_
 
 
 def command(name: str | None = None):
-    """Register the decorated function as the command `name` (default: the function's name)."""
-    return app.command(name, cls=Command)
+    """Register the decorated function as the command `name` (default: the function's name).
+
+    typer refuses an existing path it cannot read as a usage error (exit 2); the commands refuse it
+    themselves, as bad input naming the file (exit 3), so typer's check is turned off."""
+    def register(function):
+        for param in inspect.signature(function).parameters.values():
+            if isinstance(param.default, typer.models.ParameterInfo):
+                param.default.readable = False
+        return app.command(name, cls=Command)(function)
+
+    return register
 
 
 def _print_version(value: bool) -> None:

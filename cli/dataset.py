@@ -9,7 +9,7 @@ from breastplan.clock import Clock
 from breastplan.deform.conditions import CONDITIONS, find_condition
 
 from .app import JSON, command
-from .output import progress, report, usage_error
+from .output import progress, report, usage_error, writable
 
 
 MAX_DD = 64
@@ -39,6 +39,7 @@ def dataset(
     from breastplan.learn.datasets import build_dataset
 
     database = Database.load(db)
+    writable(out)
     with progress(f"{cond.name} × {dd} degrees", len(database)) as advance:
         data = build_dataset(database, cond, dd, advance)
     path = data.save(out)

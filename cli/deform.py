@@ -7,11 +7,12 @@ from typing import TYPE_CHECKING, List, Optional
 import typer
 
 from breastplan import BadInputError
+from breastplan.errors import require_folder
 from breastplan.clock import Clock
 from breastplan.deform.names import DD, DEFAULT_CONDITION, KIND_PARAMS, METHODS, NEEDS_PRIMITIVE
 
 from .app import JSON, command, parse_pairs
-from .output import report, usage_error
+from .output import report, usage_error, writable
 
 if TYPE_CHECKING:
     from breastplan import Primitive
@@ -47,7 +48,7 @@ def deform(
 
     from breastplan import to_mm, to_model_units, transform_points, write_ply
     from breastplan.case import pose_comment
-    from breastplan.units import breast_units_problem
+    from breastplan.units import BREAST_EXTENT_MM, breast_units_problem
 
     given = _parse_primitive(primitive)
     params = parse_pairs(param, f"parameters of {kind}", "--param")
@@ -60,6 +61,7 @@ def deform(
     problem = breast_units_problem(geometry.points)
     if problem:
         raise BadInputError(input, problem)
+    writable(out)
     prim = given or carried
     if prim is None and kind in NEEDS_PRIMITIVE:
         raise usage_error(f"{kind} needs the breast primitive, and {input} carries none: "
@@ -82,16 +84,20 @@ def deform(
         extra = {"condition": result.condition.name, "method": method, "degree": degree,
                  "degree_reached": round(result.degree_reached, 4), "t": round(result.t, 6),
                  "params": {k: round(float(v), 6) for k, v in params.items()}}
-    if not np.isfinite(moved).all():
+    with np.errstate(over="ignore", invalid="ignore"):
+        shift = np.linalg.norm(moved - local, axis=1)          # the pose is rigid: the same in the breast frame
+    if not np.isfinite(shift).all():
         raise BadInputError(input, f"{kind} with these parameters sends points to infinity")
+    if shift.max() > BREAST_EXTENT_MM[1]:
+        raise BadInputError(input, f"{kind} with these parameters moves points by {shift.max():.3g} mm, more than "
+                                   f"any breast spans ({BREAST_EXTENT_MM[1]:g} mm)")
     after = transform_points(pose, moved)
     carry = [] if prim is None else [prim.comment(), pose_comment(pose)]
     write_ply(out, after, faces=geometry.faces,
               comments=[f"breastplan deform {kind} " + " ".join(f"{k}={v:g}" for k, v in params.items()), *carry])
-    moved = np.linalg.norm(after - geometry.points, axis=1)
     report({"output": str(out), "points": len(after), "kind": kind, **extra,
             "primitive": "given" if given else "carried by the input" if carried else None,
-            "mean_displacement_mm": float(moved.mean()), "max_displacement_mm": float(moved.max()),
+            "mean_displacement_mm": float(shift.mean()), "max_displacement_mm": float(shift.max()),
             "seconds": clock.seconds}, as_json, f"{kind} → {out}")
 
 
@@ -104,7 +110,7 @@ def _breast(input: Path):
     from breastplan.case import Case, pose_from_comments
 
     if input.is_dir() or input.name == Case.FIT_NPZ:
-        fit = Case(input if input.is_dir() else input.parent).load_fit()
+        fit = Case(require_folder(input if input.is_dir() else input.parent, "case folder")).load_fit()
         return Geometry(fit.vertices, fit.faces), fit.primitive, fit.pose
     geometry = read_ply(input)
     try:

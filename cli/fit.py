@@ -9,11 +9,11 @@ import typer
 from breastplan import BadInputError
 from breastplan.clock import Clock
 from breastplan.deform.names import KIND_PARAMS
-from breastplan.errors import about
+from breastplan.errors import about, require_folder
 from breastplan.options import DEFORMATIONS, FitOptions, OptionError
 
 from .app import JSON, command
-from .output import report, stderr, usage_error
+from .output import report, stderr, usage_error, writable
 
 if TYPE_CHECKING:
     import numpy as np
@@ -44,6 +44,7 @@ def fit(
         raise usage_error(str(exc), {"lattice": "--lattice", "max_iterations": "--max-iterations"}[exc.option]) from None
 
     points, source, folder = _breast_points(input)     # bad input is refused before the stage loads
+    writable(out or folder, folder=True)
 
     from threadpoolctl import threadpool_limits
 
@@ -85,6 +86,7 @@ def _breast_points(input: Path) -> tuple[np.ndarray, Path, Path]:
     from breastplan.units import breast_units_problem
 
     if input.is_dir():
+        require_folder(input, "case folder")
         points, source, folder = Case(input).load_scan().points, input / Case.SCAN_PLY, input
     elif input.suffix.lower() == ".ply" or not input.exists():
         points, source, folder = read_ply(input).points, input, input.parent

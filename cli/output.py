@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
+from pathlib import Path
 from typing import Any, Iterator
 
 import typer
@@ -20,6 +22,37 @@ stderr = Console(stderr=True, highlight=False)
 def usage_error(message: str, param: str | None = None) -> typer.BadParameter:
     """A usage error (exit 2) to raise from a command."""
     return typer.BadParameter(message, param_hint=param)
+
+
+def writable(path: Path, folder: bool = False) -> Path:
+    """`path` if an output file (or `folder`) can be written there; else BadInputError naming it (exit 3),
+    raised before any work: a name longer than the file system holds, a file where a folder is needed,
+    a folder the user may not write in."""
+    from breastplan import BadInputError
+
+    path = Path(path)
+    existing = next((p for p in (path, *path.parents) if _exists(p)), Path(path.anchor or "."))
+    limit = os.pathconf(existing if existing.is_dir() else existing.parent, "PC_NAME_MAX")
+    long = [p for p in path.relative_to(existing).parts if len(os.fsencode(p)) > limit]
+    if long:
+        raise BadInputError(path, f"cannot be written: its name has {len(os.fsencode(long[0]))} bytes, more "
+                                  f"than the {limit} a file name may have")
+    if existing == path and path.is_dir() != folder:
+        raise BadInputError(path, "is a file, not a folder" if folder else "is a folder; --out needs a file name")
+    where = existing if existing != path else path if folder else path.parent    # the folder written in
+    if not where.is_dir():
+        raise BadInputError(path, f"cannot be written: {where} is a file, not a folder")
+    if not os.access(where, os.W_OK | os.X_OK):
+        raise BadInputError(path, f"cannot be written: no permission to write in {where}")
+    return path
+
+
+def _exists(path: Path) -> bool:
+    try:                         # Path.exists raises on a name too long
+        path.stat()
+    except OSError:
+        return False
+    return True
 
 
 @contextlib.contextmanager

@@ -8,7 +8,7 @@ import typer
 from breastplan.clock import Clock
 
 from .app import JSON, command
-from .output import progress, report, usage_error
+from .output import progress, report, usage_error, writable
 
 
 MAX_POINTS = 250_000
@@ -30,8 +30,9 @@ def synth(
         raise usage_error(f"'{db}' is not a database; choose V or S", "--db")
     if seed < 0:
         raise usage_error(f"--seed must be 0 or more, got {seed}", "--seed")
-    if points > MAX_POINTS:
-        raise usage_error(f"--points must be at most {MAX_POINTS:,} per breast, got {points:,}", "--points")
+    if not 9 <= points <= MAX_POINTS:
+        raise usage_error(f"--points must be a square number from 9 to {MAX_POINTS:,} per breast, got {points:,}",
+                          "--points")
 
     from breastplan.learn.databases import build_database, grid_for
 
@@ -39,6 +40,7 @@ def synth(
         grid_for(points)
     except ValueError as exc:
         raise usage_error(str(exc), "--points") from None
+    writable(out, folder=True)
     database = build_database(db, seed=seed, n_points=points)
     from breastplan.atomic import atomic_set
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import os
 from pathlib import Path
 from typing import Iterator
 
@@ -35,6 +36,20 @@ def require_file(path: str | Path, kind: str, error: type[BadInputError] = BadIn
         raise error(path, "is not a regular file")
     if path.stat().st_size == 0:
         raise error(path, "is empty (0 bytes)")
+    try:
+        open(path, "rb").close()
+    except OSError as exc:
+        raise error(path, f"cannot be read ({exc.strerror})") from None
+    return path
+
+
+def require_folder(path: str | Path, kind: str, error: type[BadInputError] = BadInputError) -> Path:
+    """`path` as a Path if it is a folder whose files can be listed and read; else `error` saying why."""
+    path = Path(path)
+    if not path.is_dir():
+        raise error(path, f"is not a {kind}")
+    if not os.access(path, os.R_OK | os.X_OK):
+        raise error(path, "cannot be read (Permission denied)")
     return path
 
 

@@ -7,8 +7,10 @@ open3d's reader reports such defects only as console warnings, hence this module
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -23,6 +25,12 @@ _TYPES = {
 }
 _FORMATS = {"ascii": None, "binary_little_endian": "<", "binary_big_endian": ">"}
 _MAX_HEADER = 1 << 16
+_CHUNK = 1 << 24
+"""Bytes of ASCII data parsed at a time."""
+_TRAILING = 64
+"""Bytes of whitespace a binary PLY may hold after its data (a final newline)."""
+_MAX_POLYGON = 1 << 16
+"""Vertices a face may have."""
 MAX_ELEMENTS = 20_000_000
 """Vertices (or faces) a PLY may declare: no body scan holds more."""
 
@@ -45,34 +53,37 @@ class _Element:
 
 
 def read_ply(path: str | Path) -> Geometry:
-    """Read a PLY file; raise ArtefactError naming the file and the defect."""
+    """Read a PLY file; raise ArtefactError naming the file and the defect.
+
+    The header is read and checked first, then the sizes it declares against the file's size, so
+    that a foreign, forged or oversized file is refused before its body is read; the body is read
+    as declared (binary) or parsed in chunks (ASCII), never more than it should hold.
+    """
     path = require_file(path, "PLY file", ArtefactError)
     try:
-        with open(path, "rb") as fh:                  # the header first: a foreign or forged file is
-            head = fh.read(_MAX_HEADER)               # refused before its body is read
-            fmt, elements, comments, body = _parse_header(path, head)
-            too_many = [e for e in elements if e.count > MAX_ELEMENTS]
-            if too_many:
-                raise ArtefactError(path, f"declares {too_many[0].count:,} '{too_many[0].name}' elements, more than "
-                                          f"any body scan holds ({MAX_ELEMENTS:,})")
-            body += fh.read()
+        with open(path, "rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            fmt, elements, comments, start = _parse_header(path, fh.read(_MAX_HEADER))
+            _check_declared(path, elements, fmt, size - start)
+            fh.seek(start)
+            if fmt is None:
+                arrays = _read_ascii(path, elements, _Numbers(path, fh))
+            else:
+                arrays = _read_binary(path, elements, fh, fmt, size)
     except OSError as exc:
         raise ArtefactError(path, f"cannot be read ({exc.strerror})") from None
-    if fmt is None:
-        arrays = _read_ascii(path, elements, body)
-    else:
-        arrays = _read_binary(path, elements, body, fmt)
     return _to_geometry(path, elements, arrays, comments)
 
 
 def _parse_header(path: Path, data: bytes):
+    """(byte order or None for ASCII, elements, comments, offset of the body) of a PLY header."""
     if not data.startswith(b"ply"):
         raise ArtefactError(path, "is not a PLY file (it does not start with 'ply')")
     end = data.find(b"end_header", 0, _MAX_HEADER)
     if end < 0:
         raise ArtefactError(path, "is not a valid PLY file: its header has no 'end_header' line")
     nl = data.find(b"\n", end)
-    body = data[nl + 1:] if nl >= 0 else b""
+    start = nl + 1 if nl >= 0 else len(data)
     try:
         lines = data[:end].decode("ascii").splitlines()[1:]
     except UnicodeDecodeError:
@@ -102,74 +113,168 @@ def _parse_header(path: Path, data: bytes):
         raise ArtefactError(path, "is not a valid PLY file: its header has no 'format' line")
     if any(e.count < 0 for e in elements):
         raise ArtefactError(path, "is not a valid PLY file: an element has a negative count")
-    return fmt, elements, comments, body
+    return fmt, elements, comments, start
 
 
-def _read_binary(path: Path, elements: list[_Element], body: bytes, order: str) -> dict:
-    arrays, offset = {}, 0
+def _check_declared(path: Path, elements: list[_Element], fmt: str | None, body_size: int) -> None:
+    """ArtefactError if the header declares more than any body scan holds, or more than the file's
+    `body_size` bytes can hold (each face counted as a triangle; in ASCII, 2 bytes per number)."""
+    for el in elements:
+        if el.count > MAX_ELEMENTS:
+            raise ArtefactError(path, f"declares {el.count:,} '{el.name}' elements, more than any body scan "
+                                      f"holds ({MAX_ELEMENTS:,})")
+    need = 0
+    for el in elements:
+        if fmt is None:
+            need += 2 * el.count * sum(1 if count_t is None else 4 for _, _, count_t in el.props)
+        else:
+            need += el.count * sum(np.dtype(t).itemsize * (1 if count_t is None else 3)
+                                   + (0 if count_t is None else np.dtype(count_t).itemsize)
+                                   for _, t, count_t in el.props)
+        if need - (fmt is None) > body_size:
+            raise _truncated(path, el)
+
+
+def _truncated(path: Path, el: _Element) -> ArtefactError:
+    return ArtefactError(path, f"is truncated: its header declares {el.count} '{el.name}' "
+                               f"elements but the file ends before their data does")
+
+
+def _read_binary(path: Path, elements: list[_Element], fh: BinaryIO, order: str, size: int) -> dict:
+    """Each element's records, read as declared; trailing data other than whitespace is refused."""
+    arrays = {}
     for el in elements:
         lists = [p for p in el.props if p[2] is not None]
         if not lists:
             dtype = np.dtype([(n, order + t) for n, t, _ in el.props])
         elif el.name == "face" and len(lists) == 1:
-            dtype = _face_dtype(path, el, body, offset, order)
+            dtype = _face_dtype(path, el, fh, order, size)
         else:
             raise ArtefactError(path, f"has a PLY element '{el.name}' with list properties breastplan cannot read")
-        size = dtype.itemsize * el.count
-        if offset + size > len(body):
-            raise ArtefactError(path, f"is truncated: its header declares {el.count} '{el.name}' "
-                                      f"elements but the file ends before their data does")
-        arrays[el.name] = np.frombuffer(body, dtype=dtype, count=el.count, offset=offset)
-        offset += size
+        if fh.tell() + dtype.itemsize * el.count > size:        # checked before anything is allocated
+            raise _truncated(path, el)
+        arrays[el.name] = np.frombuffer(fh.read(dtype.itemsize * el.count), dtype=dtype, count=el.count)
+    extra = size - fh.tell()
+    if extra > _TRAILING or fh.read(extra).strip():
+        raise ArtefactError(path, f"is not a valid PLY file: it holds {extra:,} bytes after the data its header "
+                                  f"declares (a wrong element count or property type?)")
     return arrays
 
 
-def _face_dtype(path: Path, el: _Element, body: bytes, offset: int, order: str) -> np.dtype:
+def _face_dtype(path: Path, el: _Element, fh: BinaryIO, order: str, size: int) -> np.dtype:
     """Structured dtype of a face element, assuming every face has the first face's vertex count."""
     fields = []
     for name, t, count_t in el.props:
         if count_t is None:
             fields.append((name, order + t))
             continue
-        at = offset + np.dtype(fields).itemsize  # the first face's vertex count
-        if el.count and at + np.dtype(count_t).itemsize > len(body):
-            raise ArtefactError(path, "is truncated: the file ends before its face data")
-        k = int(np.frombuffer(body, order + count_t, 1, at)[0]) if el.count else 3
+        k = 3
+        if el.count:                                            # the first face's vertex count
+            at = fh.tell() + np.dtype(fields).itemsize
+            if at + np.dtype(count_t).itemsize > size:
+                raise ArtefactError(path, "is truncated: the file ends before its face data")
+            fh.seek(at)
+            k = int(np.frombuffer(fh.read(np.dtype(count_t).itemsize), order + count_t)[0])
+            fh.seek(at - np.dtype(fields).itemsize)
         if k < 3:
             raise ArtefactError(path, f"has a face with {k} vertices; faces need at least 3")
+        if fh.tell() + el.count * (np.dtype(fields).itemsize + np.dtype(count_t).itemsize
+                                   + k * np.dtype(t).itemsize) > size:
+            raise _truncated(path, el)
+        if k > _MAX_POLYGON:
+            raise ArtefactError(path, f"has a face with {k:,} vertices; breastplan reads at most {_MAX_POLYGON:,}")
         fields += [("_n", order + count_t), ("_idx", order + t, (k,))]
     return np.dtype(fields)
 
 
-def _read_ascii(path: Path, elements: list[_Element], body: bytes) -> dict:
-    try:
-        tokens = np.array(body.split(), dtype=float)
-    except ValueError:
-        raise ArtefactError(path, "is not a valid ASCII PLY file: its data holds a value that is not a number") from None
-    arrays, pos = {}, 0
+class _Numbers:
+    """The numbers of an ASCII PLY body, parsed a chunk at a time as they are taken."""
+
+    def __init__(self, path: Path, fh: BinaryIO):
+        self.path, self.fh = path, fh
+        self.left = os.fstat(fh.fileno()).st_size - fh.tell()   # bytes not yet read
+        self.buf, self.pos, self.carry = np.empty(0), 0, b""
+
+    def _fill(self) -> bool:
+        """Parse the next chunk (up to its last whitespace); False at the end of the file."""
+        block = self.fh.read(_CHUNK)
+        self.left = self.left - len(block) if block else 0       # 0 also if the file shrank meanwhile
+        data, self.carry = self.carry + block, b""
+        if block:
+            cut = max(data.rfind(c) for c in b" \t\r\n") + 1       # a number may go on in the next chunk
+            if cut == 0 and len(data) > _CHUNK:
+                raise _not_a_number(self.path)
+            data, self.carry = data[:cut], data[cut:]
+        try:
+            self.buf, self.pos = np.array(data.split(), dtype=float), 0
+        except ValueError:
+            raise _not_a_number(self.path) from None
+        return bool(block) or self.buf.size > 0
+
+    def most(self) -> int:
+        """The most numbers the rest of the file can hold (2 bytes each)."""
+        return self.buf.size - self.pos + (self.left + len(self.carry) + 1) // 2
+
+    def peek(self) -> float | None:
+        """The next number without taking it; None at the end of the file."""
+        while self.pos == self.buf.size:
+            if not self._fill():
+                return None
+        return float(self.buf[self.pos])
+
+    def take(self, n: int) -> np.ndarray:
+        """The next `n` numbers (fewer at the end of the file)."""
+        out, got = np.empty(min(n, self.most())), 0
+        while got < out.size and self.peek() is not None:
+            part = self.buf[self.pos: self.pos + out.size - got]
+            out[got: got + part.size] = part
+            got, self.pos = got + part.size, self.pos + part.size
+        return out[:got]
+
+    def rest(self) -> int | None:
+        """How many numbers remain: exact if the file holds no more chunks, else None (many)."""
+        count = self.buf.size - self.pos
+        while self.left or self.carry:
+            if count and self.left:
+                return None
+            self._fill()
+            count += self.buf.size
+        return count
+
+
+def _not_a_number(path: Path) -> ArtefactError:
+    return ArtefactError(path, "is not a valid ASCII PLY file: its data holds a value that is not a number")
+
+
+def _read_ascii(path: Path, elements: list[_Element], numbers: _Numbers) -> dict:
+    arrays = {}
     for el in elements:
         n_scalar = sum(1 for p in el.props if p[2] is None)
         if any(p[2] is not None for p in el.props):
             if el.name != "face" or el.props[0][2] is None or len(el.props) != 1:
                 raise ArtefactError(path, f"has a PLY element '{el.name}' with list properties breastplan cannot read")
-            k = int(tokens[pos]) if el.count and pos < len(tokens) else 3
+            first = numbers.peek() if el.count else 3.0          # the first face's vertex count
+            if first is not None and first < 3:
+                raise ArtefactError(path, f"has a face with {first:g} vertices; faces need at least 3")
+            k = int(first) if first is not None and first <= _MAX_POLYGON else 3
             width = 1 + k
         else:
             width = n_scalar
-        chunk = tokens[pos: pos + width * el.count]
+        if width * el.count > numbers.most():                  # checked before anything is allocated
+            raise _truncated(path, el)
+        chunk = numbers.take(width * el.count)
         if chunk.size < width * el.count:
-            raise ArtefactError(path, f"is truncated: its header declares {el.count} '{el.name}' "
-                                      f"elements but the file ends before their data does")
+            raise _truncated(path, el)
         table = chunk.reshape(el.count, width)
         if width != n_scalar:
             arrays[el.name] = {"_n": table[:, 0], "_idx": table[:, 1:]}
         else:
             arrays[el.name] = {name: table[:, i] for i, (name, _, _) in enumerate(el.props)}
-        pos += width * el.count
-    if pos != len(tokens):
-        extra = len(tokens) - pos
-        raise ArtefactError(path, f"is not a valid ASCII PLY file: its data holds {extra} value{'s' * (extra != 1)} "
-                                  f"more than its header declares (a line with too many numbers?)")
+    extra = numbers.rest()
+    if extra != 0:
+        many = f"{extra} value{'s' * (extra != 1)}" if extra is not None else "values"
+        raise ArtefactError(path, f"is not a valid ASCII PLY file: its data holds {many} more than its header "
+                                  f"declares (a line with too many numbers?)")
     return arrays
 
 

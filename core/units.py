@@ -25,19 +25,31 @@ def mu3_to_cc(volume_mu3):
     return np.asarray(volume_mu3, dtype=float) * MM_PER_MU**3 / 1000.0
 
 
-
 BREAST_EXTENT_MM = (5.0, 1000.0)
 """A breast (or its fit) in millimetres spans more than 5 mm and less than a metre."""
+FAR_EXTENT_MM = 3.0e6
+"""More than a body spans even in micrometres (3 m): a point lies far from the others."""
+
+
+def extent(points) -> float:
+    """The largest side of the axis-aligned bounding box of (N, 3) points (0 for none; inf on overflow)."""
+    p = np.asarray(points, dtype=float)
+    if not p.size:
+        return 0.0
+    with np.errstate(over="ignore", invalid="ignore"):      # ±1e308 coordinates: an infinite extent
+        return float(np.max(p.max(axis=0) - p.min(axis=0)))
 
 
 def breast_units_problem(points_mm) -> str | None:
     """Why (N, 3) points cannot be a breast in millimetres, judged by their extent, or None."""
-    p = np.asarray(points_mm, dtype=float)
-    extent = float(np.ptp(p, axis=0).max()) if p.size else 0.0
-    if extent == 0.0:
+    size = extent(points_mm)
+    if size == 0.0:
         return "has all its points at one place: no surface"
-    if extent < BREAST_EXTENT_MM[0]:
-        return f"spans only {extent:.3g} units, too little for a breast in millimetres (is it in metres?)"
-    if extent > BREAST_EXTENT_MM[1]:
-        return f"spans {extent:.4g} units, too much for a breast in millimetres (is it in micrometres?)"
+    if size < BREAST_EXTENT_MM[0]:
+        return f"spans only {size:.3g} units, too little for a breast in millimetres (is it in metres?)"
+    if size > FAR_EXTENT_MM:
+        return (f"spans {size:.3g} units, more than any body in millimetres or micrometres "
+                f"(a point lies far from the others?)")
+    if size > BREAST_EXTENT_MM[1]:
+        return f"spans {size:.4g} units, too much for a breast in millimetres (is it in micrometres?)"
     return None

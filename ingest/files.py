@@ -5,6 +5,9 @@ deterministic) with the triangle normals; point files keep their points and norm
 are detected from the extent (largest side of the axis-aligned bounding box) or declared.
 Every defect raises BadInputError naming the file: open3d reports corrupt or foreign files
 only as console warnings and hands back an empty geometry, so this module checks for that.
+What no body scan holds is refused before a reader loads it: each file's header (STL, PCD) or
+its lines, scanned in chunks (OBJ, XYZ), are checked against MAX_POINTS and the file's size.
+open3d is imported when a reader needs it.
 """
 from __future__ import annotations
 
@@ -13,12 +16,15 @@ import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
-import open3d as o3d
 
 from breastplan import BadInputError, read_ply, require_file
 from breastplan.case import CAMERA_FRAME
+from breastplan.ply import MAX_ELEMENTS as MAX_POINTS
+from breastplan.units import FAR_EXTENT_MM as FAR_EXTENT
+from breastplan.units import extent as extent_of
 
 SUPPORTED = (".ply", ".obj", ".stl", ".pcd", ".xyz")
 POINTS_PER_MM2 = 1.0
@@ -28,6 +34,9 @@ SAMPLE_SEED = 0
 METRE_EXTENT = (0.05, 3.0)
 MM_EXTENT = (50.0, 3000.0)
 """Plausible extents of a torso or breast scan in metres and in millimetres."""
+_CHUNK = 1 << 24
+_MAX_LINE = 1 << 16
+"""Bytes scanned at a time, and the longest line a text scan file may hold."""
 _MAGIC = {b"\x89PNG": "a PNG image", b"\xff\xd8\xff": "a JPEG image", b"\x89MCAP": "an MCAP recording",
           b"PK\x03\x04": "a ZIP or NPZ archive", b"\x93NUMPY": "a NumPy array", b"ply": "a PLY file",
           b"%PDF": "a PDF document"}
@@ -52,7 +61,7 @@ def read_scan_file(path: str | Path, units: str = "auto") -> ScanCloud:
     _check_file(path)
     points, faces, normals, comments = _READERS[path.suffix.lower()](path)
     _check_points(path, points)
-    extent = float(np.ptp(points, axis=0).max())
+    extent = extent_of(points)
     mm_per_unit, units_text = _mm_per_unit(path, extent, units)
     points = points * mm_per_unit
     if faces is not None:
@@ -73,10 +82,6 @@ def _check_file(path: Path) -> None:
         kind = f"has the extension '{path.suffix}'" if path.suffix else "has no file extension"
         raise BadInputError(path, f"{kind}; supported scan files are {', '.join(SUPPORTED)}")
     require_file(path, "scan file")
-    try:
-        path.open("rb").close()
-    except OSError as exc:
-        raise BadInputError(path, f"cannot be read ({exc.strerror})") from None
 
 
 def _check_points(path: Path, points: np.ndarray) -> None:
@@ -90,10 +95,15 @@ def _check_points(path: Path, points: np.ndarray) -> None:
 
 def _mm_per_unit(path: Path, extent: float, units: str) -> tuple[float, str]:
     """Millimetres per file unit and a phrase saying how the units were chosen."""
-    e = np.format_float_positional(extent, precision=3, fractional=False, trim="-")
+    e = np.format_float_positional(extent, precision=3, fractional=False, trim="-") if extent < 1e6 else f"{extent:.3g}"
+    if extent == 0.0:
+        raise BadInputError(path, "has all its points at one place: no surface")
     if units != "auto" and extent > MM_EXTENT[1]:       # more than a body in either unit
         raise BadInputError(path, f"has an extent of {extent:.3g} {units}, more than any body scan spans "
                                   f"(a point lies far from the others?)")
+    if extent > FAR_EXTENT:
+        raise BadInputError(path, f"has an extent of {e}, more than any body scan spans in metres, millimetres or "
+                                  f"micrometres (a point lies far from the others?)")
     if units == "mm" and extent <= METRE_EXTENT[1]:
         raise BadInputError(path, f"is declared mm but its extent of {e} says metres")
     if units == "m" and extent >= MM_EXTENT[0]:
@@ -110,14 +120,15 @@ def _mm_per_unit(path: Path, extent: float, units: str) -> tuple[float, str]:
 
 def _sample_surface(path: Path, points_mm: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Sample a mesh (mm) uniformly by area, ~1 point per mm², seeded; normals from the triangles."""
-    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(points_mm),
-                                     o3d.utility.Vector3iVector(np.ascontiguousarray(faces, dtype=np.int32)))
-    area = mesh.get_surface_area()
-    if not area > 0:
-        raise BadInputError(path, "is a mesh whose triangles have no area")
-    n = int(np.clip(round(area * POINTS_PER_MM2), *SAMPLE_RANGE))
-    o3d.utility.random.seed(SAMPLE_SEED)
-    cloud = mesh.sample_points_uniformly(n, use_triangle_normal=True)
+    with _open3d() as o3d:
+        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(points_mm),
+                                         o3d.utility.Vector3iVector(np.ascontiguousarray(faces, dtype=np.int32)))
+        area = mesh.get_surface_area()
+        if not area > 0:
+            raise BadInputError(path, "is a mesh whose triangles have no area")
+        n = int(np.clip(round(area * POINTS_PER_MM2), *SAMPLE_RANGE))
+        o3d.utility.random.seed(SAMPLE_SEED)
+        cloud = mesh.sample_points_uniformly(n, use_triangle_normal=True)
     return np.asarray(cloud.points), np.asarray(cloud.normals)
 
 
@@ -152,10 +163,11 @@ def _read_ply(path: Path):
 
 def _read_mesh(path: Path):
     """OBJ/STL through open3d; polygon OBJs, whose non-triangles open3d drops, through pymeshlab."""
-    with _quiet_open3d():
+    polygons = _check_obj(path) if path.suffix.lower() == ".obj" else _check_stl(path)   # STL: None
+    with _open3d() as o3d:
         mesh = o3d.io.read_triangle_mesh(str(path))
     points, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.triangles, dtype=np.int64)
-    if path.suffix.lower() == ".obj" and _has_polygons(path):
+    if polygons:
         points, faces = _read_polygon_obj(path)
     if len(faces) == 0:
         raise _not_valid(path, "or holds no triangles")
@@ -164,7 +176,8 @@ def _read_mesh(path: Path):
 
 def _read_pcd(path: Path):
     """PCD through open3d, NaN points kept so that they are reported."""
-    with _quiet_open3d():
+    _check_pcd(path)
+    with _open3d() as o3d:
         cloud = o3d.io.read_point_cloud(str(path), format="pcd")
     if len(cloud.points) == 0:
         raise _not_valid(path, "or holds no points")
@@ -174,6 +187,9 @@ def _read_pcd(path: Path):
 
 def _read_xyz(path: Path):
     """Plain text 'x y z' or 'x y z nx ny nz' per line ('#' comments), parsed strictly by numpy."""
+    lines = sum(chunk.count(b"\n") for chunk in _text_chunks(path))
+    if lines > MAX_POINTS:
+        raise BadInputError(path, f"holds {lines:,} lines, more points than any body scan holds ({MAX_POINTS:,})")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
@@ -181,7 +197,8 @@ def _read_xyz(path: Path):
     except UnicodeDecodeError:
         raise _not_valid(path, "(it is not text)") from None
     except ValueError as exc:
-        raise _not_valid(path, f"({str(exc).split(';')[0].rstrip('.')})") from None
+        detail = re.sub(r"'([^']{40})[^']+'", r"'\1…'", str(exc).split(";")[0].rstrip("."))  # a long word, cut
+        raise _not_valid(path, f"({detail})") from None
     if table.size == 0:
         raise BadInputError(path, "holds no points")
     if table.shape[1] not in (3, 6):
@@ -210,28 +227,114 @@ def _read_polygon_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return mesh.vertex_matrix().astype(np.float64), mesh.face_matrix().astype(np.int64)
 
 
-def _has_polygons(path: Path) -> bool:
-    """Whether an OBJ file has a face ('f' line) of 4 or more vertices."""
-    return re.search(rb"(?m)^[ \t]*f(?:[ \t]+[^ \t\r\n]+){4,}", path.read_bytes()) is not None
+# --- checks before a reader loads a file: what no body scan holds, refused from headers and lines ---
+
+def _text_chunks(path: Path) -> Iterator[bytes]:
+    """A text scan file in chunks of whole lines; BadInputError if it is binary or has an endless line."""
+    with path.open("rb") as fh:
+        carry = b""
+        while block := fh.read(_CHUNK):
+            if b"\0" in block:
+                raise _not_valid(path, "(it is not text)")
+            data = carry + block
+            cut = data.rfind(b"\n") + 1
+            if len(data) - cut > _MAX_LINE:
+                raise _not_valid(path, f"(it has a line longer than {_MAX_LINE:,} bytes)")
+            carry = data[cut:]
+            yield data[:cut]
+        yield carry
+
+
+def _check_obj(path: Path) -> bool:
+    """Refuse an OBJ that is not text or holds more vertices or faces than any body scan; whether it
+    has a face ('f' line) of 4 or more vertices."""
+    vertices = faces = 0
+    polygons = False
+    for chunk in _text_chunks(path):
+        chunk = b"\n" + chunk                                          # every line starts after a newline
+        vertices += chunk.count(b"\nv ") + chunk.count(b"\nv\t")
+        faces += chunk.count(b"\nf ") + chunk.count(b"\nf\t")
+        polygons = polygons or re.search(rb"(?m)^[ \t]*f(?:[ \t]+[^ \t\r\n]+){4,}", chunk) is not None
+        for count, what in ((vertices, "vertices"), (faces, "faces")):
+            if count > MAX_POINTS:
+                raise BadInputError(path, f"holds more than {MAX_POINTS:,} {what}, more than any body scan")
+    return polygons
+
+
+def _check_stl(path: Path) -> None:
+    """Refuse a binary STL whose triangle count is 0, beyond any body scan or beyond the file's size,
+    and an ASCII STL ('solid …', not of a binary STL's size) of more triangles than any body scan."""
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        head = fh.read(84)
+    n = int.from_bytes(head[80:84], "little") if len(head) == 84 else -1
+    if head.startswith(b"solid") and size != 84 + 50 * n:
+        facets = sum(chunk.count(b"endfacet") for chunk in _text_chunks(path))
+        if facets > MAX_POINTS:
+            raise BadInputError(path, f"holds {facets:,} triangles, more than any body scan ({MAX_POINTS:,})")
+        return
+    if _real_type(path):
+        raise _not_valid(path, "")
+    if n > MAX_POINTS:
+        raise BadInputError(path, f"declares {n:,} triangles, more than any body scan holds ({MAX_POINTS:,})")
+    if n == 0:
+        raise BadInputError(path, "is a binary STL file with no triangles")
+    if 0 < n and size < 84 + 50 * n:
+        raise _not_valid(path, f"(it declares {n:,} triangles but ends before their data does)")
+
+
+def _check_pcd(path: Path) -> None:
+    """Refuse a PCD whose header is missing, declares more points than any body scan, or more data than
+    the file holds (2 bytes a number in ASCII; SIZE × COUNT bytes a point in binary)."""
+    with path.open("rb") as fh:
+        head = fh.read(_MAX_LINE)
+    fields, offset = {}, 0
+    for line in head.splitlines(keepends=True):
+        offset += len(line)
+        words = line.decode("latin-1").split()
+        if words and not words[0].startswith("#"):
+            fields[words[0].upper()] = words[1:]
+        if words[:1] in (["DATA"], ["data"]):
+            break
+    else:
+        raise _not_valid(path, "(its header has no DATA line)")
+    try:
+        points, data = int(fields["POINTS"][0]), fields["DATA"][0].lower()
+        counts = [int(c) for c in fields.get("COUNT", ["1"] * len(fields["SIZE"]))]
+        row = sum(int(size) * count for size, count in zip(fields["SIZE"], counts))
+    except (KeyError, IndexError, ValueError):
+        raise _not_valid(path, "(its header lacks a valid POINTS, SIZE or DATA line)") from None
+    if points > MAX_POINTS:
+        raise BadInputError(path, f"declares {points:,} points, more than any body scan holds ({MAX_POINTS:,})")
+    need = {"ascii": 2 * points * sum(counts) - 1, "binary": points * row}.get(data, 0)
+    if path.stat().st_size - offset < need:
+        raise _not_valid(path, f"(its header declares {points:,} points but the file ends before their data does)")
 
 
 def _not_valid(path: Path, detail: str) -> BadInputError:
     """'is not a valid STL file …', naming the real type when its first bytes give it away."""
     fmt = path.suffix.lower().lstrip(".").upper()
-    with path.open("rb") as fh:
-        head = fh.read(16)
-    real = next((name for magic, name in _MAGIC.items() if head.startswith(magic)), None)
+    real = _real_type(path)
     if real:
         return BadInputError(path, f"is not a valid {fmt} file: it is {real}")
     return BadInputError(path, f"is not a valid {fmt} file {detail}".strip())
 
 
+def _real_type(path: Path) -> str | None:
+    """What a file is by its first bytes ("a PNG image"), if they give it away."""
+    with path.open("rb") as fh:
+        head = fh.read(16)
+    return next((name for magic, name in _MAGIC.items() if head.startswith(magic)), None)
+
+
 @contextmanager
-def _quiet_open3d():
-    """Silence open3d's console warnings (its readers' only report of a bad file)."""
+def _open3d():
+    """open3d, with its console warnings (its readers' only report of a bad file) silenced."""
+    import open3d as o3d
+
     previous = o3d.utility.get_verbosity_level()
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
     try:
-        yield
+        yield o3d
     finally:
         o3d.utility.set_verbosity_level(previous)

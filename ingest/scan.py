@@ -6,6 +6,7 @@ camera.ply (the background-free torso, input frame) and scan.npz (`breastplan.sc
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,8 +15,10 @@ from breastplan.clock import Clock
 from breastplan.options import IngestOptions
 
 from .files import read_scan_file
-from .pipeline import Ingested, ingest_cloud, ingest_frames
 from .recording import MCAP_MAGIC, DepthFrames, read_recording
+
+if TYPE_CHECKING:
+    from .pipeline import Ingested
 
 
 def is_recording(path: Path) -> bool:
@@ -32,7 +35,8 @@ def is_recording(path: Path) -> bool:
 def ingest(input: Path | None, options: IngestOptions) -> Scan:
     """Run the pipeline on a recording, a scan file, or (input None) a live OAK device.
 
-    The file readers name `input` in their errors; the pipeline's errors name no file.
+    The file readers name `input` in their errors; the pipeline's errors name no file. The pipeline
+    (open3d, scipy) is imported after the source is read, so that bad input is refused quickly.
     """
     clock = Clock()
     if input is None or is_recording(Path(input)):
@@ -42,10 +46,14 @@ def ingest(input: Path | None, options: IngestOptions) -> Scan:
                 depth = capture(options.device_id, options.frames or 10)
             else:
                 depth = read_recording(input, options.frames)
+        from .pipeline import ingest_frames
+
         result = ingest_frames(depth, options, clock)
         source = _depth_source(depth, "recording" if input is not None else "device")
     else:
         cloud = read_scan_file(input, options.units)
+        from .pipeline import ingest_cloud
+
         result = ingest_cloud(cloud, options, clock)
         source = Source("file", cloud.description)
     inputs = {} if input is None else {Path(input).name: input}

@@ -1,0 +1,203 @@
+"""Bad input through the `breastplan` command (docs/cli.md): each case ends as promised.
+
+Bad input: exit 3, one sentence naming the file, nothing written. Usage: exit 2, the option named,
+nothing written. Large inputs are sparse files: they cost no disk and are refused from their header.
+"""
+import io
+import os
+import shutil
+import subprocess
+import zipfile
+
+import numpy as np
+import pytest
+
+from breastplan import read_ply, write_ply
+
+from clitools import assert_bad_input, run
+
+PLY_XYZ = "property float x\nproperty float y\nproperty float z\n"
+
+
+def breast_mm(n=2000, seed=0):
+    """A hemisphere of radius 60 mm: a breast-sized point cloud in millimetres."""
+    v = np.random.default_rng(seed).normal(size=(n, 3))
+    v[:, 2] = np.abs(v[:, 2])
+    return 60.0 * v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def sparse(path, header: bytes, size: int):
+    """`header` then zeros up to `size` bytes, without writing the zeros."""
+    path.write_bytes(header)
+    os.truncate(path, size)
+    return path
+
+
+def unprivileged(path):
+    """The command prefix under which `path` (chmod 000 by the caller) cannot be read: none, or for root,
+    setpriv dropping the capabilities that let root read anything."""
+    if not os.access(path, os.R_OK):
+        return []
+    if os.geteuid() == 0 and shutil.which("setpriv"):
+        return ["setpriv", "--bounding-set=-dac_override,-dac_read_search"]
+    pytest.skip("running as root without setpriv: chmod 000 does not stop root reading")
+
+
+def four_numbers_ply(path):
+    rows = np.random.default_rng(0).uniform(0, 100, (60, 3))
+    text = "\n".join(" ".join(f"{v:.3f}" for v in row) for row in rows).replace("\n", " 5.0\n", 1)
+    path.write_text(f"ply\nformat ascii 1.0\nelement vertex 60\n{PLY_XYZ}end_header\n{text}\n")
+    return path
+
+
+def forged_npz(path):
+    """An NPZ whose member's header declares 10¹² × 3 float64 values (24 TB) while it holds 24 bytes."""
+    np.savez(path, grid=np.zeros(2))
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (10**12, 3)})
+    with zipfile.ZipFile(path, "a") as archive:
+        archive.writestr("points.npy", header.getvalue() + b"\0" * 24)
+    return path
+
+
+GB2 = 2 << 30
+PCD_100M = ("VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 100000000\nHEIGHT 1\n"
+            "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 100000000\nDATA binary\n")
+DEFORM = ["deform", "--kind", "ptosis", "--param", "b0=1"]
+INGEST = ["ingest", "--side", "left"]
+FIT = ["fit"]
+CASES = {  # name → (file name, builder(path) → path, command, extra options, words of the sentence)
+    "ascii ply, a line of 4 numbers (deform)": ("four.ply", four_numbers_ply, DEFORM, [], "1 value more than its"),
+    "ascii ply, a line of 4 numbers (ingest)": ("four.ply", four_numbers_ply, INGEST, [], "1 value more than its"),
+    "all points identical (fit)": ("same.ply", lambda p: write_ply(p, np.full((500, 3), 10.0)), FIT, [],
+                                   "all its points at one place"),
+    "all points identical (ingest)": ("same.ply", lambda p: write_ply(p, np.full((500, 3), 10.0)), INGEST, [],
+                                      "all its points at one place"),
+    "breast in micrometres (fit)": ("um.ply", lambda p: write_ply(p, breast_mm() * 1000), FIT, [], "micrometres"),
+    "breast in metres (deform)": ("m.ply", lambda p: write_ply(p, breast_mm() / 1000), DEFORM, [], "is it in metres"),
+    "one coordinate 1e30, --units mm (ingest)": ("far.ply", lambda p: write_ply(p, np.r_[breast_mm(), [[1e30, 0, 0]]]),
+                                                 INGEST, ["--units", "mm"], "more than any body scan spans"),
+    "one coordinate 1e30 (fit)": ("far.ply", lambda p: write_ply(p, np.r_[breast_mm(), [[1e30, 0, 0]]]), FIT, [],
+                                  "a point lies far from the others"),
+    "coordinates ±1.7e308, overflowing (fit)": ("inf.ply", lambda p: write_ply(p, np.r_[breast_mm(), [[1.7e308] * 3,
+                                                [-1.7e308] * 3]]), FIT, [], "a point lies far from the others"),
+    "npz member declaring 10^12 × 3 values (dataset)": ("db.npz", forged_npz, ["dataset", "--condition", "ptosis b0",
+                                                        "--db"], [], "declares 1000000000000×3 values"),
+    "2 GB of zeros as .ply (deform)": ("zero.ply", lambda p: sparse(p, b"", GB2), DEFORM, [], "is not a PLY file"),
+    "2 GB of zeros as .xyz (ingest)": ("zero.xyz", lambda p: sparse(p, b"", GB2), INGEST, [], "it is not text"),
+    "2 GB of zeros as .obj (ingest)": ("zero.obj", lambda p: sparse(p, b"", GB2), INGEST, [], "it is not text"),
+    "2 GB of zeros as .stl (ingest)": ("zero.stl", lambda p: sparse(p, b"", GB2), INGEST, [], "no triangles"),
+    "2 GB of zeros as .pcd (ingest)": ("zero.pcd", lambda p: sparse(p, b"", GB2), INGEST, [], "no DATA line"),
+    "2 GB of zeros as .npz (dataset)": ("zero.npz", lambda p: sparse(p, b"", GB2),
+                                        ["dataset", "--condition", "ptosis b0", "--db"], [], "is not an NPZ file"),
+    "ply of 100 vertices and 2 GB more (fit)": (
+        "tail.ply", lambda p: sparse(p, f"ply\nformat binary_little_endian 1.0\nelement vertex 100\n{PLY_XYZ}"
+                                        "end_header\n".encode(), GB2), FIT, [], "bytes after the data its header"),
+    "ascii ply of 100 vertices and 2 GB more (ingest)": (
+        "tail.ply", lambda p: sparse(p, f"ply\nformat ascii 1.0\nelement vertex 100\n{PLY_XYZ}end_header\n".encode(),
+                                     GB2), INGEST, [], "not a number"),
+    "ply declaring 89 M vertices (fit)": (
+        "huge.ply", lambda p: sparse(p, f"ply\nformat binary_little_endian 1.0\nelement vertex 89000000\n{PLY_XYZ}"
+                                        "end_header\n".encode(), 89_000_000 * 12 + 200), FIT, [],
+        "declares 89,000,000 'vertex' elements, more than any body scan holds"),
+    "ply declaring 19 M vertices in 1 kB (fit)": (
+        "short.ply", lambda p: sparse(p, f"ply\nformat binary_little_endian 1.0\nelement vertex 19000000\n{PLY_XYZ}"
+                                         "end_header\n".encode(), 1000), FIT, [], "truncated"),
+    "ascii ply declaring 19 M vertices in 1 kB (ingest)": (
+        "short.ply", lambda p: sparse(p, f"ply\nformat ascii 1.0\nelement vertex 19000000\n{PLY_XYZ}"
+                                         "end_header\n".encode(), 1000), INGEST, [], "truncated"),
+    "binary stl declaring 2^32 - 1 triangles (ingest)": ("big.stl", lambda p: p.write_bytes(bytes(80) + b"\xff" * 4
+                                                          + bytes(50)), INGEST, [], "declares 4,294,967,295 triangles"),
+    "pcd declaring 100 M points (ingest)": ("big.pcd", lambda p: p.write_text(PCD_100M), INGEST, [],
+                                            "declares 100,000,000 points, more than any body scan"),
+    "ply whose first face declares 2^31 vertices (deform)": (
+        "faces.ply", lambda p: p.write_bytes(f"ply\nformat binary_little_endian 1.0\nelement vertex 3\n{PLY_XYZ}"
+                                             "element face 1\nproperty list int int vertex_indices\nend_header\n"
+                                             .encode() + bytes(36) + (2**31 - 1).to_bytes(4, "little") + bytes(12)),
+        DEFORM, [], "truncated"),
+}
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_bad_input_exits_3_with_one_sentence_naming_the_file(cli, tmp_path, name):
+    filename, build, command, options, words = CASES[name]
+    path = tmp_path / filename
+    build(path)
+    out = tmp_path / ("out.ply" if command == DEFORM else "out.npz" if "dataset" in command else "out")
+    res = run(cli, *command, path, *options, "--out", out)
+    assert_bad_input(res, path, tmp_path)
+    assert words in res.stderr, res.stderr
+
+
+@pytest.mark.parametrize("command", [DEFORM, FIT, INGEST, ["dataset", "--condition", "ptosis b0", "--db"]])
+def test_an_unreadable_file_is_bad_input_not_a_usage_error(cli, tmp_path, command):
+    path = tmp_path / ("locked.npz" if "dataset" in command else "locked.ply")
+    write_ply(path, breast_mm()) if path.suffix == ".ply" else forged_npz(path)
+    path.chmod(0)
+    prefix = unprivileged(path)
+    res = run(*prefix, cli, *command, path, "--out", tmp_path / "out")
+    assert_bad_input(res, path, tmp_path)
+    assert "cannot be read (Permission denied)" in res.stderr
+
+
+def test_an_unreadable_case_folder_is_bad_input(cli, tmp_path):
+    case = tmp_path / "case"
+    case.mkdir()
+    case.chmod(0)
+    prefix = unprivileged(case)
+    res = run(*prefix, cli, "fit", case, "--out", tmp_path / "out")
+    case.chmod(0o755)
+    assert_bad_input(res, case, tmp_path)
+    assert "cannot be read" in res.stderr
+
+
+def test_an_output_folder_without_write_permission_is_bad_input(cli, tmp_path):
+    write_ply(tmp_path / "breast.ply", breast_mm())
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    prefix = unprivileged(locked) if os.access(locked, os.W_OK) else []
+    res = run(*prefix, cli, *DEFORM, tmp_path / "breast.ply", "--out", locked / "out.ply")
+    assert res.returncode == 3 and res.stderr.strip().splitlines() == [
+        f"error: {locked / 'out.ply'}: cannot be written: no permission to write in {locked}."], res.stderr
+    assert list(locked.iterdir()) == []
+
+
+def test_a_legal_250_character_out_name_is_written(cli, tmp_path):
+    write_ply(tmp_path / "breast.ply", breast_mm())
+    out = tmp_path / ("d" * 246 + ".ply")
+    res = run(cli, *DEFORM, tmp_path / "breast.ply", "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert read_ply(out).points.shape == (2000, 3)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["breast.ply", out.name]
+
+
+def test_an_out_name_longer_than_the_file_system_allows_is_bad_input(cli, tmp_path):
+    write_ply(tmp_path / "breast.ply", breast_mm())
+    out = tmp_path / ("out" + "d" * 253 + ".ply")
+    res = run(cli, *DEFORM, tmp_path / "breast.ply", "--out", out)
+    assert_bad_input(res, out, tmp_path)
+    assert "more than the 255 a file name may have" in res.stderr
+
+
+@pytest.mark.parametrize("param,words", [("b0=1e308", "sends points to infinity"),
+                                         ("b0=400", "moves points by 2.4e+03 mm, more than any breast spans")])
+def test_parameters_beyond_any_breast_give_one_sentence(cli, tmp_path, param, words):
+    write_ply(tmp_path / "breast.ply", breast_mm())
+    res = run(cli, "deform", tmp_path / "breast.ply", "--kind", "ptosis", "--param", param,
+              "--out", tmp_path / "out.ply")
+    assert_bad_input(res, tmp_path / "breast.ply", tmp_path)
+    assert words in res.stderr, res.stderr
+
+
+@pytest.mark.parametrize("args,option", [
+    (["synth", "--db", "S", "--points", str(10**8)], "--points"),
+    (["synth", "--db", "S", "--points", "-4"], "--points"),
+    (["synth", "--db", "S", "--seed", "-1"], "--seed"),
+    (["dataset", "--db", "db.npz", "--condition", "ptosis b0", "--dd", "100000"], "--dd"),
+])
+def test_usage_errors_exit_2_naming_the_option_and_write_nothing(cli, tmp_path, args, option):
+    res = subprocess.run([cli, *args, "--out", "out"], capture_output=True, text=True, cwd=tmp_path, timeout=600)
+    assert res.returncode == 2, res.stderr
+    assert option in res.stderr and "Traceback" not in res.stderr and "NaN" not in res.stderr
+    assert list(tmp_path.iterdir()) == []
