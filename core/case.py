@@ -5,9 +5,11 @@
     case/plan/  report.html  plan.json      plan
 
 Each artefact set is written all or nothing (`atomic_set`): its PLYs are staged first and its
-NPZ last, and the NPZ records the SHA-256 of each sibling, so a set whose files do not belong
-together (a write killed between two renames) is refused on load. Every NPZ records its
-provenance: the content hashes of its inputs and the options that made it (docs/artefacts.md).
+NPZ last, and a process killed at any point leaves the previous set or (completed by `recover`,
+which every load runs first) the new one. The NPZ records the SHA-256 of each sibling, so a set
+whose files do not belong together (a file copied in, a write by another tool) is refused on load.
+Every NPZ records its provenance: the content hashes of its inputs and the options that made it
+(docs/artefacts.md).
 """
 from __future__ import annotations
 
@@ -19,7 +21,7 @@ import numpy as np
 
 from . import __version__
 from .artefacts import load_npz, save_npz
-from .atomic import atomic_set
+from .atomic import atomic_set, recover
 from .errors import ArtefactError
 from .options import SIDES
 from .ply import read_ply, write_ply
@@ -162,6 +164,7 @@ class Case:
     @classmethod
     def holds(cls, folder: str | Path) -> bool:
         """Whether `folder` is a case folder (it holds an ingested scan)."""
+        cls(folder)._recover()
         return (Path(folder) / cls.SCAN_NPZ).is_file()
 
     # --- scan -------------------------------------------------------------------------
@@ -267,6 +270,7 @@ class Case:
     def is_fresh(self, npz_name: str, wanted: Provenance) -> bool:
         """Whether the NPZ exists, was made from inputs of the same content with the same options,
         and its set is whole (a stage that can be reused)."""
+        self._recover()
         if not self.path(npz_name).is_file():
             return False
         try:
@@ -290,7 +294,16 @@ class Case:
             save_npz(stage(self.path(npz)), schema, arrays, units="mm", frame=frame, meta=meta)
         return {name: self.path(name) for name in (*plys, npz)}
 
+    def _recover(self) -> None:
+        """Complete a set write a killed process committed (`atomic.recover`)."""
+        try:
+            recover(self.folder)
+        except OSError as exc:
+            raise ArtefactError(self.folder, f"holds an interrupted write that cannot be completed here "
+                                             f"({exc.strerror or exc}); run the stage again") from None
+
     def _load_set(self, npz: str, schema: str, spec: dict, siblings: tuple[str, ...]):
+        self._recover()
         art = load_npz(self.path(npz), schema, spec)
         self._check_set(npz, art.meta, siblings)
         return art

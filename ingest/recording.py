@@ -8,18 +8,16 @@ through `dai.node.ReplayMessage`, unpaced (as fast as the host can take the fram
 from __future__ import annotations
 
 import datetime
-import io
 import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from mcap.data_stream import ReadDataStream
-from mcap.reader import make_reader
-from mcap.stream_reader import MAGIC_SIZE, read_magic
 
-from breastplan import BadInputError, require_file
+from breastplan import BadInputError
+
+from .mcap_check import check_recording
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 END_OF_RECORDING = 2**31 - 1
@@ -27,15 +25,16 @@ END_OF_RECORDING = 2**31 - 1
 recorder writes a message only after taking the next one, so the marker flushes the last
 real frame."""
 SETTLE_S = 0.05
-MAX_MESSAGES = 100_000
-"""Messages a recording may hold: an hour of a 30 fps depth stream is 108 000 frames; a scan takes seconds."""
 UNPACED_FPS = 1e6
 """Replay rate asked of ReplayMessage: far above any camera's, so replay is not paced."""
 
 
 def depthai():
-    """Import depthai quietly (it prints a USB warning on stdout otherwise)."""
+    """Import depthai quietly (it prints a USB warning on stdout otherwise), leaving signals to Python
+    (depthai's crash handler would turn SIGXFSZ, which Python ignores so that a write past a file-size
+    limit fails with an OSError naming the file, into a crash)."""
     os.environ.setdefault("DEPTHAI_LEVEL", "off")  # problems surface as our own errors
+    os.environ.setdefault("DEPTHAI_INSTALL_SIGNAL_HANDLER", "0")
     import depthai as dai
     return dai
 
@@ -109,69 +108,58 @@ def _img_frame(dai, depth: np.ndarray, K: np.ndarray, seq: int, seconds: float):
 
 
 def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFrames:
-    """Replay the RAW16 depth frames of an MCAP recording (at most `max_frames`)."""
+    """Replay the RAW16 depth frames of an MCAP recording (at most `max_frames`), once each.
+
+    The file is checked whole first (`check_recording`); frames are then taken in the order of
+    their sequence numbers until the end marker or the file's last message, never from a second pass.
+    """
     path = Path(path)
-    count = _check_mcap(path)
+    count = check_recording(path)
+    if count == 0:
+        raise BadInputError(path, "is an MCAP recording without messages (no depth frames)")
     raw16 = depthai().ImgFrame.Type.RAW16
-    frames, K, messages = [], None, 0
+    stack, K, frames, last, messages, ended = None, None, 0, -1, 0, False
     for messages, msg in enumerate(_replay(path, count), 1):
-        if (type(msg).__name__ != "ImgFrame" or msg.getType() != raw16
-                or msg.getSequenceNum() == END_OF_RECORDING):
+        if type(msg).__name__ != "ImgFrame" or msg.getType() != raw16:
             continue
-        depth = np.array(msg.getFrame(), dtype=np.uint16, copy=True)
-        if frames and depth.shape != frames[0].shape:
-            raise BadInputError(path, f"its depth frames change size from {frames[0].shape[1]}×{frames[0].shape[0]} "
-                                      f"to {depth.shape[1]}×{depth.shape[0]} at frame {len(frames) + 1}")
-        if K is None:
-            K = np.array(msg.getTransformation().getIntrinsicMatrix(), dtype=float)
-        frames.append(depth)
-        if max_frames is not None and len(frames) >= max_frames:
+        seq = msg.getSequenceNum()
+        if seq == END_OF_RECORDING:
+            ended = True
             break
-    if not frames:
-        raise BadInputError(path, "is an MCAP recording without RAW16 depth frames" if messages else
-                            "is a corrupt MCAP recording (depthai could not replay any message)")
-    depth = np.stack(frames)
+        if seq <= last:
+            raise BadInputError(path, f"is a recording whose frame {frames} has sequence number {seq}, not after "
+                                      f"{last}: its frames repeat or run backwards")
+        depth = np.asarray(msg.getFrame(), dtype=np.uint16)
+        if stack is None:
+            stack = np.empty((min(count, max_frames or count), *depth.shape), np.uint16)
+            K = np.array(msg.getTransformation().getIntrinsicMatrix(), dtype=float)
+        elif depth.shape != stack.shape[1:]:
+            raise BadInputError(path, f"its depth frames change size from {stack.shape[2]}×{stack.shape[1]} "
+                                      f"to {depth.shape[1]}×{depth.shape[0]} at frame {frames + 1}")
+        stack[frames], frames, last = depth, frames + 1, seq
+        if frames == len(stack):
+            ended = True
+            break
+    if not messages:
+        raise BadInputError(path, "is a corrupt MCAP recording (depthai could not replay any message)")
+    if not ended and messages < count:
+        raise BadInputError(path, f"is an MCAP recording of which depthai replayed only {messages} of its "
+                                  f"{count} messages")
+    if stack is None:
+        raise BadInputError(path, "is an MCAP recording without RAW16 depth frames")
+    depth = stack[:frames]                          # the marker's slot, if any, stays unused
     if not depth.any():
-        raise BadInputError(path, f"its {len(frames)} depth frames are all zero (no depth measured)")
+        raise BadInputError(path, f"its {frames} depth frames are all zero (no depth measured)")
     _check_intrinsics(path, K, depth.shape[2], depth.shape[1])
-    return DepthFrames(depth, K, f"{path.name}: depthai recording, {len(frames)} frames "
+    return DepthFrames(depth, K, f"{path.name}: depthai recording, {frames} frames "
                                  f"{depth.shape[2]}x{depth.shape[1]}")
 
 
-def _check_mcap(path: Path) -> int:
-    """The message count of an MCAP recording, read with the `mcap` package from the statistics of
-    its summary section; BadInputError (one sentence) for a file that is not MCAP, is truncated or
-    has no readable summary. No exception of the `mcap` package escapes."""
-    require_file(path, "recording")
-    with open(path, "rb") as fh:
-        try:
-            reader = make_reader(fh)                       # checks the leading magic bytes
-        except Exception:
-            raise BadInputError(path, "is not an MCAP recording (it lacks the MCAP magic bytes)") from None
-        try:
-            fh.seek(-MAGIC_SIZE, io.SEEK_END)             # a whole recording ends with them again
-            read_magic(ReadDataStream(fh))
-        except Exception:
-            raise BadInputError(path, "is a truncated MCAP recording (its end is missing)") from None
-        try:
-            summary = reader.get_summary()
-            stats = None if summary is None else summary.statistics
-            count = None if stats is None else stats.message_count
-        except Exception:
-            raise BadInputError(path, "is a corrupt MCAP recording (its summary section cannot be read)") from None
-    if not isinstance(count, int) or count < 0:
-        raise BadInputError(path, "is a corrupt MCAP recording (its summary holds no message count)")
-    if count > MAX_MESSAGES:
-        raise BadInputError(path, f"is an MCAP recording whose summary claims {count:,} messages, more than any "
-                                  f"body scan holds ({MAX_MESSAGES:,} frames)")
-    return count
-
-
 def _replay(path: Path, count: int):
-    """Yield the messages of a recording through ReplayMessage, unpaced.
+    """Yield the first `count` messages of a recording (all it holds) through ReplayMessage, unpaced.
 
-    The replay loops and is stopped after `count` messages (the summary's): at end of file
-    ReplayMessage closes the queue at once, and messages not yet taken would be lost.
+    The node loops only because at end of file it closes its queue at once, dropping messages not
+    yet taken; no message past the `count`th, which would come from the second pass, is taken.
     """
     dai = depthai()
     pipeline = dai.Pipeline(False)

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.special import ndtr, ndtri
 
 from breastplan import ArtefactError, Primitive, load_npz, save_npz, to_model_units, write_ply
+from breastplan.atomic import recover
 from breastplan.deform.degree import GENERIC_SHAPE
 from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.global_deformations import Deformation, changing
@@ -105,6 +106,11 @@ class Database:
 
     @classmethod
     def load(cls, path: str | Path) -> "Database":
+        try:
+            recover(Path(path).parent)                # a `synth --ply` write killed after its commit point
+        except OSError as exc:
+            raise ArtefactError(path, f"was left by an interrupted write that cannot be completed here "
+                                      f"({exc.strerror or exc}); run synth again") from None
         art = load_npz(path, SCHEMA, _SPEC)
         if art["points"].shape[1] != int(np.prod(art["grid"])):
             raise ArtefactError(path, "has a point count that does not match its sampling grid")
