@@ -47,7 +47,11 @@ def test_deform_with_primitive(cli, synth_s, tmp_path):
     before, after = read_ply(out / "S-shape1-00.ply").points, read_ply(tmp_path / "f.ply").points
     medial = before[:, 0] >= 0
     assert np.array_equal(after[medial], before[medial])
-    assert np.all(np.abs(after[~medial, 0]) <= np.abs(before[~medial, 0]) + 1e-9)
+    assert np.array_equal(after[:, 1:], before[:, 1:])
+    # closed form (docs/model.md §3): h = (0.1, 0), g = 0.9, γ(w) = (0 + 2 − 1.8)w³ + (2.7 − 3 − 0)w² + 1
+    # = 0.2w³ − 0.3w² + 1 with w = |x|/a2, a2 = 10 mu = 60 mm; x ← x·γ(w) on the lateral half x < 0
+    w = -before[~medial, 0] / 60.0
+    assert np.allclose(after[~medial, 0], before[~medial, 0] * (0.2 * w**3 - 0.3 * w**2 + 1), rtol=0, atol=1e-5)
 
 
 def test_deform_reads_the_primitive_a_synth_ply_carries(cli, synth_s, tmp_path):

@@ -43,6 +43,10 @@ def test_volume_law(seed):
 
 def test_database_v_is_one_shape_at_many_scales(db_v):
     assert np.allclose(db_v.semi_axes, db_v.semi_axes[:, :1])        # five equal semi-axes
+    b, c, s, h, g = TABLE_4_1["generic"]
+    for vector in db_v.deformation:                                   # the generic shape of Table 4.1
+        d = Deformation.from_vector(vector)
+        assert (d.ptosis, d.turn, d.top_shape, d.flatten_side, d.turn_top) == (b, c, s, h, g)
     # the generic shape is two shears: breast volume = hemisphere (2/3)πa³, a in mm
     a_mm = db_v.semi_axes[:, 0] * 6
     assert np.allclose(db_v.volume_cc, 2 / 3 * np.pi * a_mm**3 / 1000, rtol=0.005)

@@ -7,6 +7,7 @@ import pytest
 from breastplan import ArtefactError, read_ply, to_mm, write_ply
 from breastplan.deform.by_degree import MODELS, deform_by_degree, slug
 from breastplan.deform.conditions import CONDITIONS
+from breastplan.deform.descriptors import breast_scalars
 from breastplan.deform.global_deformations import apply_kind
 from breastplan.learn.datasets import build_dataset
 from breastplan.learn.features import FEATURE_SETS, VectorReducer, example_features
@@ -67,11 +68,22 @@ def test_trained_model_file_predicts_what_the_estimator_predicts(db_small, tmp_p
 
 
 @pytest.mark.parametrize("name", DEPLOYED)
-def test_shipped_models_load_and_stay_on_their_line(name):
-    """The package ships one model per deployed condition; its positions lie near [0, 1]."""
-    model = load_model(MODELS / f"{slug(CONDITIONS[name])}.npz")
+def test_shipped_models_load_and_stay_on_their_line(db_s, name):
+    """The package ships one model per deployed condition. On every test breast of database S it stays
+    on its line: over degrees 1 … 8 its position rises and stays within [−0.2, 1.2], and at the degree
+    of row j (j = 1 … 8, docs/model.md §4: t = (j − 1)/7) it gives that row's t within 0.03."""
+    cond = CONDITIONS[name]
+    model = load_model(MODELS / f"{slug(cond)}.npz")
     assert model.meta["condition"] == name and model.meta["training"]["split"] == "train"
     assert model.meta["features"][0] == "DD"
+    ds = build_dataset(db_s, cond, 8)
+    for i in np.flatnonzero(db_s.split == "test"):
+        scalars = breast_scalars(db_s.points[i], cond.kind, model.meta["feature_set"])
+        sweep = model.predict(np.column_stack([np.linspace(1, 8, 15), np.tile(scalars, (15, 1))]))
+        assert np.all(np.diff(sweep) > 0) and -0.2 <= sweep.min() and sweep.max() <= 1.2, (i, sweep)
+        k = np.flatnonzero(ds.breast == i)
+        t = model.predict(np.column_stack([ds.degree_continuous[k], np.tile(scalars, (len(k), 1))]))
+        assert np.max(np.abs(t - ds.row[k] / 7)) < 0.03, (i, t)
 
 
 def test_exact_deform_by_degree_reproduces_a_known_row(db_s):
@@ -88,12 +100,16 @@ def test_exact_deform_by_degree_reproduces_a_known_row(db_s):
 
 @pytest.mark.parametrize("name", ["ptosis b0>b1", "turn c1>c0"])
 def test_learnt_deform_by_degree_is_close_to_the_exact_one(db_s, name):
-    """On test breasts the shipped model lands within 0.3 degree of the request."""
+    """On test breasts the shipped model lands within 0.15 degree of the request, 0.06 on average
+    (on all 12 test breasts the worst is 0.11; a position off by 0.03 on the line, 0.21 degree)."""
     cond = CONDITIONS[name]
+    misses = []
     for i in np.flatnonzero(db_s.split == "test")[::4]:
         for degree in (2.0, 4.5, 7.0):
             r = deform_by_degree(db_s.points[i], cond.kind, degree, condition=name, method="learnt")
-            assert abs(r.degree_reached - degree) < 0.3, (i, degree, r.degree_reached)
+            assert abs(r.degree_reached - degree) < 0.15, (i, degree, r.degree_reached)
+            misses.append(abs(r.degree_reached - degree))
+    assert np.mean(misses) < 0.06
 
 
 def test_deform_by_degree_command(cli, db_s, tmp_path):
