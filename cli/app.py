@@ -10,10 +10,9 @@ function, so that `breastplan --help` and every command's start-up stay fast
 """
 from __future__ import annotations
 
+import inspect
 import math
 from typing import TYPE_CHECKING, List
-
-import inspect
 
 import typer
 from typer.core import TyperCommand, TyperGroup

@@ -132,6 +132,13 @@ def _parse_primitive(text: Optional[str]) -> Optional[Primitive]:
         raise usage_error(f"the primitive needs a1..a5 (and optionally eps1, eps2); "
                           f"missing {missing}, unknown {unknown}", "--primitive")
     try:
-        return Primitive(**values)
+        prim = Primitive(**values)
     except ValueError as exc:
         raise usage_error(str(exc), "--primitive") from None
+    from breastplan.units import BREAST_EXTENT_MM, MM_PER_MU
+
+    largest = max(values[n] for n in PARAM_NAMES[:5])
+    if largest > BREAST_EXTENT_MM[1] / (2 * MM_PER_MU):
+        raise usage_error(f"a semi-axis of {largest:.3g} model units ({MM_PER_MU:g} mm each) makes the primitive "
+                          f"larger than any breast ({BREAST_EXTENT_MM[1]:g} mm across)", "--primitive")
+    return prim

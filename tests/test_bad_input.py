@@ -201,3 +201,13 @@ def test_usage_errors_exit_2_naming_the_option_and_write_nothing(cli, tmp_path, 
     assert res.returncode == 2, res.stderr
     assert option in res.stderr and "Traceback" not in res.stderr and "NaN" not in res.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_primitive_larger_than_any_breast_is_a_usage_error(cli, tmp_path):
+    write_ply(tmp_path / "breast.ply", breast_mm())
+    res = run(cli, "deform", tmp_path / "breast.ply", "--kind", "ptosis", "--param", "b0=1",
+              "--primitive", "a1=1e308,a2=10,a3=10,a4=10,a5=10", "--out", tmp_path / "out.ply")
+    assert res.returncode == 2, res.stderr
+    assert "--primitive" in res.stderr and "larger than any breast" in res.stderr
+    assert "Traceback" not in res.stderr and "Warning" not in res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["breast.ply"]
