@@ -33,6 +33,9 @@ SEMI_AXIS_RANGE = (0.2, 1.5)
 (the medial side, cropped between the breasts) would otherwise let its semi-axis run away."""
 DEFORMED_FIT_POINTS = 600
 """Points of a fit with deformations (finite-difference Jacobian: each point costs more)."""
+START_NFEV = 50
+"""Evaluations of each solve of a top-shape start: a start need not converge, and on a breast the
+model cannot hold it may wander for the solver's whole budget (200), a second each."""
 START_TURN_RAD = 1e-6
 """The pose of a top-shape start keeps the breast frame's axes: a cloud's lower part alone lets a
 turn about z trade places with a1 and a2."""
@@ -242,7 +245,7 @@ def _top_shape_start(p: np.ndarray, kinds: tuple[str, ...], solve: "_Solver") ->
     q, nfev = p - x[10:13], 0
     for _ in range(2):
         still = (q[:, 1] < -LOWER_MARGIN * np.exp(x[3])) | (q[:, 2] < LOW_SHARE * np.exp(x[4]))
-        sol = solve(seeded_subset(p[still], DEFORMED_FIT_POINTS), rest, x, max_turn=START_TURN_RAD)
+        sol = solve(seeded_subset(p[still], DEFORMED_FIT_POINTS), rest, x, max_nfev=START_NFEV, max_turn=START_TURN_RAD)
         x, nfev, q = sol.x, nfev + sol.nfev, _undone(sol.x, p, rest)
     a, e1, e2, _, _ = _unpack(x)
     primitive = Primitive(*a, e1, e2)
