@@ -55,6 +55,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_fit.py
 	$(BIN)/python benchmarks/bench_learn.py
 	$(BIN)/python benchmarks/bench_realistic.py
+	$(BIN)/python benchmarks/bench_refusal.py
 
 clean:
 	rm -rf $(VENV) out
