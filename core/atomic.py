@@ -139,20 +139,8 @@ def recover(folder: str | Path) -> list[Path]:
 def _write_journal(journal: Path, staged: list[tuple[Path, Path]]) -> None:
     folder = journal.parent
     renames = [[os.path.relpath(tmp, folder), os.path.relpath(path, folder)] for tmp, path in staged]
-    text = json.dumps({"schema": JOURNAL_SCHEMA, "renames": renames}).encode()
-    fd, tmp = tempfile.mkstemp(prefix=journal.name + ".", suffix=".part", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, journal)
-    except BaseException as exc:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        if isinstance(exc, OSError):
-            raise OSError(exc.errno, exc.strerror, str(journal)) from None
-        raise
+    with atomic_open(journal) as fh:
+        fh.write(json.dumps({"schema": JOURNAL_SCHEMA, "renames": renames}).encode())
     _sync(folder)
 
 
@@ -198,9 +186,9 @@ def _sync(path: Path) -> None:
 def _remove_stale(path: Path) -> None:
     """Remove the temporaries of `path` a killed write left (call `recover` first): `.NAME.XXXXXXXX.part`
     (its own or a staged copy), `..NAME.<hex8>.part.XXXXXXXX.part` (a staged copy's) and
-    `.NAME.commit.XXXXXXXX.part` (a journal's). A concurrent writer of the same file is not supported."""
+    `..NAME.commit.XXXXXXXX.part` (a journal's). A concurrent writer of the same file is not supported."""
     name = re.escape(_short(path.name))
-    stale = re.compile(rf"(\.{name}|\.\.{name}\.[0-9a-f]{{8}}\.part|\.{name}{re.escape(JOURNAL)})"
+    stale = re.compile(rf"(\.{name}|\.\.{name}\.[0-9a-f]{{8}}\.part|\.\.{name}{re.escape(JOURNAL)})"
                        rf"\.[a-z0-9_]{{8}}\.part")
     with contextlib.suppress(OSError):
         for entry in os.scandir(path.parent):
