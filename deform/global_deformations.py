@@ -187,7 +187,8 @@ _FORWARD = {"top-shape": top_shape, "flatten-side": flatten_side, "turn-top": tu
             "ptosis": ptosis, "turn": turn}
 _INVERSE = {"top-shape": top_shape_inverse, "flatten-side": flatten_side_inverse,
             "turn-top": turn_top_inverse, "ptosis": ptosis_inverse, "turn": turn_inverse}
-_TABULATED = frozenset({"top-shape", "flatten-side"})
+TABULATED = frozenset({"top-shape", "flatten-side"})
+"""The kinds whose inverse interpolates a table of their 1-D map."""
 
 
 def kind_params(kind: str, params: Mapping[str, float] | Sequence[float]) -> tuple[float, ...]:
@@ -212,7 +213,7 @@ def apply_kind(points, kind: str, params, primitive: Primitive | None = None, *,
     `fast` inverts top-shape and flatten-side for surface points from their tables (`top_shape_inverse`)."""
     values = kind_params(kind, params)
     fn = (_INVERSE if inverse else _FORWARD)[kind]
-    options = {"fast": fast} if inverse and kind in _TABULATED else {}
+    options = {"fast": fast} if inverse and kind in TABULATED else {}
     if kind in NEEDS_PRIMITIVE:
         return fn(points, *values, primitive=_need(primitive, kind), **options)
     return fn(points, *values)

@@ -16,7 +16,7 @@ from scipy.optimize import least_squares
 
 from breastplan import BadInputError, Primitive, to_mm, to_model_units
 from breastplan.deform.breast_model import BreastModel
-from breastplan.deform.global_deformations import Deformation, beta
+from breastplan.deform.global_deformations import TABULATED, Deformation, apply_kind, beta
 from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
 
 from .sampling import seeded_subset
@@ -271,6 +271,27 @@ def _plausible(x: np.ndarray, kinds: tuple[str, ...]) -> bool:
     return bool(np.all((x[13:] >= lo) & (x[13:] <= hi)))
 
 
+def _radial_batch(xs: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
+    """(B, N) `_radial` of the parameter vectors xs (B, len(x)), which differ only in the pose and in
+    the deformations that need no table (docs/model.md §3): the tabulated inverses and the
+    inside–outside function, most of a residual's cost, run once over all B·N points."""
+    a, e1, e2, _, _ = _unpack(xs[0])
+    primitive = Primitive(*a, e1, e2)
+    q = np.stack([(p - x[10:13]) @ _rotation(x[7:10]) for x in xs])
+    deformations = [_deformation(x, kinds) for x in xs]
+    for kind in reversed(kinds):                               # the inverses, in reverse §3 order
+        if kind in TABULATED:
+            params = deformations[0].params(kind)
+            if any(params):
+                q = apply_kind(q.reshape(-1, 3), kind, params, primitive, inverse=True, fast=True).reshape(q.shape)
+            continue
+        for k, d in enumerate(deformations):
+            if any(d.params(kind)):
+                q[k] = apply_kind(q[k], kind, d.params(kind), primitive, inverse=True)
+    f = np.maximum(primitive.inside_outside(q), 1e-12)
+    return np.linalg.norm(q, axis=-1) * (1.0 - f ** (-e1 / 2))
+
+
 def _undone(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
     """Points p (mu, data frame) taken back through the pose and deformations of x to the primitive."""
     a, e1, e2, rot, t = _unpack(x)
@@ -297,15 +318,56 @@ class _Solver:
     def weight(self, p: np.ndarray) -> float:
         return CHEST_PRIOR_WEIGHT * np.sqrt(len(p))
 
+    def differences(self, x: np.ndarray, f0: np.ndarray, p: np.ndarray, kinds: tuple[str, ...],
+                    bounds: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """Forward-difference Jacobian at x (f0 = residuals there), stepped as scipy's '2-point' steps
+        (√eps·max(1, |x|), away from a bound it would cross). The columns that leave the primitive and
+        the tabulated deformations alone — the pose's and the other deformations' — run as one batch."""
+        lower, upper = bounds
+        h = np.sqrt(np.finfo(float).eps) * np.where(x >= 0, 1.0, -1.0) * np.maximum(1.0, np.abs(x))
+        h = np.where((x + h > upper) | (x + h < lower), -h, h)
+        h = (x + h) - x
+        stepped = x + np.diag(h)                                # row j: x with its j-th value stepped
+        batched = _batched_columns(kinds)
+        J = np.empty((len(f0), len(x)))
+        for j in np.setdiff1d(np.arange(len(x)), batched):
+            J[:, j] = self.residuals(stepped[j], p, kinds) - f0
+        r = _radial_batch(stepped[batched], p, kinds)
+        if self.chest_prior:
+            r = np.hstack([r, self.weight(p) * np.stack([_chest_prior(s) for s in stepped[batched]])])
+        J[:, batched] = (r - f0).T
+        return J / h
+
     def __call__(self, p: np.ndarray, kinds: tuple[str, ...], x0: np.ndarray, max_nfev: int = 200,
                  max_turn: float = MAX_TURN_RAD, plausible: bool = False):
         """least_squares from x0: analytic Jacobian for the plain primitive, 2-point with deformations;
         `plausible` bounds the deformations to their PLAUSIBLE ranges (free otherwise)."""
         lower, upper = _bounds(x0, max_turn, kinds if plausible else ())
         x0 = np.clip(x0, lower + 1e-9, upper - 1e-9)
-        jac = "2-point" if kinds else (lambda x: self.jacobian(x, p))
-        return least_squares(lambda x: self.residuals(x, p, kinds), x0, jac=jac, bounds=(lower, upper),
+        last = {}
+
+        def residuals(x):
+            last["x"], last["f"] = x.copy(), self.residuals(x, p, kinds)
+            return last["f"]
+
+        def differences(x):
+            f0 = last["f"] if np.array_equal(last.get("x"), x) else self.residuals(x, p, kinds)
+            return self.differences(x, f0, p, kinds, (lower, upper))
+
+        jac = differences if kinds else (lambda x: self.jacobian(x, p))
+        return least_squares(residuals, x0, jac=jac, bounds=(lower, upper),
                              loss=self.loss, f_scale=self.f_scale, x_scale="jac", max_nfev=max_nfev)
+
+
+def _batched_columns(kinds: tuple[str, ...]) -> np.ndarray:
+    """Indices of x that `_radial_batch` may step: the pose (7–12) and the parameters of the
+    untabulated deformations among `kinds`."""
+    columns, i = list(range(7, 13)), 13
+    for kind in kinds:
+        n = len(KIND_PARAMS[kind])
+        columns += [] if kind in TABULATED else list(range(i, i + n))
+        i += n
+    return np.array(columns)
 
 
 def _bounds(x0: np.ndarray, max_turn: float, bounded: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
