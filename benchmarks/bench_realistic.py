@@ -27,8 +27,9 @@ volume and ptosis figures only when its side is isolated):
    `body.half_volumes_cc()` of that side); worst relative error ≤ 10 %. Baseline: the same on the
    Chen pairs (truth: `Primitive.volume_cc`);
 5. firmness pairs (same cup, firmness 0 vs 1), per view × side: (a) the fitted ptosis b0 (docs/model.md
-   §3, `BreastFit.superquadric.deformation.params("ptosis")`) is larger for firmness 0 (target: every
-   case; baseline: on the Chen torsos, the share of scenes whose fitted left/right b0 order matches the
+   §3, `BreastFit.superquadric.deformation.params("ptosis")`) is larger for firmness 0 by at least
+   B0_TIE (target: every case; closer b0 are a tie — both at the plausible bound, say — and count as
+   not ordered; baseline: on the Chen torsos, the share of scenes whose fitted left/right b0 order matches the
    true order, where the true b0 differ by ≥ 0.2); (b) the fitted volumes differ by ≤ 5 % of their mean
    (baseline: the true difference, in % of the same mean);
 6. fit seconds per breast (the whole `fit_breast` call, one call per breast): median over the realistic
@@ -78,6 +79,8 @@ CHEN_SEEDS, CHEN_TILTS_DEG = (0, 1, 2), (0.0, 10.0, 5.0)
 CHEN_SCALE = 1.12
 """The Chen pairs' second member: all five semi-axes × 1.12 (volume × 1.40)."""
 CHEN_B0_GAP = 0.2
+B0_TIE = 0.01
+"""Fitted b0 of a firmness pair closer than this are a tie (most often both at the bound 3)."""
 """Chen scenes whose true left/right ptosis b0 differ by less than this are left out of 5a's baseline."""
 TIMING_RESOLUTION, TIMING_CASES = "800x600", 4
 TARGETS = {"both_isolated_pct": 100.0, "nipple_median_mm": 3.0, "nipple_worst_mm": 8.0, "asymmetry_worst_mm": 4.0,
@@ -356,7 +359,9 @@ def realistic_pairs(scenes: list[SceneResult], varies: str) -> list[dict]:
                     if varies == "cup":
                         case["relative_error_pct"] = 100.0 * (case["fitted_change_cc"] / case["true_change_cc"] - 1.0)
                     else:
-                        case["order_ok"] = bool(a.b0 > b.b0)          # firmness 0 sags more: larger b0
+                        case["order"] = ("right" if a.b0 > b.b0 + B0_TIE else      # firmness 0 sags more: larger b0
+                                         "tie" if abs(a.b0 - b.b0) <= B0_TIE else "wrong")
+                        case["order_ok"] = case["order"] == "right"
                         case["volume_difference_pct"] = 100.0 * abs(case["fitted_change_cc"]) / mean
                         case["true_difference_pct"] = 100.0 * abs(case["true_change_cc"]) / mean
                 cases.append(case)
@@ -501,7 +506,8 @@ def print_pairs(cup: list[dict], firm: list[dict], chen_cup: list[dict], console
     table = new_table("bench_realistic 5 — firmness pairs (firmness 0 → 1): fitted ptosis and volumes",
                       ("pair", "view", "side", "b0 (0 → 1)", "b1 (0 → 1)", "b0 order", "volume (0 → 1)",
                        "fitted |Δ|", "true |Δ|"),
-                      caption="b0 order: 'yes' when firmness 0 has the larger fitted b0. |Δ|: volume difference in % "
+                      caption=f"b0 order: 'right' when firmness 0 has the larger fitted b0 by over {B0_TIE}, 'tie' "
+                              "within it. |Δ|: volume difference in % "
                               "of the mean fitted volume; true: the half-body volume difference in % of the same mean.")
     for c in firm:
         if not c["fitted"]:
@@ -509,7 +515,7 @@ def print_pairs(cup: list[dict], firm: list[dict], chen_cup: list[dict], console
                           f"{abs(c['true_change_cc']):.0f} cc")
             continue
         table.add_row(c["pair"], str(c["view"]), c["side"], f"{c['b0'][0]:+.2f} → {c['b0'][1]:+.2f}",
-                      f"{c['b1'][0]:+.2f} → {c['b1'][1]:+.2f}", "yes" if c["order_ok"] else "no",
+                      f"{c['b1'][0]:+.2f} → {c['b1'][1]:+.2f}", c["order"],
                       f"{c['volume_cc'][0]:.0f} → {c['volume_cc'][1]:.0f} cc", f"{c['volume_difference_pct']:.1f} %",
                       f"{c['true_difference_pct']:.1f} %")
     console.print(table)
@@ -588,6 +594,7 @@ def main() -> None:
                over=f"{len(cup_errors)}/{len(cup)} pair × view × side cases (Chen {len(chen_cup_errors)}/{len(chen_cup)})"),
         figure("firmness_ptosis_order", 100.0 * sum(c["order_ok"] for c in firm_fitted) / len(firm_fitted)
                if firm_fitted else None, T["firmness_order_pct"], chen_order["order_ok_pct"], "%", at_most=False,
+               ties=sum(c["order"] == "tie" for c in firm_fitted), wrong=sum(c["order"] == "wrong" for c in firm_fitted),
                over=f"{len(firm_fitted)}/{len(firm)} cases (Chen: {len(chen_order['cases'])} scenes, left/right b0 order)"),
         figure("firmness_volume_difference_worst", max_or_none(c["volume_difference_pct"] for c in firm_fitted),
                T["firmness_volume_pct"], max_or_none(c["true_difference_pct"] for c in firm_fitted), "%",
