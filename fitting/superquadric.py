@@ -95,10 +95,7 @@ def _radial(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...] = ()) -> np.nda
     Signed (negative inside), unlike `Primitive.radial_distance`, so that least squares sees
     a smooth residual through the surface.
     """
-    a, e1, e2, _, _ = _unpack(x)
-    q = _undone(x, p, kinds)
-    f = np.maximum(Primitive(*a, e1, e2).inside_outside(q), 1e-12)
-    return np.linalg.norm(q, axis=1) * (1.0 - f ** (-e1 / 2))
+    return _radial_batch(x[None], p, kinds)[0]
 
 
 def _radial_jacobian(x: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -272,9 +269,24 @@ def _plausible(x: np.ndarray, kinds: tuple[str, ...]) -> bool:
 
 
 def _radial_batch(xs: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
-    """(B, N) `_radial` of the parameter vectors xs (B, len(x)), which differ only in the pose and in
-    the deformations that need no table (docs/model.md §3): the tabulated inverses and the
-    inside–outside function, most of a residual's cost, run once over all B·N points."""
+    """(B, N) `_radial` of the parameter vectors xs (B, len(x)), which share the primitive and the
+    tabulated deformations (see `_undone_batch`)."""
+    a, e1, e2, _, _ = _unpack(xs[0])
+    q = _undone_batch(xs, p, kinds)
+    f = np.maximum(Primitive(*a, e1, e2).inside_outside(q), 1e-12)
+    return np.linalg.norm(q, axis=-1) * (1.0 - f ** (-e1 / 2))
+
+
+def _undone(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
+    """Points p (mu, data frame) taken back through the pose and deformations of x to the primitive."""
+    return _undone_batch(x[None], p, kinds)[0]
+
+
+def _undone_batch(xs: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
+    """(B, N, 3) `_undone` of the parameter vectors xs (B, len(x)), which differ only in the pose and in
+    the deformations that need no table (docs/model.md §3): each tabulated inverse, most of a
+    residual's cost, runs once over all B·N points; zero-parameter kinds are skipped, as by
+    `Deformation.inverse`."""
     a, e1, e2, _, _ = _unpack(xs[0])
     primitive = Primitive(*a, e1, e2)
     q = np.stack([(p - x[10:13]) @ _rotation(x[7:10]) for x in xs])
@@ -288,15 +300,7 @@ def _radial_batch(xs: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.n
         for k, d in enumerate(deformations):
             if any(d.params(kind)):
                 q[k] = apply_kind(q[k], kind, d.params(kind), primitive, inverse=True)
-    f = np.maximum(primitive.inside_outside(q), 1e-12)
-    return np.linalg.norm(q, axis=-1) * (1.0 - f ** (-e1 / 2))
-
-
-def _undone(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
-    """Points p (mu, data frame) taken back through the pose and deformations of x to the primitive."""
-    a, e1, e2, rot, t = _unpack(x)
-    q = (p - t) @ _rotation(rot)
-    return _deformation(x, kinds).inverse(q, Primitive(*a, e1, e2), fast=True) if kinds else q
+    return q
 
 
 @dataclass(frozen=True)
