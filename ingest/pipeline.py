@@ -21,7 +21,7 @@ from .chest_wall import ChestWall, fit_chest_wall
 from .depth import depth_range, fuse, to_points
 from .files import ScanCloud
 from .recording import DepthFrames
-from .trunk import find_trunk
+from .trunk import Trunk, find_trunk
 
 COARSE_MM = 10.0
 """Voxel size of the coarse cloud used for background removal, chest wall and mounds."""
@@ -46,6 +46,23 @@ class Ingested:
     crop: dict                       # mound centre, radius, roi, thresholds
     torso_camera: np.ndarray         # (M, 3) the background-free torso, input frame
     timings_ms: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class BodyInView:
+    """The nearest body in view (viewing frame, mm): its points, coarse voxels' centroids, each
+    point's voxel, and its trunk."""
+
+    points: np.ndarray
+    voxels: np.ndarray
+    which: np.ndarray
+    trunk: Trunk
+
+
+def find_body(points: np.ndarray) -> BodyInView:
+    """The nearest body among viewing-frame points (`body_cluster`) and its trunk (`find_trunk`)."""
+    body, voxels, which = body_cluster(points)
+    return BodyInView(body, voxels, which, find_trunk(body))
 
 
 def voxel_centroids(points: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
@@ -80,23 +97,33 @@ def ingest_cloud(cloud: ScanCloud, options: IngestOptions, clock: Clock | None =
     """A scan file's points → the breast of `options.side`; the viewing direction comes from the torso's shape."""
     clock = clock or Clock()
     with clock("viewing frame"):
-        view = np.eye(4) if cloud.frame_hint == "camera-opencv" else viewing_frame(cloud.points, options.up)
+        view, found = (np.eye(4), None) if cloud.frame_hint == "camera-opencv" else viewing_frame(cloud.points, options.up)
         points = transform_points(view, cloud.points)
         viewer = points.mean(0) - [0.0, 0.0, 2000.0]
-    return isolate(points, view, options, clock, viewer=viewer)
+    return isolate(points, view, options, clock, viewer=viewer, found=found)
 
 
-def viewing_frame(points: np.ndarray, up: str) -> np.ndarray:
-    """(4, 4) input → viewing frame for a frontal scan: z along the cloud's thinnest axis, away
-    from the viewer, y opposite to the input's `up` axis. Of the two senses of z, the viewer's
-    is the one from which the nearest body's trunk bulges towards it (a chest is convex across)."""
+def viewing_frame(points: np.ndarray, up: str) -> tuple[np.ndarray, BodyInView]:
+    """(4, 4) input → viewing frame for a frontal scan, and the body found in it: z along the cloud's
+    thinnest axis, away from the viewer, y opposite to the input's `up` axis. Of the two senses of z,
+    the viewer's is the one from which the nearest body's trunk bulges towards it (a chest is convex
+    across)."""
     centred = points - points.mean(0)
     _, vecs = np.linalg.eigh(np.cov(centred.T))
     frames = [_frame(sense * vecs[:, 0], up) for sense in (1.0, -1.0)]
-    bulge = [_trunk_bulge(transform_points(T, points)) for T in frames]
+    found = [_body_or_none(transform_points(T, points)) for T in frames]
+    bulge = [_trunk_bulge(body) for body in found]
     if max(bulge) == -np.inf:
         raise BadInputError(None, "shows no trunk: nothing in view is as wide as a chest")
-    return frames[int(np.argmax(bulge))]
+    k = int(np.argmax(bulge))
+    return frames[k], found[k]
+
+
+def _body_or_none(points: np.ndarray) -> BodyInView | None:
+    try:
+        return find_body(points)
+    except BadInputError:
+        return None
 
 
 def _frame(anterior: np.ndarray, up: str) -> np.ndarray:
@@ -113,34 +140,35 @@ def _frame(anterior: np.ndarray, up: str) -> np.ndarray:
     return T
 
 
-def _trunk_bulge(points: np.ndarray) -> float:
-    """Curvature across (1/mm) with which the trunk of the nearest body in view bulges towards
-    the viewer (viewing frame), −inf without one."""
-    try:
-        body = body_cluster(points)[0]
-        trunk = body[find_trunk(body).mask]
-    except BadInputError:
+def _trunk_bulge(body: BodyInView | None) -> float:
+    """Curvature across (1/mm) with which a body's trunk bulges towards the viewer (viewing frame),
+    −inf without a body."""
+    if body is None:
         return -np.inf
+    trunk = body.points[body.trunk.mask]
     x, y, z = (trunk - trunk.mean(0)).T
     coef, *_ = np.linalg.lstsq(np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y]), z, rcond=None)
     return 2.0 * float(coef[3])
 
 
 def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOptions, clock: Clock,
-            viewer: np.ndarray) -> Ingested:
-    """The common pipeline on points in the viewing frame (`viewer`: where the camera is)."""
+            viewer: np.ndarray, found: BodyInView | None = None) -> Ingested:
+    """The common pipeline on points in the viewing frame (`viewer`: where the camera is; `found`:
+    the body among them, if already found)."""
     roi, nipple, side = options.roi_camera_mm, options.nipple_camera_mm, options.side
     to_camera = np.linalg.inv(view_from_camera)
     in_roi = _roi_test(roi, to_camera)
     nipple_view = None if nipple is None else transform_points(view_from_camera, nipple)
-    with clock("background: voxels + DBSCAN (open3d)"):
-        body, voxels, which = body_cluster(points)
-    with clock("trunk"):
-        trunk = find_trunk(body)
-        torso = body[trunk.mask]
-        coarse = voxels[np.bincount(which[trunk.mask], minlength=len(voxels)) > 0]   # the trunk's voxels
-        coarse = coarse[trunk.chest(coarse)]
+    if found is None:
+        with clock("background: voxels + DBSCAN (open3d)"):
+            body, voxels, which = body_cluster(points)
+        with clock("trunk"):
+            found = BodyInView(body, voxels, which, find_trunk(body))
+    trunk = found.trunk
     with clock("chest wall"):
+        torso = found.points[trunk.mask]
+        in_trunk = np.bincount(found.which[trunk.mask], minlength=len(found.voxels)) > 0
+        coarse = found.voxels[in_trunk & trunk.chest(found.voxels)]       # the chest's coarse voxels
         wall = fit_chest_wall(coarse, 2)
     with clock("mounds (height basins) + breasts"):
         mounds = B.find_mounds(coarse, wall, trunk.midline_x, COARSE_MM)
