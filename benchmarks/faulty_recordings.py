@@ -1,17 +1,22 @@
 """MCAP recordings `ingest` must refuse, for bench_refusal.py (tests/test_faults.py checks them).
 
 Each is made from one intact 10-frame recording of the synthetic scanner (written once per run),
-damaged or forged after the MCAP specification (https://mcap.dev/spec), or written whole by the
-`mcap` package. `RECORDINGS` lists (name, build(folder) → path).
+damaged or forged by tests/mcap_surgery.py (after the MCAP specification), or written whole by
+the `mcap` package. `RECORDINGS` lists (name, build(folder) → path).
 """
 from __future__ import annotations
 
 import atexit
 import functools
 import shutil
-import struct
+import sys
 import tempfile
 from pathlib import Path
+
+from mcap.writer import CompressionType
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+from mcap_surgery import damage_chunk, declare_chunk_size, flip_byte_of_message, forge_count, plain_mcap  # noqa: E402
 
 
 @functools.cache
@@ -25,80 +30,30 @@ def _intact() -> Path:
     return write_recording(folder / "rec.mcap", synthetic.depth_frames(scene, 10, 1), scene.K)
 
 
-def _records(data, start: int, end: int):
-    while start < end:
-        op, length = struct.unpack_from("<BQ", data, start)
-        yield op, start, length
-        start += 9 + length
-
-
-def _summary_start(data) -> int:
-    return struct.unpack_from("<BQQQI", data, len(data) - 37)[2]
-
-
-def _chunks(data) -> list[int]:
-    return [pos for op, pos, _ in _records(data, 8, _summary_start(data)) if op == 0x06]
-
-
 def zeroed(k: int, nbytes: int):
     """The intact recording with `nbytes` zeroed in the middle of chunk k's compressed records."""
-    def build(folder: Path) -> Path:
-        data = bytearray(_intact().read_bytes())
-        at = _chunks(data)[k] + 9 + 28
-        at += 4 + struct.unpack_from("<I", data, at)[0]
-        middle = at + 8 + struct.unpack_from("<Q", data, at)[0] // 2 - nbytes // 2
-        data[middle: middle + nbytes] = bytes(nbytes)
-        return _write(folder / f"zeroed{nbytes}.mcap", data)
-    return build
+    return lambda folder: damage_chunk(_intact(), folder / f"zeroed{nbytes}.mcap", k, nbytes)
 
 
 def claiming(count: int, base=None):
-    """A recording whose summary's Statistics claim `count` messages (summary CRC cleared)."""
-    def build(folder: Path) -> Path:
-        data = bytearray((base(folder) if base else _intact()).read_bytes())
-        footer = len(data) - 37
-        pos = next(pos for op, pos, _ in _records(data, _summary_start(data), footer) if op == 0x0B)
-        struct.pack_into("<Q", data, pos + 9, count)
-        struct.pack_into("<I", data, footer + 25, 0)
-        return _write(folder / f"claims{count}.mcap", data)
-    return build
+    """A recording (the intact one, or `base`'s) whose summary claims `count` messages."""
+    return lambda folder: forge_count(base(folder) if base else _intact(), folder / f"claims{count}.mcap", count)
 
 
 def plain(name: str, payloads, compression: str = "none", chunk_size: int = 1 << 20):
     """An MCAP the `mcap` package writes: one channel, one message per payload."""
-    def build(folder: Path) -> Path:
-        from mcap.writer import CompressionType, Writer
-
-        with open(folder / name, "wb") as fh:
-            writer = Writer(fh, chunk_size=chunk_size, compression=CompressionType[compression.upper()])
-            writer.start()
-            channel = writer.register_channel("depth", "raw", writer.register_schema("raw", "", b""))
-            for i, payload in enumerate(payloads):
-                writer.add_message(channel, i, payload, i, sequence=i)
-            writer.finish()
-        return folder / name
-    return build
+    return lambda folder: plain_mcap(folder / name, payloads, CompressionType[compression.upper()], chunk_size)
 
 
 def flipped_byte(folder: Path) -> Path:
     """An uncompressed chunk with one byte of a message flipped: only its CRC-32 tells."""
-    path = plain("flipped.mcap", [bytes([i]) * 1000 for i in range(6)], chunk_size=2000)(folder)
-    data = bytearray(path.read_bytes())
-    data[data.index(bytes([3]) * 1000) + 500] ^= 0xFF
-    return _write(path, data)
+    return flip_byte_of_message(plain("flipped.mcap", [bytes([i]) * 1000 for i in range(6)], chunk_size=2000)(folder),
+                                3, 1000)
 
 
 def bomb(folder: Path) -> Path:
     """An LZ4 chunk whose header declares 1 TB uncompressed."""
-    path = plain("bomb.mcap", [b"\0" * 1000] * 3, "lz4")(folder)
-    data = bytearray(path.read_bytes())
-    struct.pack_into("<Q", data, _chunks(data)[0] + 9 + 16, 1 << 40)
-    return _write(path, data)
-
-
-def _write(path: Path, data) -> Path:
-    path.write_bytes(bytes(data))
-    return path
+    return declare_chunk_size(plain("bomb.mcap", [b"\0" * 1000] * 3, "lz4")(folder), 1 << 40)
 
 
 RECORDINGS = [

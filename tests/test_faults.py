@@ -10,7 +10,6 @@ import os
 import resource
 import shutil
 import signal
-import struct
 import subprocess
 import sys
 import tempfile
@@ -20,31 +19,20 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from mcap.stream_reader import StreamReader
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType
 
 from breastplan import BadInputError, read_ply, write_ply
 from breastplan.case import Case
 from breastplan.ingest.recording import END_OF_RECORDING, depthai, read_recording, record_messages
 
 from clitools import assert_bad_input, run
+from mcap_surgery import damage_chunk, declare_chunk_size, flip_byte_of_message, forge_count, plain_mcap
 
 GB = 1 << 30
 FIT = ("--lattice", 3, "--max-iterations", 20)
 
 
-# --- MCAP surgery, after the specification (https://mcap.dev/spec) -------------------------
-def summary_start(data) -> int:
-    return struct.unpack_from("<BQQQI", data, len(data) - 8 - 29)[2]     # the footer before the closing magic
-
-
-def records(data, start, end):
-    """(opcode, offset, body length) of the records between two offsets."""
-    while start < end:
-        op, length = struct.unpack_from("<BQ", data, start)
-        yield op, start, length
-        start += 9 + length
-
-
+# --- MCAP surgery (the damaged and forged files: mcap_surgery.py) -------------------------
 def messages_per_chunk(path) -> list[int]:
     """Messages of each chunk, from the message indexes the `mcap` package reads."""
     counts = []
@@ -56,44 +44,6 @@ def messages_per_chunk(path) -> list[int]:
             elif kind == "MessageIndex":
                 counts[-1] += len(record.records)
     return counts
-
-
-def damage_chunk(src, dst, k, nbytes):
-    """Copy `src` with `nbytes` zeroed in the middle of chunk k's compressed records."""
-    data = bytearray(Path(src).read_bytes())
-    chunks = [pos for op, pos, _ in records(data, 8, summary_start(data)) if op == 0x06]
-    at = chunks[k] + 9 + 28                                                 # past start, end, size, CRC
-    at += 4 + struct.unpack_from("<I", data, at)[0]                        # past the compression's name
-    length = struct.unpack_from("<Q", data, at)[0]
-    middle = at + 8 + length // 2 - nbytes // 2
-    data[middle: middle + nbytes] = bytes(nbytes)
-    Path(dst).write_bytes(bytes(data))
-    return Path(dst)
-
-
-def forge_count(src, dst, count):
-    """Copy `src` with its summary's Statistics record claiming `count` messages (summary CRC cleared:
-    0 means none)."""
-    data = bytearray(Path(src).read_bytes())
-    footer = len(data) - 8 - 29
-    pos = next(pos for op, pos, _ in records(data, summary_start(data), footer) if op == 0x0B)
-    struct.pack_into("<Q", data, pos + 9, count)
-    struct.pack_into("<I", data, footer + 25, 0)
-    Path(dst).write_bytes(bytes(data))
-    return Path(dst)
-
-
-def plain_mcap(path, payloads, compression=CompressionType.NONE, chunk_size=1 << 20):
-    """An MCAP written by the `mcap` package: one channel, one message per payload."""
-    with open(path, "wb") as fh:
-        writer = Writer(fh, chunk_size=chunk_size, compression=compression)
-        writer.start()
-        schema = writer.register_schema("raw", "", b"")
-        channel = writer.register_channel("depth", "raw", schema)
-        for i, payload in enumerate(payloads):
-            writer.add_message(channel, i, payload, i, sequence=i)
-        writer.finish()
-    return Path(path)
 
 
 # --- running the command with real faults ---------------------------------------------
@@ -201,9 +151,7 @@ def test_a_summary_that_lies_is_refused_up_front_in_little_memory(cli, made, tmp
 def test_a_flipped_byte_in_an_uncompressed_chunk_fails_its_crc(tmp_path):
     path = plain_mcap(tmp_path / "plain.mcap", [bytes([i]) * 1000 for i in range(6)], chunk_size=2000)
     assert messages_per_chunk(path) == [2, 2, 2]
-    data = bytearray(path.read_bytes())
-    data[data.index(bytes([3]) * 1000) + 500] ^= 0xFF
-    path.write_bytes(bytes(data))
+    flip_byte_of_message(path, 3, 1000)
     with pytest.raises(BadInputError, match=r"plain\.mcap: is a damaged MCAP recording: chunk 2 of 3, holding "
                                             r"frames 2–3 \(counting from 0\), cannot be read because its data "
                                             r"fails the CRC-32 check"):
@@ -212,10 +160,7 @@ def test_a_flipped_byte_in_an_uncompressed_chunk_fails_its_crc(tmp_path):
 
 def test_a_chunk_declaring_a_huge_size_is_refused_before_it_is_decompressed(tmp_path):
     path = plain_mcap(tmp_path / "bomb.mcap", [b"\0" * 1000] * 3, compression=CompressionType.LZ4)
-    data = bytearray(path.read_bytes())
-    chunk = next(pos for op, pos, _ in records(data, 8, summary_start(data)) if op == 0x06)
-    struct.pack_into("<Q", data, chunk + 9 + 16, 1 << 40)                  # uncompressed size: 1 TB
-    path.write_bytes(bytes(data))
+    declare_chunk_size(path, 1 << 40)                                      # uncompressed size: 1 TB
     with pytest.raises(BadInputError, match="chunk 1 declares 1,099,511,627,776 bytes, more than"):
         read_recording(path)
 
