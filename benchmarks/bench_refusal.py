@@ -14,7 +14,6 @@ Run:  .venv/bin/python benchmarks/bench_refusal.py
 """
 from __future__ import annotations
 
-import io
 import json
 import os
 import re
@@ -22,7 +21,6 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -33,11 +31,14 @@ from rich.table import Table
 
 from breastplan import write_ply
 
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+from bad_inputs import breast_mm, forged_npz, four_numbers_ply, ply_header, sparse  # noqa: E402
+from faulty_recordings import RECORDINGS  # noqa: E402  (damaged and forged MCAP recordings)
+
 BREASTPLAN = str(Path(sys.executable).with_name("breastplan"))
 TIME = "/usr/bin/time"
 TARGET_MB, TARGET_S = 1024, 5.0
 GB2 = 2 << 30
-XYZ = b"property float x\nproperty float y\nproperty float z\n"
 
 
 @dataclass(frozen=True)
@@ -52,42 +53,8 @@ class Case:
     prefix: tuple[str, ...] = ()
 
 
-def breast_mm(n: int = 2000) -> np.ndarray:
-    """A hemisphere of radius 60 mm."""
-    v = np.random.default_rng(0).normal(size=(n, 3))
-    v[:, 2] = np.abs(v[:, 2])
-    return 60.0 * v / np.linalg.norm(v, axis=1, keepdims=True)
-
-
-def sparse(path: Path, header: bytes, size: int) -> Path:
-    path.write_bytes(header)
-    os.truncate(path, size)
-    return path
-
-
-def ply_header(count: int, fmt: str = "binary_little_endian") -> bytes:
-    return f"ply\nformat {fmt} 1.0\nelement vertex {count}\n".encode() + XYZ + b"end_header\n"
-
-
 def points(name: str, pts) -> Callable[[Path], Path]:
     return lambda d: write_ply(d / name, pts)
-
-
-def four_numbers(d: Path) -> Path:
-    rows = np.random.default_rng(0).uniform(0, 100, (60, 3))
-    text = "\n".join(" ".join(f"{v:.3f}" for v in row) for row in rows).replace("\n", " 5.0\n", 1)
-    (d / "four.ply").write_bytes(ply_header(60, "ascii") + text.encode() + b"\n")
-    return d / "four.ply"
-
-
-def forged_npz(d: Path) -> Path:
-    """A member whose header declares 10¹² × 3 float64 values while it holds 24 bytes."""
-    np.savez(d / "db.npz", grid=np.zeros(2))
-    header = io.BytesIO()
-    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (10**12, 3)})
-    with zipfile.ZipFile(d / "db.npz", "a") as archive:
-        archive.writestr("points.npy", header.getvalue() + b"\0" * 24)
-    return d / "db.npz"
 
 
 def many_lines(d: Path) -> Path:
@@ -127,17 +94,17 @@ UNPRIVILEGED = ("setpriv", "--bounding-set=-dac_override,-dac_read_search") if R
 """Root reads a chmod-000 file; without these capabilities it cannot."""
 FAR = np.r_[breast_mm(), [[1e30, 0, 0]]]
 CASES = [
-    Case("ascii PLY, a line of 4 numbers (deform)", deform(four_numbers)),
-    Case("ascii PLY, a line of 4 numbers (ingest)", ingest(four_numbers)),
+    Case("ascii PLY, a line of 4 numbers (deform)", deform(lambda d: four_numbers_ply(d / "four.ply"))),
+    Case("ascii PLY, a line of 4 numbers (ingest)", ingest(lambda d: four_numbers_ply(d / "four.ply"))),
     Case("all points identical (fit)", fit(points("same.ply", np.full((500, 3), 10.0)))),
     Case("breast in micrometres (fit)", fit(points("um.ply", breast_mm() * 1000))),
     Case("breast in metres (deform)", deform(points("m.ply", breast_mm() / 1000))),
     Case("one coordinate 1e30, --units mm (ingest)", ingest(points("far.ply", FAR), "--units", "mm")),
     Case("coordinates ±1.7e308 (fit)", fit(points("inf.ply", np.r_[breast_mm(), [[1.7e308] * 3, [-1.7e308] * 3]]))),
-    Case("NPZ member declaring 10^12 × 3 values (dataset)", dataset(forged_npz)),
+    Case("NPZ member declaring 10^12 × 3 values (dataset)", dataset(lambda d: forged_npz(d / "db.npz"))),
     Case("synth --points 10^8", lambda d: ["synth", "--db", "S", "--points", 10**8, "--out", d / "out"], 2),
     Case("synth --seed -1", lambda d: ["synth", "--db", "S", "--seed", -1, "--out", d / "out"], 2),
-    Case("dataset --dd 100000", dataset(forged_npz, 100_000), 2),
+    Case("dataset --dd 100000", dataset(lambda d: forged_npz(d / "db.npz"), 100_000), 2),
     Case("unreadable file, chmod 000 (deform)", deform(locked), prefix=UNPRIVILEGED),
     Case("deform --param b0=1e308", lambda d: ["deform", points("b.ply", breast_mm())(d), "--kind", "ptosis",
                                                "--param", "b0=1e308", "--out", d / "out.ply"]),
@@ -162,9 +129,6 @@ CASES = [
     Case("ascii PLY declaring 19 M vertices in 1 kB (ingest)", ingest(file("short.ply", ply_header(19_000_000, "ascii"),
                                                                           1000))),
 ]
-
-from faulty_recordings import RECORDINGS  # noqa: E402  (damaged and forged MCAP recordings, tests/test_faults.py)
-
 CASES += [Case(f"{name} (ingest)", ingest(build)) for name, build in RECORDINGS]
 
 

@@ -3,34 +3,17 @@
 Bad input: exit 3, one sentence naming the file, nothing written. Usage: exit 2, the option named,
 nothing written. Large inputs are sparse files: they cost no disk and are refused from their header.
 """
-import io
 import os
 import shutil
 import subprocess
-import zipfile
 
 import numpy as np
 import pytest
 
 from breastplan import read_ply, write_ply
 
+from bad_inputs import PLY_XYZ, breast_mm, forged_npz, four_numbers_ply, ply_header, sparse
 from clitools import assert_bad_input, run
-
-PLY_XYZ = "property float x\nproperty float y\nproperty float z\n"
-
-
-def breast_mm(n=2000, seed=0):
-    """A hemisphere of radius 60 mm: a breast-sized point cloud in millimetres."""
-    v = np.random.default_rng(seed).normal(size=(n, 3))
-    v[:, 2] = np.abs(v[:, 2])
-    return 60.0 * v / np.linalg.norm(v, axis=1, keepdims=True)
-
-
-def sparse(path, header: bytes, size: int):
-    """`header` then zeros up to `size` bytes, without writing the zeros."""
-    path.write_bytes(header)
-    os.truncate(path, size)
-    return path
 
 
 def unprivileged(path):
@@ -41,23 +24,6 @@ def unprivileged(path):
     if os.geteuid() == 0 and shutil.which("setpriv"):
         return ["setpriv", "--bounding-set=-dac_override,-dac_read_search"]
     pytest.skip("running as root without setpriv: chmod 000 does not stop root reading")
-
-
-def four_numbers_ply(path):
-    rows = np.random.default_rng(0).uniform(0, 100, (60, 3))
-    text = "\n".join(" ".join(f"{v:.3f}" for v in row) for row in rows).replace("\n", " 5.0\n", 1)
-    path.write_text(f"ply\nformat ascii 1.0\nelement vertex 60\n{PLY_XYZ}end_header\n{text}\n")
-    return path
-
-
-def forged_npz(path):
-    """An NPZ whose member's header declares 10¹² × 3 float64 values (24 TB) while it holds 24 bytes."""
-    np.savez(path, grid=np.zeros(2))
-    header = io.BytesIO()
-    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (10**12, 3)})
-    with zipfile.ZipFile(path, "a") as archive:
-        archive.writestr("points.npy", header.getvalue() + b"\0" * 24)
-    return path
 
 
 GB2 = 2 << 30
@@ -91,21 +57,17 @@ CASES = {  # name → (file name, builder(path) → path, command, extra options
     "2 GB of zeros as .npz (dataset)": ("zero.npz", lambda p: sparse(p, b"", GB2),
                                         ["dataset", "--condition", "ptosis b0", "--db"], [], "is not an NPZ file"),
     "ply of 100 vertices and 2 GB more (fit)": (
-        "tail.ply", lambda p: sparse(p, f"ply\nformat binary_little_endian 1.0\nelement vertex 100\n{PLY_XYZ}"
-                                        "end_header\n".encode(), GB2), FIT, [], "bytes after the data its header"),
+        "tail.ply", lambda p: sparse(p, ply_header(100), GB2), FIT, [], "bytes after the data its header"),
     "ascii ply of 100 vertices and 2 GB more (ingest)": (
-        "tail.ply", lambda p: sparse(p, f"ply\nformat ascii 1.0\nelement vertex 100\n{PLY_XYZ}end_header\n".encode(),
+        "tail.ply", lambda p: sparse(p, ply_header(100, "ascii"),
                                      GB2), INGEST, [], "not a number"),
     "ply declaring 89 M vertices (fit)": (
-        "huge.ply", lambda p: sparse(p, f"ply\nformat binary_little_endian 1.0\nelement vertex 89000000\n{PLY_XYZ}"
-                                        "end_header\n".encode(), 89_000_000 * 12 + 200), FIT, [],
+        "huge.ply", lambda p: sparse(p, ply_header(89000000), 89_000_000 * 12 + 200), FIT, [],
         "declares 89,000,000 'vertex' elements, more than any body scan holds"),
     "ply declaring 19 M vertices in 1 kB (fit)": (
-        "short.ply", lambda p: sparse(p, f"ply\nformat binary_little_endian 1.0\nelement vertex 19000000\n{PLY_XYZ}"
-                                         "end_header\n".encode(), 1000), FIT, [], "truncated"),
+        "short.ply", lambda p: sparse(p, ply_header(19000000), 1000), FIT, [], "truncated"),
     "ascii ply declaring 19 M vertices in 1 kB (ingest)": (
-        "short.ply", lambda p: sparse(p, f"ply\nformat ascii 1.0\nelement vertex 19000000\n{PLY_XYZ}"
-                                         "end_header\n".encode(), 1000), INGEST, [], "truncated"),
+        "short.ply", lambda p: sparse(p, ply_header(19000000, "ascii"), 1000), INGEST, [], "truncated"),
     "binary stl declaring 2^32 - 1 triangles (ingest)": ("big.stl", lambda p: p.write_bytes(bytes(80) + b"\xff" * 4
                                                           + bytes(50)), INGEST, [], "declares 4,294,967,295 triangles"),
     "pcd declaring 100 M points (ingest)": ("big.pcd", lambda p: p.write_text(PCD_100M), INGEST, [],
