@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 DEMO   := out/demo
 export PATH := $(PATH):/sbin:/usr/sbin
 
-.PHONY: demo test bench libusb clean
+.PHONY: demo test bench libusb chromium clean
 
 $(STAMP): pyproject.toml
 	@$(MAKE) --no-print-directory libusb
@@ -27,12 +27,23 @@ libusb:
 	  fi; \
 	fi
 
+# The browser tests (tests/browser.py) drive Debian's headless Chromium through chromedriver.
+chromium:
+	@if [ ! -x /usr/bin/chromium ] || [ ! -x /usr/bin/chromedriver ]; then \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing chromium and chromium-driver (needed by the browser tests)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium chromium-driver >/dev/null; \
+	  else \
+	    echo "the browser tests need Debian's chromium and chromium-driver: install them (sudo apt-get install chromium chromium-driver) and run make again." >&2; exit 1; \
+	  fi; \
+	fi
+
 demo: $(STAMP)
 	$(BIN)/breastplan synth --db S --out $(DEMO)/database-S --ply
 	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind ptosis --param b0=1.125 --param b1=0.25 --out $(DEMO)/S-shape1-00-ptosis.ply
 	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind turn --param c0=1.1 --param c1=0.5 --out $(DEMO)/S-shape1-00-turn.ply
-	$(BIN)/breastplan ingest examples/sample.mcap --side left --out $(DEMO)/case-left
-	$(BIN)/breastplan ingest examples/sample.mcap --side right --out $(DEMO)/case-right
+	$(BIN)/breastplan ingest plan/data/sample.mcap --side left --out $(DEMO)/case-left
+	$(BIN)/breastplan ingest plan/data/sample.mcap --side right --out $(DEMO)/case-right
 	$(BIN)/breastplan fit $(DEMO)/case-left
 	$(BIN)/breastplan fit $(DEMO)/case-right
 	$(BIN)/breastplan fit $(DEMO)/S-shape1-00-ptosis.ply --out $(DEMO)/fit-S-shape1-00-ptosis
@@ -45,7 +56,7 @@ demo: $(STAMP)
 	$(BIN)/breastplan evaluate --study all --quick --out $(DEMO)/study
 	@echo "demo written to $(abspath $(DEMO))"
 
-test: $(STAMP)
+test: $(STAMP) chromium
 	$(BIN)/python -m pytest -q
 
 bench: $(STAMP)

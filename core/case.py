@@ -27,7 +27,7 @@ from .options import SIDES
 from .ply import read_ply, write_ply
 from .primitive import Primitive
 
-SCAN_SCHEMA, FIT_SCHEMA = "breastplan.scan/1", "breastplan.fit/1"
+SCAN_SCHEMA, FIT_SCHEMA, CHANGE_SCHEMA = "breastplan.scan/1", "breastplan.fit/1", "breastplan.deformation/1"
 CAMERA_FRAME = "frame camera-opencv"
 """Tag, in a PLY comment, of points in an OpenCV camera frame (x right, y down, z forward; mm)."""
 RESIDUAL_STATS = ("mean", "rms", "p95", "max")
@@ -265,6 +265,22 @@ class Case:
                    converged=bool(meta.get("converged", True)),
                    stopping_rule_met=bool(meta.get("stopping_rule_met", True)),
                    provenance=Provenance.from_meta(meta))
+
+    # --- planned changes --------------------------------------------------------------
+    def save_change(self, name: str, model: tuple[np.ndarray, np.ndarray], scan_points: np.ndarray,
+                    record: dict, provenance: Provenance) -> dict[str, Path]:
+        """Write plan/NAME.ply (the planned breast model: vertices, faces; mm, breast frame),
+        plan/NAME-scan.ply (the scan's points with the change applied, breast frame) and
+        plan/NAME.npz (the change's kinds, degrees and parameters in its metadata; the scan
+        points' displacements, mm, breast frame), all or nothing."""
+        stem = f"{self.PLAN}/{name}"
+        plys = {f"{stem}.ply": dict(points=model[0], faces=model[1], comments=[
+                    f"breastplan plan: {name}, planned breast model, mm, breast frame"]),
+                f"{stem}-scan.ply": dict(points=scan_points, comments=[
+                    f"breastplan plan: {name}, the scan's points changed, mm, breast frame"])}
+        record = dict(record)
+        arrays = {"displacement_mm": np.asarray(record.pop("displacement_mm"), float)}
+        return self._write_set(plys, f"{stem}.npz", CHANGE_SCHEMA, arrays, record, provenance)
 
     # --- provenance -------------------------------------------------------------------
     def is_fresh(self, npz_name: str, wanted: Provenance) -> bool:

@@ -88,3 +88,60 @@ class FitOptions:
 
     def as_dict(self) -> dict:
         return {**asdict(self), "deformations": list(self.deformations)}
+
+
+DEGREE_KINDS = ("ptosis", "turn", "top-shape")
+"""The deformations a surgeon plans by degree (those with deformation conditions, docs/model.md §4)."""
+PLAN_DEGREES = (1.0, 8.0)
+"""The degrees a plan takes (thesis: 8 degrees)."""
+DEFAULT_PLAN = (("ptosis", 3.0), ("turn", 3.0), ("top-shape", 3.0))
+
+
+@dataclass(frozen=True)
+class PlanOptions:
+    """What `plan` plans: (kind, degree) changes, each side's, and how degrees become parameters.
+
+    `method` is exact (the inverse solver), learnt (the shipped regressions) or the path of a
+    `breastplan.model/1` file of one condition."""
+
+    changes: tuple[tuple[str, float], ...] = DEFAULT_PLAN
+    sides: tuple[str, ...] = SIDES
+    method: str = "exact"
+
+    def __post_init__(self):
+        changes = tuple((str(k), float(d)) for k, d in self.changes)
+        if not changes:
+            raise OptionError("changes", "a plan needs at least one change (--deform KIND:DEGREE)")
+        for kind, degree in changes:
+            if kind not in DEGREE_KINDS:
+                raise OptionError("changes", f"'{kind}' has no degrees to plan; choose {', '.join(DEGREE_KINDS)}")
+            if not PLAN_DEGREES[0] <= degree <= PLAN_DEGREES[1]:   # NaN fails too
+                raise OptionError("changes", f"the degree of {kind} must lie in {PLAN_DEGREES[0]:g}..{PLAN_DEGREES[1]:g}, "
+                                             f"got {degree:g}")
+        kinds = [k for k, _ in changes]
+        if len(set(kinds)) != len(kinds):
+            raise OptionError("changes", "each kind is planned once; give one --deform per kind")
+        sides = tuple(self.sides)
+        if not sides or any(s not in SIDES for s in sides) or len(set(sides)) != len(sides):
+            raise OptionError("sides", f"the sides are left, right or both, not {'/'.join(sides) or 'none'}")
+        object.__setattr__(self, "changes", changes)
+        object.__setattr__(self, "sides", sides)
+
+    @classmethod
+    def parse(cls, deform: list[str], side: str = "both", method: str = "exact") -> "PlanOptions":
+        """From the command line's KIND:DEGREE items and side (left, right or both)."""
+        changes = []
+        for item in deform:
+            kind, sep, degree = item.partition(":")
+            try:
+                if not sep:
+                    raise ValueError
+                changes.append((kind.strip(), float(degree)))
+            except ValueError:
+                raise OptionError("changes", f"'{item}' is not KIND:DEGREE (e.g. ptosis:3)") from None
+        if side not in (*SIDES, "both"):
+            raise OptionError("sides", f"'{side}' is not a side; choose left, right or both")
+        return cls(tuple(changes) or DEFAULT_PLAN, SIDES if side == "both" else (side,), method)
+
+    def as_dict(self) -> dict:
+        return {"changes": [list(c) for c in self.changes], "sides": list(self.sides), "method": self.method}

@@ -38,26 +38,38 @@ def ingest(input: Path | None, options: IngestOptions) -> Scan:
     The file readers name `input` in their errors; the pipeline's errors name no file. The pipeline
     (open3d, scipy) is imported after the source is read, so that bad input is refused quickly.
     """
+    return ingest_sides(input, [options])[0]
+
+
+def ingest_sides(input: Path | None, options: list[IngestOptions]) -> list[Scan]:
+    """`ingest` once per options (one per side), the source read once."""
     clock = Clock()
+    first = options[0]
     if input is None or is_recording(Path(input)):
         with clock("replay (depthai)" if input is not None else "capture (depthai)"):
             if input is None:
                 from .device import capture
-                depth = capture(options.device_id, options.frames or 10)
+                depth = capture(first.device_id, first.frames or 10)
             else:
-                depth = read_recording(input, options.frames)
+                depth = read_recording(input, first.frames)
         from .pipeline import ingest_frames
 
-        result = ingest_frames(depth, options, clock)
+        run = lambda opts, c: ingest_frames(depth, opts, c)  # noqa: E731
         source = _depth_source(depth, "recording" if input is not None else "device")
     else:
-        cloud = read_scan_file(input, options.units)
+        cloud = read_scan_file(input, first.units)
         from .pipeline import ingest_cloud
 
-        result = ingest_cloud(cloud, options, clock)
+        run = lambda opts, c: ingest_cloud(cloud, opts, c)  # noqa: E731
         source = Source("file", cloud.description)
     inputs = {} if input is None else {Path(input).name: input}
-    return scan_record(result, source, options, Provenance.of(inputs, options.as_dict()))
+    scans = []
+    for opts in options:
+        side_clock = Clock()
+        side_clock.ms.update(clock.ms)
+        result = run(opts, side_clock)
+        scans.append(scan_record(result, source, opts, Provenance.of(inputs, opts.as_dict())))
+    return scans
 
 
 def _depth_source(depth: DepthFrames, kind: str) -> Source:

@@ -1,0 +1,101 @@
+"""The `plan` command: the main job, from a patient's scan to report.html (docs/cli.md)."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from breastplan.clock import Clock
+from breastplan.errors import require_file
+from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, OptionError, PlanOptions
+
+from .app import JSON, command
+from .output import report, stderr, usage_error, writable
+
+FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method"}
+
+
+@command()
+def plan(
+    input: Optional[Path] = typer.Argument(None, help="A depthai recording (.mcap), a scan file (PLY, OBJ, STL, PCD, "
+                                           "XYZ) or a case folder; omitted: the bundled sample recording."),
+    side: str = typer.Option("both", "--side", help="The breasts to plan: left, right or both."),
+    deform: List[str] = typer.Option([], "--deform", help="KIND:DEGREE, repeatable: a change to plan, KIND one of "
+                                     f"{', '.join(DEGREE_KINDS)}, DEGREE in 1..8 (decimals allowed). Default: "
+                                     + " ".join(f"{k}:{d:g}" for k, d in DEFAULT_PLAN) + "."),
+    method: str = typer.Option("exact", "--method", help="How a degree becomes parameters: exact (the inverse "
+                               "solver), learnt (the shipped regressions) or MODEL.npz (a trained model of one "
+                               "condition, for its kind)."),
+    out: Optional[Path] = typer.Option(None, "--out", help="Case folder to write (default: INPUT if it is a case "
+                                       "folder, else ./<input name>-plan)."),
+    as_json: bool = JSON,
+):
+    """Plan changes on a patient's scan: ingest, fit, each change and their combination, measures and
+    an interactive report (report.html)."""
+    clock = Clock()
+    try:
+        options = PlanOptions.parse(deform, side, method)
+    except OptionError as exc:
+        raise usage_error(str(exc), FLAGS[exc.option]) from None
+    if method not in ("exact", "learnt"):
+        model = Path(method)
+        if model.suffix.lower() != ".npz":
+            raise usage_error(f"'{method}' is not a method; choose exact, learnt or a model file (.npz)", "--method")
+        _check_model(require_file(model, "model file"))
+    if input is not None and not input.is_dir():
+        require_file(input, "recording or scan file")
+    if out is None:
+        out = input if input is not None and input.is_dir() else Path(f"{(input or Path('sample')).stem}-plan")
+    writable(out, folder=True)
+
+    from breastplan.plan.job import run_plan
+
+    with _progress() as step:
+        result = run_plan(input, out, options, step)
+    record = _read_record(out)
+    sides = {s: {"volume_cc": r["fit"]["volume_cc"], "stopping_rule_met": r["fit"]["stopping_rule_met"],
+                 "changes": [c["name"] for c in r["changes"]], "reused": r["reused"]}
+             for s, r in record["sides"].items()}
+    report({"case": str(out), "report": str(out / "report.html"), "plan": str(out / "plan.json"),
+            "input": str(result.input), "sides": sides, "measures": record["measures"],
+            "seconds": clock.seconds}, as_json, f"plan → {out / 'report.html'}")
+    for s, r in record["sides"].items():
+        if not r["fit"]["stopping_rule_met"]:
+            stderr.print(f"note: the {s} breast's fit ends above the stopping rule (normalised residual "
+                         f"{r['fit']['normalised_residual']:.4f}); the report says so.", markup=False, soft_wrap=True)
+
+
+def _check_model(path: Path) -> None:
+    """Usage error unless the model file plans one of the plannable kinds."""
+    from breastplan.model_file import load_model
+
+    kind = load_model(path).meta.get("kind")
+    if kind not in DEGREE_KINDS:
+        raise usage_error(f"{path} models '{kind}', which has no degrees to plan", "--method")
+
+
+def _read_record(out: Path) -> dict:
+    import json
+
+    return json.loads((out / "plan.json").read_text())
+
+
+class _progress:
+    """A spinner with the current stage on a terminal's stderr; nothing otherwise."""
+
+    def __enter__(self):
+        from rich.status import Status
+
+        self.status = Status("plan", console=stderr) if stderr.is_terminal else None
+        if self.status:
+            self.status.start()
+        return self.step
+
+    def step(self, stage: str) -> None:
+        if self.status:
+            self.status.update(f"plan: {stage}")
+
+    def __exit__(self, *exc):
+        if self.status:
+            self.status.stop()

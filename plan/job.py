@@ -1,0 +1,244 @@
+"""The main job: a patient's scan → ingest → fit → the planned changes → measures → report.
+
+A plan's case folder holds one case per side (`left/`, `right/`: scan, fit and `plan/<change>.*`)
+and, at its top, `report.html`, `summary.png` and `plan.json` (docs/artefacts.md). Its input is
+a recording, a scan file, a case folder (a plan's, or one side's from `ingest`), or nothing (the
+bundled sample recording). Stages whose inputs and options hash as before are reused. A new case
+folder is built beside its target and renamed into place when whole, so a failed plan leaves none;
+an existing one is updated one artefact set at a time, each all or nothing.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import secrets
+import shutil
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Callable, Iterator
+
+import numpy as np
+
+from breastplan import BadInputError, transform_points
+from breastplan.case import Case, Fit, Provenance, Scan, sha256
+from breastplan.clock import Clock
+from breastplan.errors import about
+from breastplan.options import FitOptions, IngestOptions, PlanOptions
+
+from .changes import Change, combine, solve_change
+from .surface import PlannedChange
+
+PLAN_SCHEMA = "breastplan.plan/1"
+
+
+def sample_recording() -> Path:
+    """The bundled sample recording (a synthetic patient, 10 depth frames), inside the package."""
+    return Path(str(resources.files("breastplan.plan") / "data" / "sample.mcap"))
+
+
+@dataclass(frozen=True, eq=False)
+class SidePlan:
+    """One side's case, scan, fit and planned changes (each as solved on the fitted surface)."""
+
+    side: str
+    case: Case
+    scan: Scan
+    fit: Fit
+    changes: tuple[Change, ...]              # one per requested change, then the combination
+    reused: tuple[str, ...] = ()             # stages taken from the case folder as they were
+
+    @property
+    def to_primitive(self) -> np.ndarray:
+        """(4, 4) input frame → primitive frame, mm."""
+        return np.linalg.inv(self.fit.pose) @ self.scan.camera_to_breast
+
+    @property
+    def to_input(self) -> np.ndarray:
+        """(4, 4) breast frame → input frame, mm."""
+        return np.linalg.inv(self.scan.camera_to_breast)
+
+    def planned(self, change: Change) -> PlannedChange:
+        return PlannedChange(change.deformation, self.fit.primitive, self.to_primitive)
+
+    def local_surface(self) -> np.ndarray:
+        """The fitted surface in the primitive frame, mm: what degrees are measured on."""
+        return transform_points(np.linalg.inv(self.fit.pose), self.fit.vertices)
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """A finished plan: its folder, input, options and sides."""
+
+    folder: Path
+    input: Path
+    options: PlanOptions
+    sides: dict[str, SidePlan]
+    timings_ms: dict = field(default_factory=dict)
+
+
+Progress = Callable[[str], None]
+
+
+def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Progress = lambda _: None) -> Plan:
+    """Plan `options` on `input` (None: the bundled sample) into the case folder `out`."""
+    from .record import write_plan
+
+    source = sample_recording() if input is None else Path(input)
+    clock = Clock()
+    with _building(out) as folder:
+        sides = _sides(source, folder, options, clock, progress)
+        plan = Plan(out, source, options, sides, clock.ms)
+        with clock("report"):
+            progress("report")
+            write_plan(plan, folder)
+    return plan
+
+
+@contextlib.contextmanager
+def _building(out: Path) -> Iterator[Path]:
+    """The folder to build the case in: `out` itself if it exists, else a hidden sibling renamed to
+    `out` once the plan is whole (removed if it fails)."""
+    if out.exists():
+        yield out
+        return
+    out.parent.mkdir(parents=True, exist_ok=True)
+    work = out.parent / f".{out.name}.plan-{secrets.token_hex(4)}"
+    try:
+        work.mkdir()
+        yield work
+        os.rename(work, out)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _sides(source: Path, folder: Path, options: PlanOptions, clock: Clock, progress: Progress) -> dict[str, SidePlan]:
+    """Scan and fit each side (reusing what the case folder holds), then solve its changes."""
+    if source.is_dir():
+        cases = _cases_of(source, folder, options)
+        scans, reused = {}, {}
+        for side, case in cases.items():
+            scans[side], reused[side] = case.load_scan(), ["ingest"]
+    else:
+        cases = {side: Case(folder / side) for side in options.sides}
+        scans, reused = _ingest(source, cases, clock, progress)
+    sides = {}
+    for side, case in cases.items():
+        fit, fit_reused = _fit(case, scans[side], clock, progress, side)
+        with clock(f"changes {side}"):
+            progress(f"changes {side}")
+            partial = SidePlan(side, case, scans[side], fit, ())
+            changes = solve_changes(partial, options)
+        sides[side] = SidePlan(side, case, scans[side], fit, changes, tuple(reused[side] + fit_reused))
+    return sides
+
+
+def solve_changes(side: SidePlan, options: PlanOptions) -> tuple[Change, ...]:
+    """Each requested change of one side, then (for more than one) their combination."""
+    local = side.local_surface()
+    singles = [solve_change(local, kind, degree, side.fit.primitive, method_for(options.method, kind))
+               for kind, degree in options.changes]
+    return tuple(singles + ([combine(singles)] if len(singles) > 1 else []))
+
+
+def method_for(method: str, kind: str) -> str:
+    """A model file plans its own kind; the other kinds are solved exactly."""
+    if method in ("exact", "learnt"):
+        return method
+    from breastplan.model_file import load_model
+
+    return method if load_model(Path(method)).meta.get("kind") == kind else "exact"
+
+
+def _cases_of(source: Path, folder: Path, options: PlanOptions) -> dict[str, Case]:
+    """The side cases a case folder holds for the requested sides, copied into `folder` unless the
+    plan is made in place. A one-side case from `ingest` plans its own side."""
+    _check_schema(source)
+    if Case.holds(source):
+        side = Case(source).load_scan().side
+        found = {side: source} if side in options.sides else {}
+        missing = [] if found else list(options.sides)
+    else:
+        found = {s: source / s for s in options.sides if Case.holds(source / s)}
+        missing = [s for s in options.sides if s not in found]
+    if not found and not Case.holds(source) and not any(Case.holds(source / s) for s in ("left", "right")):
+        raise BadInputError(source, "is not a case folder: it holds no scan.npz, nor left/ or right/ cases")
+    if missing:
+        raise BadInputError(source, f"holds no scan of the {' and '.join(missing)} breast; plan it from the "
+                                    "recording or scan file")
+    in_place = folder.resolve() == source.resolve()
+    cases = {}
+    for side, path in found.items():
+        target = path if in_place else folder / side
+        if not in_place:
+            shutil.copytree(path, target, dirs_exist_ok=True)
+        cases[side] = Case(target)
+    return cases
+
+
+def _check_schema(folder: Path) -> None:
+    """BadInputError naming a plan.json of another schema (an older or newer breastplan's case)."""
+    doc = folder / Case.PLAN_JSON
+    if not doc.is_file():
+        return
+    try:
+        schema = json.loads(doc.read_text()).get("schema", "")
+    except (OSError, ValueError, AttributeError):
+        raise BadInputError(doc, "is not a plan record (not JSON)") from None
+    if schema != PLAN_SCHEMA:
+        name, _, version = str(schema).partition("/")
+        if name != PLAN_SCHEMA.split("/")[0]:
+            raise BadInputError(doc, f"is not a plan record (schema '{schema}')")
+        age = "an older" if version.isdigit() and int(version) < int(PLAN_SCHEMA.split("/")[1]) else "another"
+        raise BadInputError(folder, f"is a case folder of {age} schema ({schema}; this breastplan writes "
+                                    f"{PLAN_SCHEMA}); plan the patient's scan again into a new folder")
+
+
+def _ingest(source: Path, cases: dict[str, Case], clock: Clock, progress: Progress):
+    """Each side's scan: reused when the case holds one made from this input with the same options."""
+    from breastplan.ingest.scan import ingest_sides
+
+    wanted = {side: IngestOptions(side) for side in cases}
+    scans, reused = {}, {}
+    stale = []
+    for side, case in cases.items():
+        if case.is_fresh(Case.SCAN_NPZ, Provenance.of({source.name: source}, wanted[side].as_dict())):
+            scans[side], reused[side] = case.load_scan(), ["ingest"]
+        else:
+            stale.append(side)
+            reused[side] = []
+    if stale:
+        with clock("ingest"), about(source):
+            progress("ingest " + " and ".join(stale))
+            for side, scan in zip(stale, ingest_sides(source, [wanted[s] for s in stale])):
+                cases[side].save_scan(scan)
+                scans[side] = scan
+    return scans, reused
+
+
+def _fit(case: Case, scan: Scan, clock: Clock, progress: Progress, side: str) -> tuple[Fit, list[str]]:
+    """The side's fit: reused when the case holds one of this scan with the default options."""
+    from threadpoolctl import threadpool_limits
+
+    from breastplan.fitting.breast_fit import fit_breast
+
+    options = FitOptions()
+    scan_ply = case.path(Case.SCAN_PLY)
+    wanted = Provenance.of({scan_ply.name: scan_ply}, options.as_dict())
+    if case.is_fresh(Case.FIT_NPZ, wanted):
+        return case.load_fit(), ["fit"]
+    with clock(f"fit {side}"), about(scan_ply), threadpool_limits(1, "blas"):
+        progress(f"fit {side}")
+        fit = fit_breast(scan.points, options).artefact(wanted)
+    case.save_fit(fit)
+    return fit, []
+
+
+def input_record(plan: Plan) -> dict:
+    """The plan's input as plan.json records it: path, kind and content hash."""
+    path = plan.input
+    if path.is_dir():
+        return {"path": str(path), "kind": "case folder"}
+    return {"path": str(path), "kind": "recording" if path.suffix.lower() == ".mcap" else "scan file",
+            "sha256": sha256(path)}

@@ -1,0 +1,81 @@
+"""A finished plan written out: each side's planned changes, the changed torso, plan.json, report.html
+and summary.png.
+
+Each side's changes go to its case (`Case.save_change`); the plan's own files form one set written
+all or nothing, plan.json last, so that a plan.json always describes the report beside it.
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from breastplan import __version__, transform_points, write_ply
+from breastplan.atomic import atomic_set
+from breastplan.case import Case, Provenance, sha256
+from breastplan.fitting.ffd import STOP_RESIDUAL
+
+from .job import PLAN_SCHEMA, Plan, SidePlan, input_record
+from .measures_plan import plan_measures
+
+SUMMARY = "summary.png"
+
+
+def write_plan(plan: Plan, folder: Path) -> dict:
+    """Write every artefact of `plan` into `folder` (its case folder, or the one being built); the
+    plan.json record."""
+    from .report import render, versions
+    from .summary import summary_png
+
+    sides = {}
+    for side, sp in plan.sides.items():
+        sides[side] = {"fit": fit_record(sp), "reused": list(sp.reused),
+                       "changes": [_save_change(sp, c, folder) for c in sp.changes]}
+    torso_files = {}
+    record = {"schema": PLAN_SCHEMA, "version": __version__, "input": input_record(plan),
+              "options": plan.options.as_dict(), "stopping_rule": STOP_RESIDUAL, "sides": sides,
+              "measures": plan_measures(plan), "versions": versions(),
+              "files": {"report": Case.REPORT, "summary": SUMMARY, "torso": torso_files},
+              "timings_ms": {k: round(v, 1) for k, v in plan.timings_ms.items()}}
+    with atomic_set() as stage:
+        first = next(iter(plan.sides.values()))
+        for i, change in enumerate(first.changes):
+            name = f"{Case.PLAN}/{change.name}-torso.ply"
+            moved = first.scan.torso_camera.copy()
+            for sp in plan.sides.values():
+                moved += sp.planned(sp.changes[i]).displacement(first.scan.torso_camera)
+            write_ply(stage(folder / name), moved, comments=[
+                f"breastplan plan: {change.name}, the torso with the planned change, input frame, mm"])
+            torso_files[change.name] = name
+        Path(stage(folder / Case.REPORT)).write_text(render(plan, record), encoding="utf-8")
+        summary_png(plan, record, stage(folder / SUMMARY))
+        Path(stage(folder / Case.PLAN_JSON)).write_text(json.dumps(record, indent=1), encoding="utf-8")
+    return record
+
+
+def fit_record(sp: SidePlan) -> dict:
+    f = sp.fit
+    return {"volume_cc": round(f.volume_cc_mesh, 2), "rms_mm": round(f.residuals_mm["rms"], 4),
+            "normalised_residual": round(f.normalised_residual, 6), "stopping_rule_met": f.stopping_rule_met,
+            "converged": f.converged, "points": f.points, "iterations": list(f.iterations)}
+
+
+def _save_change(sp: SidePlan, change, folder: Path) -> dict:
+    """Write one change of one side (model and scan points in the breast frame); its plan.json entry."""
+    planned = sp.planned(change)
+    to_breast = sp.scan.camera_to_breast
+    model = transform_points(to_breast, planned.model(transform_points(sp.to_input, sp.fit.vertices)))
+    shift = planned.displacement(transform_points(sp.to_input, sp.scan.points)) @ to_breast[:3, :3].T
+    details = [dict(d) for d in change.details]
+    record = {"name": change.name, "requested": [list(r) for r in change.requested], "details": details,
+              "displacement_mm": shift, "volume_cc": None}
+    fit_npz = sp.case.path(Case.FIT_NPZ)
+    provenance = Provenance({Case.FIT_NPZ: sha256(fit_npz)}, {"requested": record["requested"]})
+    paths = sp.case.save_change(change.name, (model, sp.fit.faces), sp.scan.points + shift,
+                                {k: v for k, v in record.items() if k != "volume_cc"}, provenance)
+    moved = np.linalg.norm(shift, axis=1)
+    return {"name": change.name, "requested": record["requested"], "details": details,
+            "scan_displacement_mm": {"mean": round(float(moved.mean()), 3), "max": round(float(moved.max()), 3)},
+            "files": {k: os.path.relpath(p, folder) for k, p in paths.items()}}

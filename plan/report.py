@@ -1,0 +1,234 @@
+"""report.html: a self-contained, offline page of the plan (plotly.js embedded; no request leaves it).
+
+The page draws the torso (grey points), each original breast (dark points) and the planned breast
+(a skin-coloured mesh) superimposed, the torso near the breasts coloured by how far the plan moves
+it, a degree slider per planned kind, the combination as planned, front/side/top views, the
+measures before and after with the asymmetry between sides, the fits' quality, and the inputs,
+options and versions. Geometry travels as base64 typed arrays (`views`); a small script decodes
+it and restyles the plot when a slider moves. `window.breastplanState` names the state drawn and
+`window.breastplanReady` turns true once the plot is drawn.
+"""
+from __future__ import annotations
+
+import base64
+import html
+import json
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from .job import Plan, input_record
+from .views import Views, build_views, quantise
+
+SKIN = "rgb(236,188,160)"
+TITLE = "breastplan — surgical plan"
+
+
+def _b64(array: np.ndarray, dtype: str) -> str:
+    return base64.b64encode(np.ascontiguousarray(array, dtype=dtype).tobytes()).decode("ascii")
+
+
+def _points(p: np.ndarray) -> dict:
+    return {"n": int(len(p)), "xyz": _b64(p, "<f4")}
+
+
+def page_data(plan: Plan, views: Views) -> dict:
+    """The JSON the page's script reads: geometry, states and sliders."""
+    sides = list(plan.sides)
+    patch = views.patch
+    states = []
+    for st in views.states:
+        entry = {"key": st.key, "kind": st.kind, "degree": st.degree, "mesh": {}}
+        for s in sides:
+            values, scale = quantise(st.mesh[s] - views.meshes[s][0])
+            entry["mesh"][s] = {"d": _b64(values, "i1"), "scale": scale}
+        values, scale = quantise(st.torso - patch)
+        entry["torso"] = {"d": _b64(values, "i1"), "scale": scale}
+        states.append(entry)
+    sliders = [{"kind": kind, "requested": degree,
+                "degrees": [st.degree for st in views.states if st.kind == kind]} for kind, degree in plan.options.changes]
+    return {"sides": sides, "torso": _points(views.torso), "patch": _points(patch),
+            "scans": {s: _points(views.scans[s]) for s in sides},
+            "meshes": {s: {**_points(views.meshes[s][0]), "faces": _b64(views.meshes[s][1], "<i4"),
+                           "m": int(len(views.meshes[s][1]))} for s in sides},
+            "nipples": {s: [float(v) for v in views.nipples[s]] for s in sides},
+            "states": states, "sliders": sliders, "cmax": max([1.0] + [float(np.linalg.norm(st.torso - patch, axis=1).max(
+                initial=0.0)) for st in views.states]), "combined": len(plan.options.changes) > 1, "skin": SKIN}
+
+
+def versions() -> dict[str, str]:
+    out = {}
+    for name in ("breastplan", "numpy", "scipy", "open3d", "plotly", "depthai"):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def _table(head: list[str], rows: list[list], cls: str = "") -> str:
+    th = "".join(f"<th>{html.escape(str(h))}</th>" for h in head)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(c))}</td>" for c in row) + "</tr>" for row in rows)
+    return f'<table class="{cls}"><thead><tr>{th}</tr></thead><tbody>{body}</tbody></table>'
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.1f}" if abs(v) >= 10 else f"{v:.3g}"
+    return "—" if v is None else str(v)
+
+
+def render(plan: Plan, record: dict) -> str:
+    """The page's HTML for a plan and its plan.json record."""
+    from plotly.offline import get_plotlyjs
+
+    views = build_views(plan)
+    data = json.dumps(page_data(plan, views), separators=(",", ":"))
+    return (_TEMPLATE.replace("%TITLE%", TITLE)
+            .replace("%PLOTLY%", get_plotlyjs())
+            .replace("%DATA%", data.replace("</", "<\\/"))
+            .replace("%TABLES%", tables(record))
+            .replace("%SCRIPT%", _SCRIPT))
+
+
+def tables(record: dict) -> str:
+    """The measures, fit quality and provenance tables of a plan.json record."""
+    sides = list(record["sides"])
+    parts = []
+    measures = record.get("measures", {})
+    if measures:
+        names = list(next(iter(measures["before"].values())))
+        head = ["measure"] + [f"{s} {w}" for s in sides for w in ("before", "after")]
+        if len(sides) == 2:
+            head += ["asymmetry before", "asymmetry after"]
+        rows = []
+        for name in names:
+            row = [name.replace("_", " ")]
+            for s in sides:
+                row += [measures["before"][s].get(name), measures["after"][s].get(name)]
+            if len(sides) == 2:
+                row += [measures["asymmetry"]["before"].get(name), measures["asymmetry"]["after"].get(name)]
+            rows.append(row)
+        parts.append("<h2>Measures (after: the combination as planned)</h2>" + _table(head, rows, "measures"))
+    rows = [[s, r["fit"]["volume_cc"], r["fit"]["rms_mm"], r["fit"]["normalised_residual"],
+             "met" if r["fit"]["stopping_rule_met"] else "not met", r["fit"]["points"]]
+            for s, r in record["sides"].items()]
+    parts.append("<h2>Fit quality</h2>" + _table(
+        ["side", "volume cc", "rms mm", "normalised residual", f"stopping rule {record['stopping_rule']}", "points"],
+        rows, "fit"))
+    rows = [[s, c["name"], ", ".join(f"{d['kind']} {d['degree']:g} ({d['condition']}, "
+                                     f"{' '.join(f'{p:.3g}' for p in d['params'])})" for d in c["details"])]
+            for s, r in record["sides"].items() for c in r["changes"]]
+    parts.append("<h2>Planned changes</h2>" + _table(["side", "change", "parameters (model units)"], rows))
+    inp = record["input"]
+    rows = [["input", inp["path"]], ["input kind", inp["kind"]], ["input sha256", inp.get("sha256", "—")],
+            ["options", json.dumps(record["options"])]] + [[k, v] for k, v in record["versions"].items()]
+    parts.append("<h2>Inputs, options and versions</h2>" + _table(["", ""], rows, "about"))
+    return "\n".join(parts)
+
+
+def write_page(path: Path, plan: Plan, record: dict) -> Path:
+    path.write_text(render(plan, record), encoding="utf-8")
+    return path
+
+
+_TEMPLATE = """<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8">
+<meta http-equiv="Content-Security-Policy" content="default-src 'none'; script-src 'unsafe-inline' 'unsafe-eval'; style-src 'unsafe-inline'; img-src data: blob:; worker-src blob:; font-src data:">
+<title>%TITLE%</title>
+<style>
+body{font-family:system-ui,sans-serif;margin:0;color:#222;background:#fafafa}
+header{padding:10px 16px;background:#3b3b52;color:#fff}header h1{margin:0;font-size:20px}
+main{display:flex;flex-wrap:wrap;gap:12px;padding:12px}
+#plot{width:760px;height:640px;background:#fff;border:1px solid #ddd}
+#controls{min-width:300px;max-width:420px}
+.slider{margin:8px 0}.slider label{display:block;font-weight:600}.slider input{width:260px}
+button{margin:2px;padding:4px 10px}button.on{background:#3b3b52;color:#fff}
+table{border-collapse:collapse;margin:6px 0 14px;font-size:13px}td,th{border:1px solid #ccc;padding:3px 6px;text-align:right}
+td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4px}
+#tables{padding:0 16px 16px}
+</style></head><body>
+<header><h1>%TITLE%</h1></header>
+<main><div id="plot"></div>
+<div id="controls">
+<div><b>View</b><br><button data-view="front">Front</button><button data-view="side">Side</button><button data-view="top">Top</button></div>
+<div id="sliders"></div>
+<div><b>Show</b><br><button id="original">Original</button><button id="combined">Combined, as planned</button></div>
+<p id="state"></p>
+<p>Dark points: the scan of the breast. Skin-coloured surface: the planned breast. Coloured points: how far the plan moves the patient's surface (mm).</p>
+</div></main>
+<div id="tables">%TABLES%</div>
+<script>%PLOTLY%</script>
+<script>const PLAN = %DATA%;</script>
+<script>%SCRIPT%</script>
+</body></html>
+"""
+
+_SCRIPT = r"""
+(function(){
+function b64(s, T){const b=atob(s);const u=new Uint8Array(b.length);for(let i=0;i<b.length;i++)u[i]=b.charCodeAt(i);return new T(u.buffer);}
+function split(f,n,T){T=T||Float32Array;const x=new T(n),y=new T(n),z=new T(n);for(let i=0;i<n;i++){x[i]=f[3*i];y[i]=f[3*i+1];z[i]=f[3*i+2];}return [x,y,z];}
+function pts(p){return split(b64(p.xyz,Float32Array),p.n);}
+function moved(base,n,d){const q=b64(d.d,Int8Array);const f=new Float32Array(3*n);let m=new Float32Array(n);
+ for(let i=0;i<n;i++){let s=0;for(let k=0;k<3;k++){const v=q[3*i+k]*d.scale;f[3*i+k]=base[3*i+k]+v;s+=v*v;}m[i]=Math.sqrt(s);}return [split(f,n),m];}
+const P=PLAN, traces=[], idx={};
+const torso=pts(P.torso);
+traces.push({type:'scatter3d',mode:'markers',name:'torso',x:torso[0],y:torso[1],z:torso[2],marker:{size:1.4,color:'#b9b9b9'},hoverinfo:'skip'});
+const patchBase=b64(P.patch.xyz,Float32Array), patch=split(patchBase,P.patch.n);
+idx.patch=traces.length;
+traces.push({type:'scatter3d',mode:'markers',name:'moved surface',x:patch[0],y:patch[1],z:patch[2],
+ marker:{size:1.8,color:new Float32Array(P.patch.n),colorscale:'Viridis',cmin:0,cmax:P.cmax,colorbar:{title:{text:'mm'},len:0.5,x:0.98}},hovertemplate:'%{marker.color:.1f} mm<extra></extra>'});
+const meshBase={};
+for(const s of P.sides){
+ const sc=pts(P.scans[s]);
+ traces.push({type:'scatter3d',mode:'markers',name:s+' breast (scan)',x:sc[0],y:sc[1],z:sc[2],marker:{size:1.6,color:'#2b2b2b'},hoverinfo:'skip'});
+ const m=P.meshes[s]; meshBase[s]=b64(m.xyz,Float32Array); const v=split(meshBase[s],m.n);
+ const f=split(b64(m.faces,Int32Array),m.m,Int32Array);
+ idx[s]=traces.length;
+ traces.push({type:'mesh3d',name:s+' breast (planned)',x:v[0],y:v[1],z:v[2],i:f[0],j:f[1],k:f[2],color:P.skin,opacity:0.8,showlegend:true,
+  flatshading:false,lighting:{ambient:0.55,diffuse:0.7,specular:0.15},hoverinfo:'skip'});
+}
+const views={front:{eye:{x:0,y:-1.9,z:0.15},up:{x:0,y:0,z:1}},side:{eye:{x:1.9,y:-0.3,z:0.1},up:{x:0,y:0,z:1}},top:{eye:{x:0,y:-0.2,z:1.9},up:{x:0,y:1,z:0}}};
+const layout={margin:{l:0,r:0,t:0,b:0},showlegend:true,legend:{x:0,y:1},hovermode:false,
+ scene:{aspectmode:'data',xaxis:{visible:false},yaxis:{visible:false},zaxis:{visible:false},camera:views.front}};
+const gd=document.getElementById('plot');
+function arrays(state){
+ const upd={x:[],y:[],z:[],'marker.color':[]};
+ let col=new Float32Array(P.patch.n), pos=patch;
+ if(state){[pos,col]=moved(patchBase,P.patch.n,state.torso);}
+ upd.x.push(pos[0]);upd.y.push(pos[1]);upd.z.push(pos[2]);upd['marker.color'].push(col);
+ for(const s of P.sides){const v=state?moved(meshBase[s],P.meshes[s].n,state.mesh[s])[0]:split(meshBase[s],P.meshes[s].n);
+  upd.x.push(v[0]);upd.y.push(v[1]);upd.z.push(v[2]);upd['marker.color'].push(undefined);}
+ return upd;
+}
+const ids=[idx.patch].concat(P.sides.map(s=>idx[s]));
+function label(state){
+ window.breastplanState=state?state.key:'original';
+ document.getElementById('state').textContent='Showing: '+(state?(state.kind?state.kind+', degree '+state.degree:'all planned changes combined'):'the original breasts');
+}
+function put(upd){ids.forEach((t,n)=>{traces[t]=Object.assign({},traces[t],{x:upd.x[n],y:upd.y[n],z:upd.z[n]});
+ if(upd['marker.color'][n])traces[t].marker=Object.assign({},traces[t].marker,{color:upd['marker.color'][n]});});}
+function show(state){label(state);put(arrays(state));return Plotly.react(gd,traces,gd.layout);}
+const byKey={};for(const st of P.states)byKey[st.key]=st;
+const box=document.getElementById('sliders');
+for(const sl of P.sliders){
+ const div=document.createElement('div');div.className='slider';
+ const lab=document.createElement('label');const inp=document.createElement('input');
+ inp.type='range';inp.min=0;inp.max=sl.degrees.length-1;inp.step=1;inp.value=sl.degrees.indexOf(sl.requested);inp.id='slider-'+sl.kind;
+ const name=()=>sl.kind+': degree '+sl.degrees[+inp.value]+(sl.degrees[+inp.value]===sl.requested?' (planned)':'');
+ lab.textContent=name();
+ inp.addEventListener('input',()=>{lab.textContent=name();const d=sl.degrees[+inp.value];
+  show(P.states.find(st=>st.kind===sl.kind&&st.degree===d));});
+ div.appendChild(lab);div.appendChild(inp);box.appendChild(div);
+}
+document.getElementById('original').onclick=()=>show(null);
+const comb=document.getElementById('combined');
+if(P.combined){comb.onclick=()=>show(byKey['combined']);}else{comb.style.display='none';}
+for(const b of document.querySelectorAll('button[data-view]'))b.onclick=()=>Plotly.relayout(gd,{'scene.camera':views[b.dataset.view]});
+const first=P.combined?byKey['combined']:P.states.find(st=>st.kind===P.sliders[0].kind&&st.degree===P.sliders[0].requested);
+put(arrays(first));
+label(first);
+Plotly.newPlot(gd,traces,layout,{displaylogo:false,responsive:true}).then(()=>{window.breastplanReady=true;});
+})();
+"""

@@ -1,0 +1,50 @@
+"""summary.png: a static page of the plan for the patient's file (matplotlib, no display needed)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from breastplan import transform_points
+
+from .job import Plan
+from .views import VIEW_TO_DISPLAY
+
+DPI = 110
+
+
+def summary_png(plan: Plan, record: dict, path: Path) -> Path:
+    """Front and side views of each side's breast before (dark) and after the combination as planned
+    (skin), with the measures beside them."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sides = list(plan.sides)
+    fig, axes = plt.subplots(len(sides), 3, figsize=(12, 3.6 * len(sides)), dpi=DPI, squeeze=False)
+    for row, side in zip(axes, sides):
+        sp = plan.sides[side]
+        show = VIEW_TO_DISPLAY @ sp.scan.view_from_camera
+        verts = transform_points(sp.to_input, sp.fit.vertices)
+        before = transform_points(show, verts)
+        after = transform_points(show, sp.planned(sp.changes[-1]).model(verts))
+        for ax, (u, v, title) in zip(row[:2], ((0, 2, "front"), (1, 2, "side"))):
+            ax.scatter(before[:, u], before[:, v], s=0.6, c="#2b2b2b", label="before")
+            ax.scatter(after[:, u], after[:, v], s=0.6, c="#e0a080", alpha=0.6, label="planned")
+            ax.set_aspect("equal")
+            ax.set_title(f"{side} breast, {title} view (mm)")
+            ax.legend(loc="upper right", fontsize=7, markerscale=8)
+        text = [f"{side}: " + ", ".join(c["name"] for c in record["sides"][side]["changes"][-1:])]
+        for name, value in record["measures"]["before"][side].items():
+            text.append(f"{name.replace('_', ' ')}: {value} → {record['measures']['after'][side][name]}")
+        fit = record["sides"][side]["fit"]
+        text.append(f"fit residual {fit['normalised_residual']:.4f} (rule "
+                    f"{'met' if fit['stopping_rule_met'] else 'not met'})")
+        row[2].axis("off")
+        row[2].text(0, 1, "\n".join(text), va="top", family="monospace", fontsize=8)
+    fig.tight_layout()
+    with open(path, "wb") as fh:
+        fig.savefig(fh, format="png")
+    plt.close(fig)
+    return Path(path)

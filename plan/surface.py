@@ -1,0 +1,74 @@
+"""A planned change carried onto the patient's own surface, blended into the chest around the breast.
+
+The change is a global deformation of the fitted breast (docs/model.md §3) in its primitive frame.
+Points of the breast's footprint (the base superellipse of semi-axes a1..a4) move as the model
+moves; beyond it the displacement fades to zero over a band of BAND footprint radii, with a C²
+quintic step, so that the changed breast meets the unchanged chest without a step.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from breastplan import Primitive, to_mm, to_model_units, transform_points
+from breastplan.units import MM_PER_MU
+from breastplan.deform.global_deformations import Deformation
+
+BAND = 0.5
+"""Width of the blending band outside the footprint, in footprint radii."""
+
+
+def smoothstep(s) -> np.ndarray:
+    """C² step from 1 (s ≤ 0) to 0 (s ≥ 1): 1 − (6s⁵ − 15s⁴ + 10s³)."""
+    s = np.clip(np.asarray(s, dtype=float), 0.0, 1.0)
+    return 1.0 - s * s * s * (s * (6.0 * s - 15.0) + 10.0)
+
+
+@dataclass(frozen=True, eq=False)
+class PlannedChange:
+    """A deformation of a fitted breast, placed in an input frame.
+
+    `to_primitive` maps input-frame points (mm) to the primitive's frame (mm): the fit's pose
+    inverted, after the scan's input → breast frame transform."""
+
+    deformation: Deformation
+    primitive: Primitive
+    to_primitive: np.ndarray          # (4, 4)
+    band: float = BAND
+
+    def footprint_radius(self, local_mm: np.ndarray) -> np.ndarray:
+        """Normalised radius of primitive-frame points over the base superellipse (1 on its rim)."""
+        p = self.primitive
+        ax = np.where(local_mm[:, 0] >= 0, p.a1, p.a2) * MM_PER_MU
+        ay = np.where(local_mm[:, 1] >= 0, p.a3, p.a4) * MM_PER_MU
+        return np.hypot(local_mm[:, 0] / ax, local_mm[:, 1] / ay)
+
+    def weights(self, points_mm) -> np.ndarray:
+        """(N,) blending weight of input-frame points: 1 on the footprint, 0 past the band."""
+        local = transform_points(self.to_primitive, np.asarray(points_mm, dtype=float))
+        return smoothstep((self.footprint_radius(local) - 1.0) / self.band)
+
+    def displacement(self, points_mm) -> np.ndarray:
+        """(N, 3) blended displacement of input-frame points, mm, input frame."""
+        pts = np.asarray(points_mm, dtype=float).reshape(-1, 3)
+        local = transform_points(self.to_primitive, pts)
+        w = smoothstep((self.footprint_radius(local) - 1.0) / self.band)
+        out = np.zeros_like(pts)
+        moving = w > 0
+        if moving.any():
+            near = local[moving]
+            moved = to_mm(self.deformation.apply(to_model_units(near), self.primitive))
+            out[moving] = (moved - near) * w[moving, None] @ self.to_primitive[:3, :3]   # back by Rᵀ
+        return out
+
+    def __call__(self, points_mm) -> np.ndarray:
+        """Input-frame points (mm) with the change applied, blended into the chest."""
+        pts = np.asarray(points_mm, dtype=float)
+        return pts + self.displacement(pts).reshape(pts.shape)
+
+    def model(self, vertices_mm) -> np.ndarray:
+        """Input-frame vertices of the fitted model moved by the full change (no blending)."""
+        local = transform_points(self.to_primitive, np.asarray(vertices_mm, dtype=float))
+        moved = to_mm(self.deformation.apply(to_model_units(local), self.primitive))
+        return transform_points(np.linalg.inv(self.to_primitive), moved)
