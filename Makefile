@@ -42,8 +42,8 @@ demo: $(STAMP)
 	$(BIN)/breastplan synth --db S --out $(DEMO)/database-S --ply
 	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind ptosis --param b0=1.125 --param b1=0.25 --out $(DEMO)/S-shape1-00-ptosis.ply
 	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind turn --param c0=1.1 --param c1=0.5 --out $(DEMO)/S-shape1-00-turn.ply
-	$(BIN)/breastplan ingest plan/data/sample.mcap --side left --out $(DEMO)/case-left
-	$(BIN)/breastplan ingest plan/data/sample.mcap --side right --out $(DEMO)/case-right
+	$(BIN)/breastplan ingest examples/sample.mcap --side left --out $(DEMO)/case-left
+	$(BIN)/breastplan ingest examples/sample.mcap --side right --out $(DEMO)/case-right
 	$(BIN)/breastplan fit $(DEMO)/case-left
 	$(BIN)/breastplan fit $(DEMO)/case-right
 	$(BIN)/breastplan fit $(DEMO)/S-shape1-00-ptosis.ply --out $(DEMO)/fit-S-shape1-00-ptosis

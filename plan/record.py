@@ -31,7 +31,8 @@ def write_plan(plan: Plan, folder: Path) -> dict:
 
     sides = {}
     for side, sp in plan.sides.items():
-        sides[side] = {"fit": fit_record(sp), "reused": list(sp.reused),
+        sides[side] = {"nipple_input_mm": [round(float(v), 2) for v in sp.scan.nipple_camera_mm],
+                       "fit": fit_record(sp), "reused": list(sp.reused),
                        "changes": [_save_change(sp, c, folder) for c in sp.changes]}
     torso_files = {}
     record = {"schema": PLAN_SCHEMA, "version": __version__, "input": input_record(plan),

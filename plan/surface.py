@@ -4,6 +4,11 @@ The change is a global deformation of the fitted breast (docs/model.md §3) in i
 Points of the breast's footprint (the base superellipse of semi-axes a1..a4) move as the model
 moves; beyond it the displacement fades to zero over a band of BAND footprint radii, with a C²
 quintic step, so that the changed breast meets the unchanged chest without a step.
+
+Top-shape, as the model states it, scales heights on the upper half only and so tears a surface
+along y = 0 (docs/model.md §3). On the patient's surface its displacement is faded in over the
+first SEAM·a3 above y = 0 with the same step, so her skin does not split; the planned model
+itself keeps the model's formula, on which degrees are defined.
 """
 from __future__ import annotations
 
@@ -17,6 +22,8 @@ from breastplan.deform.global_deformations import Deformation
 
 BAND = 0.5
 """Width of the blending band outside the footprint, in footprint radii."""
+SEAM = 0.25
+"""Height above y = 0, in units of the upper semi-axis a3, over which top-shape is faded in on a surface."""
 
 
 def smoothstep(s) -> np.ndarray:
@@ -58,9 +65,18 @@ class PlannedChange:
         moving = w > 0
         if moving.any():
             near = local[moving]
-            moved = to_mm(self.deformation.apply(to_model_units(near), self.primitive))
+            moved = to_mm(self._seamless(to_model_units(near)))
             out[moving] = (moved - near) * w[moving, None] @ self.to_primitive[:3, :3]   # back by Rᵀ
         return out
+
+    def _seamless(self, p_mu: np.ndarray) -> np.ndarray:
+        """The deformation of primitive-frame points (model units), top-shape faded in above y = 0."""
+        top, rest = self.deformation.split("flatten-side")
+        if not top.active():
+            return self.deformation.apply(p_mu, self.primitive)
+        lifted = top.apply(p_mu, self.primitive)
+        fade = 1.0 - smoothstep(p_mu[:, 1] / (SEAM * self.primitive.a3))
+        return rest.apply(p_mu + (lifted - p_mu) * fade[:, None], self.primitive)
 
     def __call__(self, points_mm) -> np.ndarray:
         """Input-frame points (mm) with the change applied, blended into the chest."""

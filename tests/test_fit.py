@@ -74,7 +74,7 @@ def test_fit_of_ingested_synthetic_scans_is_within_1_mm_of_the_true_breast_and_3
 @pytest.fixture(scope="module")
 def case(tmp_path_factory, cli):
     folder = tmp_path_factory.mktemp("case")
-    res = run(cli, "ingest", "plan/data/sample.mcap", "--side", "left", "--out", folder)
+    res = run(cli, "ingest", "examples/sample.mcap", "--side", "left", "--out", folder)
     assert res.returncode == 0, res.stderr
     return folder
 

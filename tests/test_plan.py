@@ -1,0 +1,240 @@
+"""`breastplan plan`: the main job on the bundled realistic sample (a MakeHuman patient recorded
+through depthai), checked against the sample's truth and against the reference model; the reuse
+of finished stages; the blend of a change into the chest; bad input."""
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import reference_model as ref
+from clitools import assert_bad_input, run
+
+from breastplan import read_ply, transform_points
+from breastplan.case import Case
+from breastplan.deform.global_deformations import Deformation
+from breastplan.ingest.realistic import write_scan_file
+from breastplan.plan.job import sample_recording
+from breastplan.plan.surface import BAND, PlannedChange, smoothstep
+from breastplan import Primitive
+
+TRUTH = sample_recording().with_name("sample_truth.npz")
+CHANGES = ("ptosis:3", "turn:2.5", "top-shape:4")
+NAMES = ("ptosis-3", "turn-2.5", "top-shape-4", "combined")
+CONDITION = {"ptosis": "ptosis b0>b1", "turn": "turn c0>c1", "top-shape": "top-shape s1->s0+"}
+
+
+@pytest.fixture(scope="module")
+def planned(cli, tmp_path_factory):
+    """The sample planned once: (case folder, plan.json, the run)."""
+    case = tmp_path_factory.mktemp("plan") / "case"
+    res = run(cli, "plan", "--out", case, "--json", *[a for c in CHANGES for a in ("--deform", c)])
+    assert res.returncode == 0, res.stderr[-3000:]
+    return case, json.loads((case / "plan.json").read_text()), res
+
+
+def test_plan_writes_every_artefact_of_both_sides(planned):
+    case, record, res = planned
+    out = json.loads(res.stdout)
+    assert out["report"] == str(case / "report.html") and record["schema"] == "breastplan.plan/1"
+    for side in ("left", "right"):
+        for name in ("scan.ply", "scan.npz", "camera.ply", "fit.ply", "fit.npz"):
+            assert (case / side / name).is_file()
+        assert [c["name"] for c in record["sides"][side]["changes"]] == list(NAMES)
+        for name in NAMES:
+            for suffix in (".ply", "-scan.ply", ".npz"):
+                assert (case / side / "plan" / f"{name}{suffix}").is_file()
+            assert (case / "plan" / f"{name}-torso.ply").is_file()
+    assert (case / "summary.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (case / "report.html").stat().st_size <= 8 * 2**20                 # the report's size target
+    assert not [p for p in case.parent.iterdir() if p.name.startswith(".")]   # no staging folder left
+
+
+def test_plan_finds_both_nipples_of_the_sample(planned):
+    _, record, _ = planned
+    truth = np.load(TRUTH)
+    for side in ("left", "right"):
+        found = np.array(record["sides"][side]["nipple_input_mm"])
+        assert np.linalg.norm(found - truth[f"{side}_nipple_camera_mm"]) < 8.0
+
+
+@pytest.mark.parametrize("name", NAMES[:3])
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_each_planned_breast_reaches_its_degree_by_the_reference_model(planned, side, name):
+    """The planned model against the fitted one, both taken back to the primitive frame: its degree
+    by the reference implementation of docs/model.md is the degree asked for."""
+    case, record, _ = planned
+    kind, degree = name.rsplit("-", 1)
+    pose = np.load(case / side / "fit.npz")["pose"]
+    back = np.linalg.inv(pose)
+    fitted = ref.mu(transform_points(back, read_ply(case / side / "fit.ply").points))
+    moved = ref.mu(transform_points(back, read_ply(case / side / "plan" / f"{name}.ply").points))
+    a5 = np.load(case / side / "fit.npz")["primitive"][4]
+    e = ref.condition_extent(CONDITION[kind], fitted, moved, a5)
+    reached = ref.continuous_degree(e, ref.reference_extents(CONDITION[kind], 8))
+    assert float(reached) == pytest.approx(float(degree), abs=1e-6)
+
+
+def test_the_combination_applies_every_change_in_model_order(planned):
+    case, record, _ = planned
+    side = "left"
+    fit = np.load(case / side / "fit.npz")
+    back, prim = np.linalg.inv(fit["pose"]), fit["primitive"]
+    fitted = ref.mu(transform_points(back, read_ply(case / side / "fit.ply").points))
+    vector = np.zeros(12)
+    for change in record["sides"][side]["changes"][:3]:
+        d = change["details"][0]
+        vector = ref.with_kind(vector, d["kind"], d["params"])
+    expected = ref.mm(ref.deform(fitted, prim, vector))
+    got = transform_points(back, read_ply(case / side / "plan" / "combined.ply").points)
+    assert np.abs(got - expected).max() < 1e-6
+
+
+def test_far_from_the_breasts_the_torso_is_unchanged_and_at_their_base_it_has_no_step(planned):
+    """Her surface changed: untouched far from the breasts; around each breast's base (footprint
+    radius 0.8..1.7, the band where the change fades out) the displacement varies by under 0.6 mm
+    per mm between neighbouring points. A change cut off at the rim instead would jump by its
+    whole displacement there (1–2 mm between points 1.5 mm apart, a slope near 1)."""
+    from scipy.spatial import cKDTree
+
+    case, _, _ = planned
+    torso = read_ply(case / "left" / "camera.ply").points
+    pairs = cKDTree(torso).query_pairs(3.0, output_type="ndarray")
+    apart = np.linalg.norm(torso[pairs[:, 0]] - torso[pairs[:, 1]], axis=1)
+    radius = {}
+    for side in ("left", "right"):
+        fit, scan = np.load(case / side / "fit.npz"), np.load(case / side / "scan.npz")
+        local = transform_points(np.linalg.inv(fit["pose"]) @ scan["transform_camera_to_breast"], torso)
+        a = fit["primitive"] * 6.0                                   # semi-axes a1..a4, mm
+        radius[side] = np.hypot(local[:, 0] / np.where(local[:, 0] >= 0, a[0], a[1]),
+                                local[:, 1] / np.where(local[:, 1] >= 0, a[2], a[3]))
+    far = np.minimum(radius["left"], radius["right"]) > 1.0 + BAND
+    for name in NAMES:
+        shift = read_ply(case / "plan" / f"{name}-torso.ply").points - torso
+        assert far.any() and np.all(shift[far] == 0.0)
+        assert np.linalg.norm(shift, axis=1).max() > 1.0              # the plan moves her surface
+        slope = np.linalg.norm(shift[pairs[:, 0]] - shift[pairs[:, 1]], axis=1) / apart
+        for r in radius.values():
+            base = (r[pairs[:, 0]] > 0.8) & (r[pairs[:, 0]] < 1.7)
+            assert base.sum() > 100 and slope[base].max() < 0.6, (name, slope[base].max())
+
+
+def test_plan_again_reuses_ingest_and_fit(planned, cli):
+    case, _, _ = planned
+    before = {s: (case / s / "fit.npz").read_bytes() for s in ("left", "right")}
+    res = run(cli, "plan", case, "--deform", "ptosis:5", "--json")
+    assert res.returncode == 0, res.stderr[-2000:]
+    record = json.loads((case / "plan.json").read_text())
+    for side in ("left", "right"):
+        assert record["sides"][side]["reused"] == ["ingest", "fit"]
+        assert (case / side / "fit.npz").read_bytes() == before[side]
+        assert [c["name"] for c in record["sides"][side]["changes"]] == ["ptosis-5"]
+
+
+def test_plan_of_one_sides_case_from_ingest(cli, tmp_path):
+    case = tmp_path / "right"
+    assert run(cli, "ingest", sample_recording(), "--side", "right", "--out", case).returncode == 0
+    res = run(cli, "plan", case, "--deform", "ptosis:2", "--json")
+    assert res.returncode == 0, res.stderr[-2000:]
+    record = json.loads((case / "plan.json").read_text())
+    assert list(record["sides"]) == ["right"] and record["sides"]["right"]["reused"] == ["ingest"]
+    assert (case / "plan" / "ptosis-2.ply").is_file() and (case / "report.html").is_file()
+
+
+# --- the blend ---------------------------------------------------------------------------------
+
+def test_smoothstep_is_a_c2_step():
+    h = 1e-4
+    s = lambda x: float(smoothstep(x))  # noqa: E731
+    assert s(0.0) == 1.0 and s(1.0) == 0.0 and s(-3.0) == 1.0 and s(7.0) == 0.0
+    for x in (0.0, 1.0):   # one-sided first and second derivatives vanish at both ends
+        for side in (-1, 1):
+            assert abs(s(x + side * h) - s(x)) < 1e-10
+            assert abs(s(x + 2 * side * h) - 2 * s(x + side * h) + s(x)) < 1e-10
+
+
+PRIM = Primitive(a1=11.0, a2=9.0, a3=10.0, a4=8.0, a5=9.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(b0=st.floats(-1.0, 1.5), c0=st.floats(-1.0, 1.0), r=st.floats(0.0, 2.5), angle=st.floats(-np.pi, np.pi),
+       z=st.floats(-20.0, 70.0))
+def test_a_planned_change_moves_the_footprint_fully_and_nothing_past_the_band(b0, c0, r, angle, z):
+    change = PlannedChange(Deformation(ptosis=(b0, 0.2), turn=(c0, 0.1)), PRIM, np.eye(4))
+    ax = (PRIM.a1 if np.cos(angle) >= 0 else PRIM.a2) * 6.0
+    ay = (PRIM.a3 if np.sin(angle) >= 0 else PRIM.a4) * 6.0
+    p = np.array([[r * ax * np.cos(angle), r * ay * np.sin(angle), z]])
+    full = ref.mm(ref.turn(ref.ptosis(ref.mu(p), b0, 0.2), c0, 0.1)) - p
+    got = change(p) - p
+    if r <= 1.0:
+        assert np.allclose(got, full, atol=1e-9)
+    elif r >= 1.0 + BAND:
+        assert np.all(got == 0.0)
+    else:   # in the band: the same direction, a fraction of it
+        w = float(smoothstep((r - 1.0) / BAND))
+        assert np.allclose(got, w * full, atol=1e-9)
+
+
+@settings(max_examples=40, deadline=None)
+@given(angle=st.floats(-np.pi, np.pi), z=st.floats(0.0, 60.0))
+def test_a_planned_change_is_continuous_across_the_rim_and_the_band(angle, z):
+    change = PlannedChange(Deformation(ptosis=(1.1, 0.3)), PRIM, np.eye(4))
+    ax = (PRIM.a1 if np.cos(angle) >= 0 else PRIM.a2) * 6.0
+    ay = (PRIM.a3 if np.sin(angle) >= 0 else PRIM.a4) * 6.0
+    for r in (1.0, 1.0 + BAND):
+        eps = 1e-6
+        p = np.array([[(r - eps) * ax * np.cos(angle), (r - eps) * ay * np.sin(angle), z],
+                      [(r + eps) * ax * np.cos(angle), (r + eps) * ay * np.sin(angle), z]])
+        d = change.displacement(p)
+        assert np.linalg.norm(d[0] - d[1]) < 1e-6
+
+
+# --- bad input ---------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("args, message", [
+    (["--deform", "wobble:3"], "has no degrees"),
+    (["--deform", "ptosis:9"], "1..8"),
+    (["--deform", "ptosis:0.5"], "1..8"),
+    (["--deform", "ptosis:nan"], "1..8"),
+    (["--deform", "ptosis3"], "KIND:DEGREE"),
+    (["--deform", "ptosis:3", "--deform", "ptosis:4"], "once"),
+    (["--side", "middle"], "not a side"),
+    (["--method", "guess"], "not a method"),
+])
+def test_plan_usage_errors_exit_2_before_any_work(cli, tmp_path, args, message):
+    res = run(cli, "plan", "--out", tmp_path / "case", *args)
+    assert res.returncode == 2 and message in res.stderr, res.stderr
+    assert not list(tmp_path.iterdir())
+
+
+def test_plan_of_a_corrupt_recording_leaves_no_case(cli, tmp_path):
+    bad = tmp_path / "scan.mcap"
+    bad.write_bytes(sample_recording().read_bytes()[: 200_000])
+    res = run(cli, "plan", bad, "--out", tmp_path / "out-case")
+    assert_bad_input(res, bad, tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scan.mcap"]
+
+
+def test_plan_of_a_patients_back_says_no_breast_and_leaves_no_case(cli, tmp_path):
+    from test_realistic import back_scene
+
+    scene, _ = back_scene("arms down, no wall, 640x400 at 650 mm")
+    back = tmp_path / "back.ply"
+    write_scan_file(back, scene)
+    res = run(cli, "plan", back, "--out", tmp_path / "out-case")
+    assert_bad_input(res, back, tmp_path)
+    assert "breast" in res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["back.ply"]
+
+
+def test_a_case_of_an_older_schema_is_named_as_such(planned, cli, tmp_path):
+    case, record, _ = planned
+    old = tmp_path / "old-case"
+    old.mkdir()
+    (old / "plan.json").write_text(json.dumps({**record, "schema": "breastplan.plan/0"}))
+    res = run(cli, "plan", old)
+    assert res.returncode == 3 and "older schema" in res.stderr and str(old) in res.stderr, res.stderr
+    assert sorted(p.name for p in old.iterdir()) == ["plan.json"]
