@@ -5,9 +5,10 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEMO   := out/demo
+TOUR   := out/tour
 export PATH := $(PATH):/sbin:/usr/sbin
 
-.PHONY: demo test bench libusb chromium clean
+.PHONY: demo tour test bench libusb chromium clean
 
 $(STAMP): pyproject.toml
 	@$(MAKE) --no-print-directory libusb
@@ -39,22 +40,27 @@ chromium:
 	fi
 
 demo: $(STAMP)
-	$(BIN)/breastplan synth --db S --out $(DEMO)/database-S --ply
-	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind ptosis --param b0=1.125 --param b1=0.25 --out $(DEMO)/S-shape1-00-ptosis.ply
-	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind turn --param c0=1.1 --param c1=0.5 --out $(DEMO)/S-shape1-00-turn.ply
-	$(BIN)/breastplan ingest examples/sample.mcap --side left --out $(DEMO)/case-left
-	$(BIN)/breastplan ingest examples/sample.mcap --side right --out $(DEMO)/case-right
-	$(BIN)/breastplan fit $(DEMO)/case-left
-	$(BIN)/breastplan fit $(DEMO)/case-right
-	$(BIN)/breastplan fit $(DEMO)/S-shape1-00-ptosis.ply --out $(DEMO)/fit-S-shape1-00-ptosis
-	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind ptosis --degree 5.5 --out $(DEMO)/S-shape1-00-ptosis-5.5.ply
-	$(BIN)/breastplan deform $(DEMO)/database-S/S-shape1-00.ply --kind ptosis --degree 5.5 --method learnt --out $(DEMO)/S-shape1-00-ptosis-5.5-learnt.ply
-	$(BIN)/breastplan scan-synth --body makehuman --cup 0.8 --firmness 0.3 --modifier asymmetry=0.4 --pose arms-down --pitch 8 --yaw -6 --frames 8 --out $(DEMO)/patient.mcap --truth $(DEMO)/patient-truth.npz
-	$(BIN)/breastplan ingest $(DEMO)/patient.mcap --side left --out $(DEMO)/patient-left
-	$(BIN)/breastplan ingest $(DEMO)/patient.mcap --side right --out $(DEMO)/patient-right
-	$(BIN)/breastplan fit $(DEMO)/patient-left
-	$(BIN)/breastplan evaluate --study all --quick --out $(DEMO)/study
-	@echo "demo written to $(abspath $(DEMO))"
+	$(BIN)/breastplan plan --out $(DEMO)
+	@echo "open $(abspath $(DEMO))/report.html in a browser"
+
+# The stages one by one, as the README's tour runs them.
+tour: $(STAMP)
+	$(BIN)/breastplan synth --db S --out $(TOUR)/database-S --ply
+	$(BIN)/breastplan deform $(TOUR)/database-S/S-shape1-00.ply --kind ptosis --param b0=1.125 --param b1=0.25 --out $(TOUR)/S-shape1-00-ptosis.ply
+	$(BIN)/breastplan deform $(TOUR)/database-S/S-shape1-00.ply --kind turn --param c0=1.1 --param c1=0.5 --out $(TOUR)/S-shape1-00-turn.ply
+	$(BIN)/breastplan ingest examples/sample.mcap --side left --out $(TOUR)/case-left
+	$(BIN)/breastplan ingest examples/sample.mcap --side right --out $(TOUR)/case-right
+	$(BIN)/breastplan fit $(TOUR)/case-left
+	$(BIN)/breastplan fit $(TOUR)/case-right
+	$(BIN)/breastplan fit $(TOUR)/S-shape1-00-ptosis.ply --out $(TOUR)/fit-S-shape1-00-ptosis
+	$(BIN)/breastplan deform $(TOUR)/database-S/S-shape1-00.ply --kind ptosis --degree 5.5 --out $(TOUR)/S-shape1-00-ptosis-5.5.ply
+	$(BIN)/breastplan deform $(TOUR)/database-S/S-shape1-00.ply --kind ptosis --degree 5.5 --method learnt --out $(TOUR)/S-shape1-00-ptosis-5.5-learnt.ply
+	$(BIN)/breastplan scan-synth --body makehuman --cup 0.8 --firmness 0.3 --modifier asymmetry=0.4 --pose arms-down --pitch 8 --yaw -6 --frames 8 --out $(TOUR)/patient.mcap --truth $(TOUR)/patient-truth.npz
+	$(BIN)/breastplan ingest $(TOUR)/patient.mcap --side left --out $(TOUR)/patient-left
+	$(BIN)/breastplan ingest $(TOUR)/patient.mcap --side right --out $(TOUR)/patient-right
+	$(BIN)/breastplan fit $(TOUR)/patient-left
+	$(BIN)/breastplan evaluate --study all --quick --out $(TOUR)/study
+	@echo "tour written to $(abspath $(TOUR))"
 
 test: $(STAMP) chromium
 	$(BIN)/python -m pytest -q
@@ -67,6 +73,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_learn.py
 	$(BIN)/python benchmarks/bench_realistic.py
 	$(BIN)/python benchmarks/bench_refusal.py
+	$(BIN)/python benchmarks/bench_plan.py
 
 clean:
 	rm -rf $(VENV) out

@@ -5,8 +5,8 @@ The page draws the torso (grey points), each original breast (dark points) and t
 it, a degree slider per planned kind, the combination as planned, front/side/top views, the
 measures before and after with the asymmetry between sides, the fits' quality, and the inputs,
 options and versions. Geometry travels as base64 typed arrays (`views`); a small script decodes
-it and restyles the plot when a slider moves. `window.breastplanState` names the state drawn and
-`window.breastplanReady` turns true once the plot is drawn.
+it and restyles the plot when a slider moves. `window.breastplanState` names the state shown, `window.breastplanDrawn` the state
+last drawn, and `window.breastplanReady` turns true once the plot is first drawn.
 """
 from __future__ import annotations
 
@@ -209,7 +209,8 @@ function label(state){
 }
 function put(upd){ids.forEach((t,n)=>{traces[t]=Object.assign({},traces[t],{x:upd.x[n],y:upd.y[n],z:upd.z[n]});
  if(upd['marker.color'][n])traces[t].marker=Object.assign({},traces[t].marker,{color:upd['marker.color'][n]});});}
-function show(state){label(state);put(arrays(state));return Plotly.react(gd,traces,gd.layout);}
+function show(state){label(state);put(arrays(state));const key=window.breastplanState;
+ return Plotly.react(gd,traces,gd.layout).then(()=>{window.breastplanDrawn=key;});}
 const byKey={};for(const st of P.states)byKey[st.key]=st;
 const box=document.getElementById('sliders');
 for(const sl of P.sliders){
@@ -229,6 +230,6 @@ for(const b of document.querySelectorAll('button[data-view]'))b.onclick=()=>Plot
 const first=P.combined?byKey['combined']:P.states.find(st=>st.kind===P.sliders[0].kind&&st.degree===P.sliders[0].requested);
 put(arrays(first));
 label(first);
-Plotly.newPlot(gd,traces,layout,{displaylogo:false,responsive:true}).then(()=>{window.breastplanReady=true;});
+Plotly.newPlot(gd,traces,layout,{displaylogo:false,responsive:true}).then(()=>{window.breastplanDrawn=window.breastplanState;window.breastplanReady=true;});
 })();
 """

@@ -18,7 +18,7 @@ from breastplan import transform_points
 from .changes import Change, change_name, solve_change
 from .job import Plan, SidePlan, method_for
 
-TORSO_POINTS = 20_000
+TORSO_POINTS = 12_000
 """At most this many torso points are drawn (a seeded subsample)."""
 VIEW_TO_DISPLAY = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])
 """Viewing frame (y down, z away) → display frame (y away, z up)."""

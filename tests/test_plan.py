@@ -3,6 +3,7 @@ through depthai), checked against the sample's truth and against the reference m
 of finished stages; the blend of a change into the chest; bad input."""
 import json
 import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import reference_model as ref
+from browser import chromium, requires_chromium
 from clitools import assert_bad_input, run
 
 from breastplan import read_ply, transform_points
@@ -238,3 +240,46 @@ def test_a_case_of_an_older_schema_is_named_as_such(planned, cli, tmp_path):
     res = run(cli, "plan", old)
     assert res.returncode == 3 and "older schema" in res.stderr and str(old) in res.stderr, res.stderr
     assert sorted(p.name for p in old.iterdir()) == ["plan.json"]
+
+
+# --- the report in a real browser ----------------------------------------------------------------
+
+def _plot_pixels(png, box) -> np.ndarray:
+    from PIL import Image
+
+    left, top, right, bottom = box
+    return np.asarray(Image.open(png).convert("RGB"))[top:bottom, left:right].astype(int)
+
+
+@requires_chromium
+def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(planned, tmp_path):
+    """Headless Chromium opens report.html from disk, draws it without a single request leaving the
+    page, and redraws the patient when a degree slider moves and when the view changes."""
+    case, record, _ = planned
+    with chromium(1280, 900) as b:
+        b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
+        assert b.js("window.breastplanDrawn") == "combined"
+        box = b.rect("#plot")
+        first = _plot_pixels(b.screenshot(tmp_path / "combined.png"), box)
+        assert len(np.unique(first.reshape(-1, 3), axis=0)) > 200          # a 3-D drawing, not a blank canvas
+        b.js("(s => { s.value = s.max; s.dispatchEvent(new Event('input')); })(document.getElementById('slider-ptosis'))")
+        for _ in range(600):
+            if b.js("window.breastplanDrawn") == "ptosis-8":
+                break
+            time.sleep(0.05)
+        assert b.js("window.breastplanDrawn") == "ptosis-8"
+        assert "ptosis: degree 8" in b.js("document.getElementById('slider-ptosis').previousSibling.textContent")
+        sagged = _plot_pixels(b.screenshot(tmp_path / "ptosis-8.png"), box)
+        assert (np.abs(sagged - first).sum(axis=2) > 30).mean() > 0.005     # the breasts were redrawn
+        b.driver.find_element("css selector", "button[data-view='side']").click()
+        time.sleep(0.5)
+        side = _plot_pixels(b.screenshot(tmp_path / "side.png"), box)
+        assert (np.abs(side - sagged).sum(axis=2) > 30).mean() > 0.02       # another view of her
+        assert b.requests() == [] and b.console_errors() == []
+        table = b.js("document.querySelector('table.measures').innerText")
+        assert "volume" in table
+        if os.environ.get("BREASTPLAN_SCREENSHOT"):                         # the README's screenshot
+            b.driver.find_element("css selector", "button[data-view='front']").click()
+            b.js("(s => { s.value = s.max; s.dispatchEvent(new Event('input')); })(document.getElementById('slider-ptosis'))")
+            time.sleep(1.0)
+            b.screenshot(os.environ["BREASTPLAN_SCREENSHOT"])

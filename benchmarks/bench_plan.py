@@ -1,0 +1,107 @@
+"""The main job: `breastplan plan` on the bundled sample, and its report in Chromium.
+
+Each round, one after the other so that both see the same load of the (shared, noisy) machine:
+- `breastplan plan --out CASE` (both sides, the default three changes ptosis:3 turn:3
+  top-shape:3, their combination, the measures and the report), whole process; target ≤ 10 s;
+- baseline: the same work as separate commands, whole processes: `ingest` of each side, `fit`
+  of each side, `deform --degree 3` of each fitted side for each of the three kinds (what a
+  user ran before `plan` existed, with no report).
+Then report.html's size (target ≤ 8 MB) and the seconds headless Chromium (Debian's, through
+tests/browser.py) takes to open it until the plot is drawn (target ≤ 2 s), median of several
+opens; baseline: a page of plotly.js alone drawing one 3-D scatter of as many points.
+
+Run:  .venv/bin/python benchmarks/bench_plan.py [--repeats N] [--quick]   (default 3; --quick 1)
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+from timing import fmt, repeats_argument, rounded, timed
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from browser import chromium, missing_chromium  # noqa: E402
+
+BIN = Path(sys.executable).with_name("breastplan")
+KINDS = ("ptosis", "turn", "top-shape")
+TARGETS = {"plan_s": 10.0, "report_mb": 8.0, "open_s": 2.0}
+
+
+def run(*args) -> None:
+    subprocess.run([str(BIN), *map(str, args)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
+
+
+def separate_commands(sample: Path, work: Path) -> None:
+    for side in ("left", "right"):
+        run("ingest", sample, "--side", side, "--out", work / side)
+        run("fit", work / side)
+        for kind in KINDS:
+            run("deform", work / side, "--kind", kind, "--degree", 3, "--out", work / f"{side}-{kind}.ply")
+
+
+def baseline_page(path: Path, points: int) -> Path:
+    import numpy as np
+    import plotly.graph_objects as go
+
+    p = np.random.default_rng(0).normal(size=(points, 3))
+    fig = go.Figure([go.Scatter3d(x=p[:, 0], y=p[:, 1], z=p[:, 2], mode="markers", marker={"size": 1.4})])
+    fig.write_html(path, include_plotlyjs=True, post_script="window.breastplanReady = true;")
+    return path
+
+
+def main() -> None:
+    repeats = repeats_argument(__doc__.splitlines()[0], 3, 1)
+    from breastplan.plan.job import sample_recording
+    from breastplan.plan.views import TORSO_POINTS
+
+    sample = sample_recording()
+    root = Path(tempfile.mkdtemp(prefix="bench-plan-"))
+    plan_times, base_times = [], []
+    try:
+        for i in range(repeats):
+            plan_times.append(timed(lambda: run("plan", "--out", root / f"case{i}")))
+            base_times.append(timed(lambda: separate_commands(sample, root / f"separate{i}")))
+        report = root / "case0" / "report.html"
+        size_mb = report.stat().st_size / 2**20
+        opens, base_opens = [], []
+        if missing_chromium() is None:
+            page = baseline_page(root / "baseline.html", TORSO_POINTS)
+            with chromium() as b:
+                for _ in range(repeats + 2):
+                    opens.append(b.open(report, wait_for_js="window.breastplanReady === true"))
+                    base_opens.append(b.open(page, wait_for_js="window.breastplanReady === true"))
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    plan_s, base_s = statistics.median(plan_times), statistics.median(base_times)
+    open_s = statistics.median(opens[1:]) if opens else None
+    base_open_s = statistics.median(base_opens[1:]) if base_opens else None
+    rows = [("plan on the sample (whole process)", plan_s, base_s, "separate commands", TARGETS["plan_s"]),
+            ("report.html opens in Chromium", open_s, base_open_s, "plotly.js + one scatter", TARGETS["open_s"])]
+    table = Table(title=f"bench_plan — medians of {repeats} rounds (opens: {max(len(opens) - 1, 0)})")
+    for col in ("case", "median", "baseline", "baseline is", "ratio", "target", "met"):
+        table.add_column(col)
+    for name, value, base, what, target in rows:
+        if value is None:
+            table.add_row(name, "no chromium", "", what, "", f"≤ {fmt(target)}", "")
+            continue
+        table.add_row(name, fmt(value), fmt(base), what, f"{value / base:.2f}", f"≤ {fmt(target)}",
+                      "yes" if value <= target else "no")
+    table.add_row("report.html size", f"{size_mb:.2f} MB", "", "", "", f"≤ {TARGETS['report_mb']:g} MB",
+                  "yes" if size_mb <= TARGETS["report_mb"] else "no")
+    Console().print(table)
+    print(json.dumps(rounded({"benchmark": "plan", "repeats": repeats, "plan_s": plan_s,
+                              "baseline_separate_commands_s": base_s, "ratio": plan_s / base_s,
+                              "report_mb": size_mb, "open_s": open_s, "baseline_plotly_page_open_s": base_open_s,
+                              "targets": TARGETS})))
+
+
+if __name__ == "__main__":
+    main()
