@@ -16,14 +16,17 @@ How the landmarks are found (the torso: the background-free body points, `Scan.t
 head, neck and arms may be in it):
 
 1. **Mid-sagittal plane** by mirror ICP: reflect the torso (8 mm voxels) in the current plane,
-   pair each point with its nearest neighbour, and take the plane bisecting the closest 60 % of
-   the pairs; the plane is kept upright (its normal ⟂ the current up axis). It starts through the
-   nipples' midpoint, normal along the nipple-to-nipple direction.
+   pair each point with the nearest of the torso's 4 mm voxels, and take the plane bisecting the
+   closest 80 % of the pairs (the rest have no mirror image: a flank seen at a grazing angle, an
+   arm posed unlike the other); the plane is kept upright (its normal ⟂ the current up axis). It
+   starts through the nipples' midpoint, normal along the nipple-to-nipple direction (one
+   nipple: through the torso's middle, normal along the viewing frame's x).
 2. **Up axis** in that plane. The camera may look up or down but is taken as not rolled: the up
-   axis lies in the viewing frame's y–z plane. It starts at the viewing frame's −y, and the
-   camera's pitch is then corrected by making the anterior midline profile of the sternum and
-   the upper abdomen (130–400 mm below the notch) vertical, as it is on an upright body.
-   Plane, up axis and notch are refined together (`ROUNDS` rounds).
+   axis lies in the viewing frame's y–z plane (a scan file's viewing frame has its y opposite the
+   declared up axis). It starts at the viewing frame's −y, and the camera's pitch is then
+   corrected by making the anterior midline profile of the sternum and the upper abdomen
+   (130–400 mm below the notch) vertical, as it is on an upright body. Plane, up axis and notch
+   are refined together (`ROUNDS` rounds).
 3. **Sternal (jugular) notch**: on the midline profile (the most anterior torso point in 5 mm
    height bins of the strip within 10 mm of the plane), the deepest (most posterior) point
    between 60 and 400 mm above the nipples — the hollow where the sloping upper chest meets the
@@ -46,10 +49,10 @@ MEASURES = ("volume_cc", "upper_pole_cc", "lower_pole_cc", "pole_ratio", "notch_
 """The names `breast_measures` gives, in order."""
 
 VOXEL_MM = (4.0, 8.0)
-"""Voxels evening out the torso's sampling: the profile's (fine) and the mirror ICP's (coarse)."""
-MIRROR_KEEP = 0.6
-"""Share of the mirror pairs (the closest) that place the plane; the rest have no mirror image
-(a flank seen at a grazing angle, an arm posed unlike the other)."""
+"""Voxels evening out the torso's sampling: fine (the profile; the mirror images' partners) and
+coarse (the points the mirror ICP reflects)."""
+MIRROR_KEEP = 0.8
+"""Share of the mirror pairs (the closest) that place the plane."""
 STRIP_MM = 10.0
 """Half-width of the midline strip the profile is taken in."""
 BIN_MM = 5.0
@@ -65,6 +68,7 @@ MIN_STERNUM_BINS = 20
 ROUNDS = 4
 """Rounds of plane → notch → pitch."""
 MIRROR_ITERATIONS = 40
+"""Mirror ICP iterations at most, each time it runs."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,7 +123,7 @@ def find_landmarks(torso_mm, nipples: dict, view_from_input=None) -> BodyLandmar
     R = np.eye(3) if view_from_input is None else np.asarray(view_from_input, float)[:3, :3]
     level, up = R.T @ [1.0, 0.0, 0.0], R.T @ [0.0, -1.0, 0.0]    # viewing frame: x level, y down
     fine, coarse = (_voxel_centroids(P, s) for s in VOXEL_MM)
-    tree = cKDTree(coarse)
+    tree = cKDTree(fine)                          # mirror images are looked up among the fine voxels
     centre = np.mean(list(nips.values()), axis=0)
     if len(nips) == 2:
         left = _unit(_perp(nips["left"] - nips["right"], up))
@@ -143,10 +147,11 @@ def _mirror_plane(P, tree, n, d, up) -> tuple[np.ndarray, float]:
     for _ in range(MIRROR_ITERATIONS):
         dist, j = tree.query(P - 2.0 * (P @ n - d)[:, None] * n)
         keep = dist <= max(np.quantile(dist, MIRROR_KEEP), 1e-9)
-        D = _perp(P[keep] - P[j[keep]], up)             # pairs point across the plane
+        Q = tree.data[j[keep]]
+        D = _perp(P[keep] - Q, up)             # pairs point across the plane
         vec = np.linalg.eigh(D.T @ D)[1][:, -1]
         new = vec * np.sign(vec @ n)
-        d = float(np.mean(0.5 * (P[keep] + P[j[keep]]) @ new))
+        d = float(np.mean(0.5 * (P[keep] + Q) @ new))
         moved = np.linalg.norm(new - n)
         n = new
         if moved < 1e-7:

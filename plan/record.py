@@ -18,7 +18,7 @@ from breastplan.case import Case, Provenance, sha256
 from breastplan.fitting.ffd import STOP_RESIDUAL
 
 from .job import PLAN_SCHEMA, Plan, SidePlan, input_record
-from .measures_plan import plan_measures
+from .measures import asymmetry, breast_measures, find_landmarks
 
 SUMMARY = "summary.png"
 
@@ -80,3 +80,33 @@ def _save_change(sp: SidePlan, change, folder: Path) -> dict:
     return {"name": change.name, "requested": record["requested"], "details": details,
             "scan_displacement_mm": {"mean": round(float(moved.mean()), 3), "max": round(float(moved.max()), 3)},
             "files": {k: os.path.relpath(p, folder) for k, p in paths.items()}}
+
+
+def plan_measures(plan: Plan) -> dict:
+    """Each side's measures before and after (the last change: the combination as planned, or the
+    single change), and their asymmetry (left − right); lengths mm, volumes cc, input frame."""
+    first = next(iter(plan.sides.values()))
+    landmarks = find_landmarks(first.scan.torso_camera, {s: sp.scan.nipple_camera_mm for s, sp in plan.sides.items()},
+                               first.scan.view_from_camera)
+    before, after = {}, {}
+    for side, sp in plan.sides.items():
+        verts, nipple = transform_points(sp.to_input, sp.fit.vertices), sp.scan.nipple_camera_mm
+        planned = sp.planned(sp.changes[-1])
+        before[side] = breast_measures(landmarks, nipple, verts, sp.fit.faces)
+        after[side] = breast_measures(landmarks, planned.model(nipple[None])[0], planned.model(verts), sp.fit.faces)
+    asym = {when: {k: v["left_minus_right"] for k, v in asymmetry(m).items()} for when, m in
+            (("before", before), ("after", after))}
+    return _finite({"before": before, "after": after, "asymmetry": asym if len(before) == 2 else {},
+                    "landmarks": {"sternal_notch_mm": landmarks.sternal_notch, "up_axis": landmarks.up_axis,
+                                  "left_axis": landmarks.left_axis}})
+
+
+def _finite(x):
+    """Rounded plain values for JSON: floats to 0.01 (None where not finite), arrays to lists."""
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, np.ndarray):
+        return [_finite(float(v)) for v in x]
+    if isinstance(x, float):
+        return round(x, 4 if abs(x) < 10 else 2) if np.isfinite(x) else None
+    return x

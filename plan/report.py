@@ -96,8 +96,8 @@ def tables(record: dict) -> str:
     """The measures, fit quality and provenance tables of a plan.json record."""
     sides = list(record["sides"])
     parts = []
-    measures = record.get("measures", {})
-    if measures:
+    measures = record["measures"]
+    if measures["before"]:
         names = list(next(iter(measures["before"].values())))
         head = ["measure"] + [f"{s} {w}" for s in sides for w in ("before", "after")]
         if len(sides) == 2:

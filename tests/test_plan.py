@@ -3,6 +3,7 @@ through depthai), checked against the sample's truth and against the reference m
 of finished stages; the blend of a change into the chest; bad input."""
 import json
 import os
+import shutil
 import time
 from pathlib import Path
 
@@ -61,6 +62,23 @@ def test_plan_finds_both_nipples_of_the_sample(planned):
     for side in ("left", "right"):
         found = np.array(record["sides"][side]["nipple_input_mm"])
         assert np.linalg.norm(found - truth[f"{side}_nipple_camera_mm"]) < 8.0
+
+
+def test_the_measures_know_her_midline_and_the_asymmetry_of_her_nipples(planned):
+    """Against the sample's truth: the nipples' distances from her mid-sagittal plane (x = 0 of the
+    MakeHuman body) and the height difference between her nipples along her up axis."""
+    _, record, _ = planned
+    truth = np.load(TRUTH)
+    body_from_camera = np.linalg.inv(truth["camera_from_body"])
+    nipple = {s: truth[f"{s}_nipple_camera_mm"] for s in ("left", "right")}
+    measures = record["measures"]["before"]
+    for side in ("left", "right"):
+        true_midline = abs(transform_points(body_from_camera, nipple[side])[0])
+        assert measures[side]["nipple_to_midline_mm"] == pytest.approx(true_midline, abs=6.0)
+    up = truth["camera_from_body"][:3, 1]
+    true_drop = float((nipple["right"] - nipple["left"]) @ up)          # left nipple below the right one
+    assert true_drop > 5.0
+    assert record["measures"]["asymmetry"]["before"]["nipple_below_notch_mm"] == pytest.approx(true_drop, abs=4.0)
 
 
 @pytest.mark.parametrize("name", NAMES[:3])
@@ -124,16 +142,22 @@ def test_far_from_the_breasts_the_torso_is_unchanged_and_at_their_base_it_has_no
             assert base.sum() > 100 and slope[base].max() < 0.6, (name, slope[base].max())
 
 
-def test_plan_again_reuses_ingest_and_fit(planned, cli):
-    case, _, _ = planned
-    before = {s: (case / s / "fit.npz").read_bytes() for s in ("left", "right")}
+def test_plan_again_reuses_ingest_and_fit(planned, cli, tmp_path):
+    case = tmp_path / "case"
+    shutil.copytree(planned[0], case)
+    fits = {s: (case / s / "fit.npz").read_bytes() for s in ("left", "right")}
     res = run(cli, "plan", case, "--deform", "ptosis:5", "--json")
     assert res.returncode == 0, res.stderr[-2000:]
     record = json.loads((case / "plan.json").read_text())
     for side in ("left", "right"):
         assert record["sides"][side]["reused"] == ["ingest", "fit"]
-        assert (case / side / "fit.npz").read_bytes() == before[side]
+        assert (case / side / "fit.npz").read_bytes() == fits[side]
         assert [c["name"] for c in record["sides"][side]["changes"]] == ["ptosis-5"]
+        # ptosis is a shear (Jacobian determinant 1): the planned breast keeps its volume, and it
+        # moves nothing across the body, so her width and the fold's place stay
+        before, after = record["measures"]["before"][side], record["measures"]["after"][side]
+        assert after["volume_cc"] == pytest.approx(before["volume_cc"], abs=0.02)
+        assert after["width_mm"] == pytest.approx(before["width_mm"], abs=0.02)
 
 
 def test_plan_of_one_sides_case_from_ingest(cli, tmp_path):
