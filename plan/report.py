@@ -223,9 +223,11 @@ for(const sl of P.sliders){
   show(P.states.find(st=>st.kind===sl.kind&&st.degree===d));});
  div.appendChild(lab);div.appendChild(inp);box.appendChild(div);
 }
+function planned(){for(const sl of P.sliders){const inp=document.getElementById('slider-'+sl.kind);
+ inp.value=sl.degrees.indexOf(sl.requested);inp.previousSibling.textContent=sl.kind+': degree '+sl.requested+' (planned)';}}
 document.getElementById('original').onclick=()=>show(null);
 const comb=document.getElementById('combined');
-if(P.combined){comb.onclick=()=>show(byKey['combined']);}else{comb.style.display='none';}
+if(P.combined){comb.onclick=()=>{planned();return show(byKey['combined']);};}else{comb.style.display='none';}
 for(const b of document.querySelectorAll('button[data-view]'))b.onclick=()=>Plotly.relayout(gd,{'scene.camera':views[b.dataset.view]});
 const first=P.combined?byKey['combined']:P.states.find(st=>st.kind===P.sliders[0].kind&&st.degree===P.sliders[0].requested);
 put(arrays(first));

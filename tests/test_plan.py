@@ -304,6 +304,9 @@ def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(pl
         assert "volume" in table
         if os.environ.get("BREASTPLAN_SCREENSHOT"):                         # the README's screenshot
             b.driver.find_element("css selector", "button[data-view='front']").click()
-            b.js("(s => { s.value = s.max; s.dispatchEvent(new Event('input')); })(document.getElementById('slider-ptosis'))")
-            time.sleep(1.0)
+            b.driver.find_element("css selector", "#combined").click()
+            for _ in range(600):
+                if b.js("window.breastplanDrawn") == "combined":
+                    break
+                time.sleep(0.05)
             b.screenshot(os.environ["BREASTPLAN_SCREENSHOT"])
