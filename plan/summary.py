@@ -3,8 +3,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from breastplan import transform_points
 
 from .job import Plan
@@ -16,13 +14,13 @@ DPI = 110
 def summary_png(plan: Plan, record: dict, path: Path) -> Path:
     """Front and side views of each side's breast before (dark) and after the combination as planned
     (skin), with the measures beside them."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     sides = list(plan.sides)
-    fig, axes = plt.subplots(len(sides), 3, figsize=(12, 3.6 * len(sides)), dpi=DPI, squeeze=False)
+    fig = Figure(figsize=(12, 3.6 * len(sides)), dpi=DPI)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(len(sides), 3, squeeze=False)
     for row, side in zip(axes, sides):
         sp = plan.sides[side]
         show = VIEW_TO_DISPLAY @ sp.scan.view_from_camera
@@ -30,8 +28,8 @@ def summary_png(plan: Plan, record: dict, path: Path) -> Path:
         before = transform_points(show, verts)
         after = transform_points(show, sp.planned(sp.changes[-1]).model(verts))
         for ax, (u, v, title) in zip(row[:2], ((0, 2, "front"), (1, 2, "side"))):
-            ax.scatter(before[:, u], before[:, v], s=0.6, c="#2b2b2b", label="before")
-            ax.scatter(after[:, u], after[:, v], s=0.6, c="#e0a080", alpha=0.6, label="planned")
+            ax.scatter(before[:, u], before[:, v], s=0.6, linewidths=0, c="#2b2b2b", label="before")
+            ax.scatter(after[:, u], after[:, v], s=0.6, linewidths=0, c="#e0a080", alpha=0.6, label="planned")
             ax.set_aspect("equal")
             ax.set_title(f"{side} breast, {title} view (mm)")
             ax.legend(loc="upper right", fontsize=7, markerscale=8)
@@ -45,6 +43,5 @@ def summary_png(plan: Plan, record: dict, path: Path) -> Path:
         row[2].text(0, 1, "\n".join(text), va="top", family="monospace", fontsize=8)
     fig.tight_layout()
     with open(path, "wb") as fh:
-        fig.savefig(fh, format="png")
-    plt.close(fig)
+        fig.savefig(fh, format="png", pil_kwargs={"compress_level": 3})
     return Path(path)
