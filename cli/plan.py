@@ -57,13 +57,54 @@ def plan(
     sides = {s: {"volume_cc": r["fit"]["volume_cc"], "stopping_rule_met": r["fit"]["stopping_rule_met"],
                  "changes": [c["name"] for c in r["changes"]], "reused": r["reused"]}
              for s, r in record["sides"].items()}
-    report({"case": str(out), "report": str(out / "report.html"), "plan": str(out / "plan.json"),
-            "input": str(result.input), "sides": sides, "measures": record["measures"],
-            "seconds": clock.seconds}, as_json, f"plan → {out / 'report.html'}")
+    result = {"case": str(out), "report": str(out / "report.html"), "plan": str(out / "plan.json"),
+              "input": str(result.input), "sides": sides, "measures": record["measures"], "seconds": clock.seconds}
+    if as_json:
+        report(result, True, "")
+    else:
+        _print_plan(result, record)
     for s, r in record["sides"].items():
         if not r["fit"]["stopping_rule_met"]:
             stderr.print(f"note: the {s} breast's fit ends above the stopping rule (normalised residual "
                          f"{r['fit']['normalised_residual']:.4f}); the report says so.", markup=False, soft_wrap=True)
+
+
+def _print_plan(result: dict, record: dict) -> None:
+    """The plan for a person: what was planned, the measures before and after, where the report is."""
+    from rich.table import Table
+
+    from .output import stdout
+
+    m = record["measures"]
+    sides = list(record["sides"])
+    changes = ", ".join(c["name"] for c in record["sides"][sides[0]]["changes"])
+    table = Table(title=f"plan: {changes} — after: {record['sides'][sides[0]]['changes'][-1]['name']}",
+                  title_justify="left")
+    table.add_column("measure")
+    for s in sides:
+        table.add_column(f"{s} before", justify="right")
+        table.add_column(f"{s} after", justify="right")
+    if m["asymmetry"]:
+        table.add_column("left − right before", justify="right")
+        table.add_column("after", justify="right")
+    for name in m["before"][sides[0]]:
+        row = [name.replace("_", " ")]
+        for s in sides:
+            row += [_number(m["before"][s][name]), _number(m["after"][s][name])]
+        if m["asymmetry"]:
+            row += [_number(m["asymmetry"]["before"][name]), _number(m["asymmetry"]["after"][name])]
+        table.add_row(*row)
+    stdout.print(table)
+    for s in sides:
+        fit = record["sides"][s]["fit"]
+        reused = record["sides"][s]["reused"]
+        stdout.print(f"{s} fit: {fit['volume_cc']:.1f} cc, rms {fit['rms_mm']:.2f} mm, normalised residual "
+                     f"{fit['normalised_residual']:.4f}" + (f"; reused: {', '.join(reused)}" if reused else ""))
+    stdout.print(f"report → {result['report']}  ({result['seconds']:.1f} s)")
+
+
+def _number(v) -> str:
+    return "—" if v is None else f"{v:.1f}" if abs(v) >= 10 else f"{v:.2f}"
 
 
 def _check_model(path: Path) -> None:

@@ -14,14 +14,14 @@ import json
 import os
 import secrets
 import shutil
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Callable, Iterator
 
 import numpy as np
 
-from breastplan import BadInputError, transform_points
+from breastplan import BadInputError, Primitive, transform_points
 from breastplan.case import Case, Fit, Provenance, Scan, sha256
 from breastplan.clock import Clock
 from breastplan.errors import about
@@ -50,9 +50,22 @@ class SidePlan:
     reused: tuple[str, ...] = ()             # stages taken from the case folder as they were
 
     @property
+    def anatomical(self) -> np.ndarray:
+        """(4, 4) primitive frame → the side's anatomical frame: the model's breast is a right one
+        (its −x lateral, docs/model.md §1, §3), so a left breast is mirrored in x and both sides
+        plan the same change, medial and lateral alike (a turn turns both breasts outwards)."""
+        return np.diag([-1.0, 1.0, 1.0, 1.0]) if self.side == "left" else np.eye(4)
+
+    @property
+    def primitive(self) -> Primitive:
+        """The fitted primitive in the anatomical frame (a left breast's a1, a2 swapped)."""
+        p = self.fit.primitive
+        return replace(p, a1=p.a2, a2=p.a1) if self.side == "left" else p
+
+    @property
     def to_primitive(self) -> np.ndarray:
-        """(4, 4) input frame → primitive frame, mm."""
-        return np.linalg.inv(self.fit.pose) @ self.scan.camera_to_breast
+        """(4, 4) input frame → anatomical primitive frame, mm."""
+        return self.anatomical @ np.linalg.inv(self.fit.pose) @ self.scan.camera_to_breast
 
     @property
     def to_input(self) -> np.ndarray:
@@ -60,11 +73,11 @@ class SidePlan:
         return np.linalg.inv(self.scan.camera_to_breast)
 
     def planned(self, change: Change) -> PlannedChange:
-        return PlannedChange(change.deformation, self.fit.primitive, self.to_primitive)
+        return PlannedChange(change.deformation, self.primitive, self.to_primitive)
 
     def local_surface(self) -> np.ndarray:
-        """The fitted surface in the primitive frame, mm: what degrees are measured on."""
-        return transform_points(np.linalg.inv(self.fit.pose), self.fit.vertices)
+        """The fitted surface in the anatomical primitive frame, mm: what degrees are measured on."""
+        return transform_points(self.anatomical @ np.linalg.inv(self.fit.pose), self.fit.vertices)
 
 
 @dataclass(frozen=True, eq=False)
@@ -137,7 +150,7 @@ def _sides(source: Path, folder: Path, options: PlanOptions, clock: Clock, progr
 def solve_changes(side: SidePlan, options: PlanOptions) -> tuple[Change, ...]:
     """Each requested change of one side, then (for more than one) their combination."""
     local = side.local_surface()
-    singles = [solve_change(local, kind, degree, side.fit.primitive, method_for(options.method, kind))
+    singles = [solve_change(local, kind, degree, side.primitive, method_for(options.method, kind))
                for kind, degree in options.changes]
     return tuple(singles + ([combine(singles)] if len(singles) > 1 else []))
 

@@ -36,8 +36,9 @@ def smoothstep(s) -> np.ndarray:
 class PlannedChange:
     """A deformation of a fitted breast, placed in an input frame.
 
-    `to_primitive` maps input-frame points (mm) to the primitive's frame (mm): the fit's pose
-    inverted, after the scan's input → breast frame transform."""
+    `to_primitive` maps input-frame points (mm) to the primitive's frame (mm): the scan's input →
+    breast frame transform, then the fit's pose inverted (and, for a left breast, a mirror in x:
+    any orthogonal transform)."""
 
     deformation: Deformation
     primitive: Primitive

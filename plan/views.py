@@ -83,7 +83,7 @@ def _single(side: SidePlan, plan: Plan, kind: str, degree: float) -> Change:
     for change in side.changes:
         if change.name == name:
             return change
-    return solve_change(side.local_surface(), kind, degree, side.fit.primitive, method_for(plan.options.method, kind))
+    return solve_change(side.local_surface(), kind, degree, side.primitive, method_for(plan.options.method, kind))
 
 
 def _state(plan: Plan, changes: dict[str, Change], patch_in: np.ndarray, show, key: str, kind, degree) -> State:

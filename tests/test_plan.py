@@ -98,11 +98,15 @@ def test_each_planned_breast_reaches_its_degree_by_the_reference_model(planned, 
     assert float(reached) == pytest.approx(float(degree), abs=1e-6)
 
 
-def test_the_combination_applies_every_change_in_model_order(planned):
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_the_combination_applies_every_change_in_model_order(planned, side):
+    """The model's breast is a right one (−x lateral): a left breast is planned mirrored in x."""
     case, record, _ = planned
-    side = "left"
     fit = np.load(case / side / "fit.npz")
-    back, prim = np.linalg.inv(fit["pose"]), fit["primitive"]
+    mirror = np.diag([-1.0 if side == "left" else 1.0, 1.0, 1.0, 1.0])
+    back, prim = mirror @ np.linalg.inv(fit["pose"]), fit["primitive"].copy()
+    if side == "left":
+        prim[[0, 1]] = prim[[1, 0]]
     fitted = ref.mu(transform_points(back, read_ply(case / side / "fit.ply").points))
     vector = np.zeros(12)
     for change in record["sides"][side]["changes"][:3]:
@@ -111,6 +115,23 @@ def test_the_combination_applies_every_change_in_model_order(planned):
     expected = ref.mm(ref.deform(fitted, prim, vector))
     got = transform_points(back, read_ply(case / side / "plan" / "combined.ply").points)
     assert np.abs(got - expected).max() < 1e-6
+
+
+def test_a_turn_turns_both_breasts_outwards(planned):
+    """c0 > c1 turns the model's (right) breast laterally; planned on both sides, both nipples move
+    away from her midline, by mirror-image changes."""
+    _, record, _ = planned
+    turn = [c for c in record["sides"]["left"]["changes"] if c["name"] == "turn-2.5"][0]["details"][0]
+    assert turn["params"][0] > turn["params"][1]
+    case, _, _ = planned
+    for side in ("left", "right"):
+        scan = np.load(case / side / "scan.npz")
+        before = read_ply(case / side / "scan.ply").points
+        after = read_ply(case / side / "plan" / "turn-2.5-scan.ply").points
+        to_input = np.linalg.inv(scan["transform_camera_to_breast"])
+        lateral = 1.0 if side == "left" else -1.0                      # camera x: towards her left
+        shift = (transform_points(to_input, after) - transform_points(to_input, before))[:, 0] * lateral
+        assert shift.mean() > 0.5 and (shift > -1e-9).all()
 
 
 def test_far_from_the_breasts_the_torso_is_unchanged_and_at_their_base_it_has_no_step(planned):
