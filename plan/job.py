@@ -102,11 +102,11 @@ def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Prog
     clock = Clock()
     with _building(out) as folder:
         sides = _sides(source, folder, options, clock, progress)
-        plan = Plan(out, source, options, sides, clock.ms)
         with clock("report"):
             progress("report")
-            write_plan(plan, folder)
-    return plan
+            write_plan(Plan(out, source, options, sides, clock.ms), folder)
+    moved = {s: replace(sp, case=Case(out / sp.case.folder.relative_to(folder))) for s, sp in sides.items()}
+    return Plan(out, source, options, moved, clock.ms)
 
 
 @contextlib.contextmanager
