@@ -331,3 +331,14 @@ def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(pl
                     break
                 time.sleep(0.05)
             b.screenshot(os.environ["BREASTPLAN_SCREENSHOT"])
+
+
+def test_a_side_case_of_an_older_schema_is_named_as_such(planned, cli, tmp_path):
+    case = tmp_path / "case"
+    shutil.copytree(planned[0], case)
+    scan = dict(np.load(case / "left" / "scan.npz"))
+    scan["schema"] = np.str_("breastplan.scan/0")
+    with open(case / "left" / "scan.npz", "wb") as fh:
+        np.savez(fh, **scan)
+    res = run(cli, "plan", case)
+    assert res.returncode == 3 and "older schema" in res.stderr and "scan.npz" in res.stderr, res.stderr
