@@ -28,8 +28,8 @@ def summary_png(plan: Plan, record: dict, path: Path) -> Path:
         before = transform_points(show, verts)
         after = transform_points(show, sp.planned(sp.changes[-1]).model(verts))
         for ax, (u, v, title) in zip(row[:2], ((0, 2, "front"), (1, 2, "side"))):
-            ax.scatter(before[:, u], before[:, v], s=0.6, linewidths=0, c="#2b2b2b", label="before")
-            ax.scatter(after[:, u], after[:, v], s=0.6, linewidths=0, c="#e0a080", alpha=0.6, label="planned")
+            ax.scatter(after[:, u], after[:, v], s=4, linewidths=0, c="#e3a47c", label="planned")
+            ax.scatter(before[:, u], before[:, v], s=0.4, linewidths=0, c="#2b2b2b", label="before")
             ax.set_aspect("equal")
             ax.set_title(f"{side} breast, {title} view (mm)")
             ax.legend(loc="upper right", fontsize=7, markerscale=8)
