@@ -5,8 +5,9 @@ The page draws the torso (grey points), each original breast (dark points) and t
 it, a degree slider per planned kind, the combination as planned, front/side/top views, the
 measures before and after with the asymmetry between sides, the fits' quality, and the inputs,
 options and versions. Geometry travels as base64 typed arrays (`views`); a small script decodes
-it and restyles the plot when a slider moves. `window.breastplanState` names the state shown, `window.breastplanDrawn` the state
-last drawn, and `window.breastplanReady` turns true once the plot is first drawn.
+it and restyles the plot when a slider moves. The page is painted first (`window.breastplanShown`), then the 3-D scene is built;
+`window.breastplanState` names the state shown, `window.breastplanDrawn` the state last drawn,
+and `window.breastplanReady` turns true once the plot is first drawn.
 """
 from __future__ import annotations
 
@@ -150,7 +151,7 @@ td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4p
 #tables{padding:0 16px 16px}
 </style></head><body>
 <header><h1>%TITLE%</h1></header>
-<main><div id="plot"></div>
+<main><div id="plot"><p id="drawing" style="padding:16px">Drawing the 3-D view…</p></div>
 <div id="controls">
 <div><b>View</b><br><button data-view="front">Front</button><button data-view="side">Side</button><button data-view="top">Top</button></div>
 <div id="sliders"></div>
@@ -232,6 +233,8 @@ for(const b of document.querySelectorAll('button[data-view]'))b.onclick=()=>Plot
 const first=P.combined?byKey['combined']:P.states.find(st=>st.kind===P.sliders[0].kind&&st.degree===P.sliders[0].requested);
 put(arrays(first));
 label(first);
-Plotly.newPlot(gd,traces,layout,{displaylogo:false,responsive:true}).then(()=>{window.breastplanDrawn=window.breastplanState;window.breastplanReady=true;});
+window.breastplanShown=true;   // the page (controls, tables) is painted before the 3-D scene is built
+requestAnimationFrame(()=>setTimeout(()=>{document.getElementById('drawing').remove();
+ Plotly.newPlot(gd,traces,layout,{displaylogo:false,responsive:true}).then(()=>{window.breastplanDrawn=window.breastplanState;window.breastplanReady=true;});},0));
 })();
 """
