@@ -75,9 +75,6 @@ def load_npz(path: str | Path, schema: str, spec: Spec | None = None) -> Artefac
         raise ArtefactError(path, f"has schema {found}, expected {schema}")
     if ver is None or ver > want_ver:
         raise ArtefactError(path, f"has schema {found}, newer than this breastplan reads ({schema})")
-    if ver < want_ver:
-        raise ArtefactError(path, f"has schema {found}, an older schema than this breastplan reads ({schema}); "
-                                  "make it again from its inputs")
     art = Artefact({k: v for k, v in raw.items() if k not in RESERVED})
     art.schema, art.units = found, str(raw.get("units", ""))
     art.frame, art.version = str(raw.get("frame", "")), str(raw.get("version", ""))

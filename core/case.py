@@ -321,6 +321,9 @@ class Case:
     def _load_set(self, npz: str, schema: str, spec: dict, siblings: tuple[str, ...]):
         self._recover()
         art = load_npz(self.path(npz), schema, spec)
+        if art.schema != schema:             # a case's sets have one layout each: an older one is not read
+            raise ArtefactError(self.path(npz), f"has schema {art.schema}, an older schema than this breastplan "
+                                                f"reads ({schema}); run the stage again")
         self._check_set(npz, art.meta, siblings)
         return art
 
