@@ -118,10 +118,7 @@ def top_shape_inverse(points, s0: float, s1: float, t0: float, t1: float, *,
     def forward(z):
         return z * beta(prim.latitude_at(z) * (2 / np.pi), s0, s1, t0, t1)
 
-    z = prim.a5 * np.sin(np.linspace(0.0, np.pi / 2, TABLE_SIZE)) ** prim.eps1
-    image = forward(z)
-    falling = np.flatnonzero(np.diff(image) <= 0)
-    top = falling[0] if len(falling) else TABLE_SIZE - 1      # the first maximum of the map
+    z, image, top = top_shape_table(prim.a5, prim.eps1, s0, s1, t0, t1)
     p = _copy(points)
     sel = (p[..., 1] > 0) & (p[..., 2] > 0) & (fast | (p[..., 2] < image[top]))   # fast: clip to the top
     h = p[..., 2][sel]
@@ -131,6 +128,33 @@ def top_shape_inverse(points, s0: float, s1: float, t0: float, t1: float, *,
         solved[fold] = np.interp(h[fold], image[top:][::-1], z[top:][::-1])
     p[..., 2][sel] = solved
     return p
+
+
+_TABLE_SINES = np.sin(np.linspace(0.0, np.pi / 2, TABLE_SIZE))
+"""sin u at the TABLE_SIZE latitudes of top-shape's table, u uniform on [0, π/2]."""
+_TABLE_LATITUDES: dict = {}
+"""(a5, eps1) ↦ (table heights z, their latitudes w = 2u/π): a fit's table changes with s0…t1 far more
+often than with the primitive (each column of its finite-difference Jacobian steps one of them)."""
+
+
+def top_shape_table(a5, eps1, s0, s1, t0, t1) -> tuple[np.ndarray, np.ndarray, int]:
+    """Top-shape's map z ↦ z·β(w(z)) on the upper half, tabulated (`top_shape_inverse`): the heights
+    z = a5·sin(u)^eps1 at TABLE_SIZE latitudes u uniform on [0, π/2], their images, and the index of
+    the map's first maximum (the table's last node if it rises throughout)."""
+    key = (float(a5), float(eps1))
+    cached = _TABLE_LATITUDES.get(key)
+    if cached is None:
+        z = a5 * _TABLE_SINES ** eps1
+        w = np.arcsin(np.clip(z / a5, 0.0, 1.0) ** (1.0 / eps1)) * (2 / np.pi)   # Primitive.latitude_at(z)·2/π
+        z.flags.writeable = w.flags.writeable = False             # shared by every table of (a5, eps1)
+        if len(_TABLE_LATITUDES) >= 64:
+            _TABLE_LATITUDES.clear()
+        _TABLE_LATITUDES[key] = cached = (z, w)
+    z, w = cached
+    image = z * beta(w, s0, s1, t0, t1)
+    falling = np.flatnonzero(np.diff(image) <= 0)
+    top = int(falling[0]) if len(falling) else TABLE_SIZE - 1      # the first maximum of the map
+    return z, image, top
 
 
 # --- flatten-side: x scaled by γ(|x|/a2), lateral half ---------------------------------

@@ -76,8 +76,9 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
     faces32 = np.ascontiguousarray(faces, dtype=np.uint32)
     norm = np.maximum(np.linalg.norm(sub, axis=1), 1e-9)
     P, current, damping = rest.copy(), vertices.copy(), DAMPING[1]
-    match = _match(current, faces32, sub, B)
-    residual, it, stalled = np.mean(match[3] / norm), 0, False
+    hit = _closest(current, faces32, sub, detail=True)    # the current surface's closest points
+    match = products = None                                # their basis rows and normals, the normal matrix's
+    residual, it, stalled = np.mean(hit[1] / norm), 0, False   # products: made when a step needs them
     history = [residual]                                   # the residual after each iteration
     target = STOP_RESIDUAL                                 # on the subset; tightened if the whole cloud misses it
     data_norm = np.maximum(np.linalg.norm(data, axis=1), 1e-9)
@@ -85,20 +86,24 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
     while True:
         while residual >= target and not stalled and it < max_iterations:
             it += 1
-            step = P + _step(match, sub, damping, LL, P - rest, K)
+            if match is None:
+                match = _matched(current, faces32, B, *hit)
+            delta, products = _step(match, sub, damping, LL, P - rest, K, products)
+            step = P + delta
             trial = B @ step.reshape(3, K).T
-            trial_match = _match(trial, faces32, sub, B)
-            trial_residual = np.mean(trial_match[3] / norm)
+            trial_hit = _closest(trial, faces32, sub, detail=True)
+            trial_residual = np.mean(trial_hit[1] / norm)
             if trial_residual < residual:
                 stalled = trial_residual > (1 - STALL) * residual and damping <= DAMPING[0]
-                P, current, match, residual = step, trial, trial_match, trial_residual
+                P, current, hit, residual = step, trial, trial_hit, trial_residual
+                match = products = None
                 damping = max(damping / 2, DAMPING[0])
-            else:
+            else:                                          # undone: the next step reuses this match's products
                 stalled = damping >= DAMPING[2]
                 damping = min(damping * 4, DAMPING[2])
             history.append(residual)
             stalled = stalled or (it >= CREEP[0] and residual > (1 - CREEP[1]) * history[it - CREEP[0]])
-        dist = _closest(current, faces32, data)[1]
+        dist = hit[1] if sub is data else _closest(current, faces32, data)[1]
         final = float(np.mean(dist / data_norm))
         if final < STOP_RESIDUAL or residual >= target or stalled or it >= max_iterations:
             break
@@ -108,8 +113,9 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
     return FFDFit(lattice, current, final, dist, it, time.perf_counter() - start, converged)
 
 
-def _step(match, data, damping, LL, offset, K):
-    """Gauss–Newton step ΔP (3K,) for the matched rows, normals and closest points.
+def _step(match, data, damping, LL, offset, K, products=None):
+    """Gauss–Newton step ΔP (3K,) for the matched rows, normals and closest points, and the products
+    (AᵀA, RᵀR) it used, which a step from the same match (after an undone one) takes again.
 
     Each point weighs its offset by W = (1 − d²)·nnᵀ + d²·I (d the damping), so the normal
     matrix is (1 − d²)·AᵀA + d²·I₃⊗RᵀR with A = [n_x R, n_y R, n_z R]. Its products run in
@@ -118,19 +124,35 @@ def _step(match, data, damping, LL, offset, K):
     rows, normals, points, _ = match
     d2 = damping**2
     delta = data - points
-    A = (normals[:, :, None] * rows[:, None, :]).reshape(len(rows), -1).astype(np.float32)
-    R = rows.astype(np.float32)
-    M = (1 - d2) * (A.T @ A).astype(float) + np.kron(np.eye(3), d2 * (R.T @ R).astype(float))
+    if products is None:
+        A = np.empty((len(rows), 3, rows.shape[1]), np.float32)           # n_c·R, rounded once to float32
+        np.multiply(normals[:, :, None], rows[:, None, :], out=A, casting="same_kind")
+        A = A.reshape(len(rows), -1)
+        R = rows.astype(np.float32)
+        products = ((A.T @ A).astype(float), (R.T @ R).astype(float))
+    AtA, RtR = products
+    M = (1 - d2) * AtA
+    damped = d2 * RtR
+    for c in range(3):                                     # + I₃⊗(d²·RᵀR)
+        M[c * K:(c + 1) * K, c * K:(c + 1) * K] += damped
+    M += LL
     g = (1 - d2) * normals * np.einsum("nc,nc->n", normals, delta)[:, None] + d2 * delta
     rhs = (rows.T @ g).T.reshape(-1) - LL @ offset
-    return np.linalg.solve(M + LL, rhs)
+    return np.linalg.solve(M, rhs), products
 
 
 def _match(vertices, faces, data, B):
     """Closest points of data on the mesh: their basis rows, unit normals, points and distances."""
-    tri, dist, points, bary = _closest(vertices, faces, data, detail=True)
+    return _matched(vertices, faces, B, *_closest(vertices, faces, data, detail=True))
+
+
+def _matched(vertices, faces, B, tri, dist, points, bary):
+    """`_match` from `_closest`'s answer: the basis row of each closest point is the barycentric
+    mix of its triangle's corner rows (a sparse product: the same sums as gathering the rows)."""
     corners = faces[tri].astype(np.int64)
-    rows = np.einsum("nk,nkc->nc", bary, B[corners])
+    mix = sparse.csr_matrix((bary.ravel(), corners.ravel(), np.arange(0, corners.size + 1, 3)),
+                            shape=(len(tri), len(B)))
+    rows = mix @ B
     vertex_normals = igl.per_vertex_normals(vertices, faces.astype(np.int64),
                                             igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_AREA)   # unit
     normals = np.einsum("nk,nkc->nc", bary, vertex_normals[corners])

@@ -16,7 +16,8 @@ from scipy.optimize import least_squares
 
 from breastplan import BadInputError, Primitive, to_mm, to_model_units
 from breastplan.deform.breast_model import BreastModel
-from breastplan.deform.global_deformations import TABULATED, Deformation, apply_kind, beta
+from breastplan.deform.global_deformations import (REFERENCE_AXIS, TABLE_SIZE, TABULATED, Deformation,
+                                                   apply_kind, beta, top_shape_table)
 from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
 
 from .sampling import seeded_subset
@@ -95,7 +96,7 @@ def _radial(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...] = ()) -> np.nda
     Signed (negative inside), unlike `Primitive.radial_distance`, so that least squares sees
     a smooth residual through the surface.
     """
-    return _radial_batch(x[None], p, kinds)[0]
+    return _radial_rows(x[None], p, kinds)[0]
 
 
 def _radial_jacobian(x: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -143,9 +144,26 @@ def _radial_jacobian(x: np.ndarray, p: np.ndarray) -> np.ndarray:
     return J
 
 
+_ROTATIONS: dict[bytes, np.ndarray] = {}
+"""Rotation vector (its bytes) ↦ its matrix, read-only: a fit asks for the same few many times (its
+residual, the chest prior and every column of its Jacobian but the pose's)."""
+
+
 def _rotation(w: np.ndarray) -> np.ndarray:
     """Rotation matrix of the rotation vector w (Rodrigues; series near θ = 0): scipy's Rotation
-    costs 50 µs a call, a tenth of a deformed fit's residual."""
+    costs 50 µs a call, a tenth of a deformed fit's residual. Read-only (cached)."""
+    w = np.asarray(w, dtype=float)
+    key = w.tobytes()
+    R = _ROTATIONS.get(key)
+    if R is None:
+        if len(_ROTATIONS) >= 256:
+            _ROTATIONS.clear()
+        R = _ROTATIONS[key] = _rodrigues(w)
+        R.flags.writeable = False
+    return R
+
+
+def _rodrigues(w: np.ndarray) -> np.ndarray:
     th2 = float(w @ w)
     if th2 < 1e-8:
         s, c = 1.0 - th2 / 6, 0.5 - th2 / 24
@@ -268,39 +286,142 @@ def _plausible(x: np.ndarray, kinds: tuple[str, ...]) -> bool:
     return bool(np.all((x[13:] >= lo) & (x[13:] <= hi)))
 
 
-def _radial_batch(xs: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
-    """(B, N) `_radial` of the parameter vectors xs (B, len(x)), which share the primitive and the
-    tabulated deformations (see `_undone_batch`)."""
-    a, e1, e2, _, _ = _unpack(xs[0])
-    q = _undone_batch(xs, p, kinds)
-    f = np.maximum(Primitive(*a, e1, e2).inside_outside(q), 1e-12)
-    return np.linalg.norm(q, axis=-1) * (1.0 - f ** (-e1 / 2))
+def _radial_rows(xs: np.ndarray, p: np.ndarray, kinds: tuple[str, ...],
+                 calls: np.ndarray | None = None) -> np.ndarray:
+    """(B, N) `_radial` of each parameter vector of xs (B, len(x)) at the points p (N, 3, mu).
+
+    Each row gets what `_radial` of that row alone gives, to the last bit (the same operations on
+    the same values), but the rows run together: the poses, tables and deformations that rows
+    share are computed once, and the rest as (B, N) arrays. Only flatten-side's table depends on
+    the points it inverts: rows with the same id in `calls` share that table (as rows of one
+    batched evaluation did); by default each row has its own.
+    """
+    q, a, e = _undone_rows(xs, p, kinds, calls)
+    f = np.maximum(_inside_outside_rows(q, a, e), 1e-12)
+    r = np.linalg.norm(q, axis=-1)
+    for b in range(len(r)):                      # a scalar exponent per row: `**` as Primitive's code runs it
+        r[b] *= 1.0 - f[b] ** (-e[b, 0] / 2)
+    return r
+
+
+def _inside_outside_rows(q: np.ndarray, a: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """(B, N) `Primitive.inside_outside` of the points q (B, N, 3), row b with semi-axes a[b] and
+    exponents e[b] (the same operations: numpy takes some scalar exponents, such as 0.5 and 2, by
+    another route than an array of them, so the powers run row by row)."""
+    x, y = q[..., 0], q[..., 1]
+    X = np.abs(x / np.where(x >= 0, a[:, 0, None], a[:, 1, None]))
+    Y = np.abs(y / np.where(y >= 0, a[:, 2, None], a[:, 3, None]))
+    Z = np.abs(q[..., 2] / a[:, 4, None])
+    for b in range(len(q)):
+        e1, e2 = e[b]
+        s = 2 / e2
+        X[b] = (X[b] ** s + Y[b] ** s) ** (e2 / e1) + Z[b] ** (2 / e1)
+    return X
+
+
+def _height(points: np.ndarray, a: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """`Primitive.height` of points (n, 3) with y > 0, for semi-axes a (5,) and exponents e (2,)."""
+    x = points[:, 0]
+    e1, e2 = e
+    s = 2 / e2
+    flat = (np.abs(x / np.where(x >= 0, a[0], a[1])) ** s + np.abs(points[:, 1] / a[2]) ** s) ** (e2 / e1)
+    return a[4] * np.maximum(1.0 - flat, 0.0) ** (e1 / 2)     # (F at z = 0 is flat + 0.0: the same value)
+
+
+def _folded(q: np.ndarray, sel: np.ndarray, a: np.ndarray, e: np.ndarray, fold: float) -> np.ndarray:
+    """(R, N) `_height(q[k], a[k], e) > fold` of the points sel (y > 0) of each row k of q (R, N, 3), False
+    elsewhere; e (and a5) the same for every row. The heights are computed only where they may pass: the
+    surface rises above `fold` only where F at z = 0 is below c = 1 − (fold/a5)^(2/eps1), and there
+    F ≥ max(|x|/a1|a2, y/a3)^(2/eps1), so a point whose larger ratio exceeds c^(eps1/2) — here by a
+    margin far above rounding — stays below."""
+    e1 = e[0]
+    c = max(1.0 - (fold / a[0, 4]) ** (2 / e1), 0.0)
+    bound = c ** (e1 / 2) * (1 + 1e-4) + 1e-12
+    x = q[..., 0]
+    near = sel & (np.abs(x) < bound * np.where(x >= 0, a[:, 0, None], a[:, 1, None])) \
+        & (np.abs(q[..., 1]) < bound * a[:, 2, None])
+    out = np.zeros(sel.shape, dtype=bool)
+    for k in np.flatnonzero(near.any(axis=1)):
+        out[k, near[k]] = _height(q[k][near[k]], a[k], e) > fold
+    return out
 
 
 def _undone(x: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
     """Points p (mu, data frame) taken back through the pose and deformations of x to the primitive."""
-    return _undone_batch(x[None], p, kinds)[0]
+    return _undone_rows(x[None], p, kinds)[0][0]
 
 
-def _undone_batch(xs: np.ndarray, p: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
-    """(B, N, 3) `_undone` of the parameter vectors xs (B, len(x)), which differ only in the pose and in
-    the deformations that need no table (docs/model.md §3): each tabulated inverse, most of a
-    residual's cost, runs once over all B·N points; zero-parameter kinds are skipped, as by
-    `Deformation.inverse`."""
-    a, e1, e2, _, _ = _unpack(xs[0])
-    primitive = Primitive(*a, e1, e2)
-    q = np.stack([(p - x[10:13]) @ _rotation(x[7:10]) for x in xs])
-    deformations = [_deformation(x, kinds) for x in xs]
-    for kind in reversed(kinds):                               # the inverses, in reverse §3 order
-        if kind in TABULATED:
-            params = deformations[0].params(kind)
-            if any(params):
-                q = apply_kind(q.reshape(-1, 3), kind, params, primitive, inverse=True, fast=True).reshape(q.shape)
+def _undone_rows(xs: np.ndarray, p: np.ndarray, kinds: tuple[str, ...], calls: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(B, N, 3) `_undone` of each parameter vector of xs (B, len(x)) (see `_radial_rows`), with each
+    row's semi-axes (B, 5) and exponents (B, 2). The inverses run in reverse docs/model.md §3 order;
+    a kind whose parameters are all zero is the identity and is skipped, as by `Deformation.inverse`."""
+    B = len(xs)
+    a = np.empty((B, 5))
+    for b in range(B):
+        a[b] = np.exp(xs[b, :5])
+    e = xs[:, 5:7]
+    poses: dict[bytes, np.ndarray] = {}
+    q = np.empty((B, len(p), 3))
+    for b in range(B):
+        key = xs[b, 7:13].tobytes()
+        if key not in poses:
+            poses[key] = (p - xs[b, 10:13]) @ _rotation(xs[b, 7:10])
+        q[b] = poses[key]
+    offsets, i = {}, 13
+    for kind in kinds:
+        offsets[kind] = i
+        i += len(KIND_PARAMS[kind])
+    for kind in reversed(kinds):
+        params = xs[:, offsets[kind]: offsets[kind] + len(KIND_PARAMS[kind])]
+        active = np.flatnonzero(params.any(axis=1))
+        if not len(active):
             continue
-        for k, d in enumerate(deformations):
-            if any(d.params(kind)):
-                q[k] = apply_kind(q[k], kind, d.params(kind), primitive, inverse=True)
-    return q
+        every = len(active) == B
+        sub = q if every else q[active]
+        if kind in ("ptosis", "turn"):                 # shears by z (docs/model.md §3), undone
+            k0, k1 = -params[active, 0, None], -params[active, 1, None]
+            zeta = sub[..., 2] / REFERENCE_AXIS
+            sub[..., 1 if kind == "ptosis" else 0] -= zeta * (k0 + k1 * zeta)
+        elif kind == "turn-top":
+            g0, g1 = -params[active, 0, None], -params[active, 1, None]
+            w = sub[..., 1] / a[active, 2, None]
+            sub[..., 0] -= np.where(w > 0, w * (g0 + g1 * w), 0.0)
+        elif kind == "top-shape":
+            _top_shape_undone(sub, active, params, a, e)
+        else:                                          # flatten-side: its table spans its call's points
+            ids = np.arange(B) if calls is None else np.asarray(calls)
+            for call in dict.fromkeys(ids[active].tolist()):
+                rows = np.flatnonzero(ids[active] == call)
+                first = active[rows[0]]
+                primitive = Primitive(*a[first], *e[first])
+                sub[rows] = apply_kind(sub[rows].reshape(-1, 3), kind, params[first], primitive, inverse=True,
+                                       fast=True).reshape(len(rows), -1, 3)
+        if not every:
+            q[active] = sub
+    return q, a, e
+
+
+def _top_shape_undone(q: np.ndarray, rows: np.ndarray, params: np.ndarray, a: np.ndarray, e: np.ndarray) -> None:
+    """`top_shape_inverse(..., fast=True)` of each q[k] (in place), the row rows[k] of the parameters,
+    semi-axes a and exponents e: one table for the rows that share a5, eps1 and (s0, s1, t0, t1)."""
+    groups: dict[tuple, list[int]] = {}
+    for k, b in enumerate(rows):
+        groups.setdefault((a[b, 4], e[b, 0], *params[b].tolist()), []).append(k)
+    for members in groups.values():
+        b = rows[members[0]]
+        z, image, top = top_shape_table(a[b, 4], e[b, 0], *params[b].tolist())
+        sub = q[members] if len(members) < len(q) else q
+        height = sub[..., 2]
+        sel = (sub[..., 1] > 0) & (height > 0)
+        h = height[sel]
+        solved = np.interp(h, image[:top + 1], z[:top + 1])
+        if top < TABLE_SIZE - 1:                       # past the fold: the folding branch (surface points)
+            fold = _folded(sub, sel, a[rows[members]], e[b], z[top])[sel]
+            solved[fold] = np.interp(h[fold], image[top:][::-1], z[top:][::-1])
+        height[sel] = solved
+        if sub is not q:
+            q[members] = sub
 
 
 @dataclass(frozen=True)
@@ -325,22 +446,27 @@ class _Solver:
     def differences(self, x: np.ndarray, f0: np.ndarray, p: np.ndarray, kinds: tuple[str, ...],
                     bounds: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
         """Forward-difference Jacobian at x (f0 = residuals there), stepped as scipy's '2-point' steps
-        (√eps·max(1, |x|), away from a bound it would cross). The columns that leave the primitive and
-        the tabulated deformations alone — the pose's and the other deformations' — run as one batch."""
+        (√eps·max(1, |x|), away from a bound it would cross), its columns bit-identical to stepping
+        each parameter alone. All columns run as one `_radial_rows`, which computes what the stepped
+        vectors share once: the pose of every column but the pose's, top-shape's table of every
+        column but a5's, eps1's and top-shape's own."""
         lower, upper = bounds
         h = np.sqrt(np.finfo(float).eps) * np.where(x >= 0, 1.0, -1.0) * np.maximum(1.0, np.abs(x))
         h = np.where((x + h > upper) | (x + h < lower), -h, h)
         h = (x + h) - x
         stepped = x + np.diag(h)                                # row j: x with its j-th value stepped
-        batched = _batched_columns(kinds)
-        J = np.empty((len(f0), len(x)))
-        for j in np.setdiff1d(np.arange(len(x)), batched):
-            J[:, j] = self.residuals(stepped[j], p, kinds) - f0
-        r = _radial_batch(stepped[batched], p, kinds)
+        calls = np.arange(len(x))
+        calls[_batched_columns(kinds)] = -1                     # flatten-side: one table for these, as before
+        r = _radial_rows(stepped, p, kinds, calls)
         if self.chest_prior:
-            r = np.hstack([r, self.weight(p) * np.stack([_chest_prior(s) for s in stepped[batched]])])
-        J[:, batched] = (r - f0).T
-        return J / h
+            weight, priors = self.weight(p), {}
+            for s in stepped:
+                key = s[7:13].tobytes()
+                if key not in priors:
+                    priors[key] = weight * _chest_prior(s)
+            r = np.hstack([r, np.stack([priors[s[7:13].tobytes()] for s in stepped])])
+        r -= f0
+        return np.ascontiguousarray(r.T) / h
 
     def __call__(self, p: np.ndarray, kinds: tuple[str, ...], x0: np.ndarray, max_nfev: int = 200,
                  max_turn: float = MAX_TURN_RAD, plausible: bool = False):
