@@ -67,17 +67,21 @@ def learnt_position(model: ModelFile, points_mm, kind: str, degree: float) -> fl
 def deform_by_degree(points_mm, kind: str, degree: float, *, condition: str | None = None,
                      method: str = "exact", primitive: Primitive | None = None,
                      models: Path = MODELS) -> ByDegree:
-    """Deform a breast (mm, breast frame) to `degree` ∈ [1, 8] of `kind` along `condition`."""
-    cond = pick_condition(kind, condition)
+    """Deform a breast (mm, breast frame) to `degree` ∈ [1, 8] of `kind` along `condition`.
+
+    `method`: exact, learnt (the condition's model in `models`), or the path of a `breastplan.model/1`
+    file (`.npz`) trained for one condition of `kind`, whose condition is then the default."""
+    if method not in METHODS and not str(method).endswith(".npz"):
+        raise ValueError(f"unknown method '{method}'; choose one of {', '.join(METHODS)} or a model file")
+    given = None if method in METHODS else load_model(Path(method))
+    cond = pick_condition(kind, condition or (given.meta.get("condition") if given else None))
     if not 1.0 <= degree <= DD:
         raise ValueError(f"the degree must lie in [1, {DD}], got {degree:g}")
     p_mu = to_model_units(np.asarray(points_mm, dtype=float))
     if method == "exact":
         t = solve_degree(p_mu, cond, DD, degree, primitive).t
-    elif method == "learnt":
-        t = learnt_position(load_model(models / f"{slug(cond)}.npz"), points_mm, kind, degree)
     else:
-        raise ValueError(f"unknown method '{method}'; choose one of {', '.join(METHODS)}")
+        t = learnt_position(given or load_model(models / f"{slug(cond)}.npz"), points_mm, kind, degree)
     params = cond.at(t)
     moved = apply_kind(p_mu, kind, params, primitive)
     reached = continuous_degree(condition_extent(cond, p_mu, moved, primitive), reference_extents(cond, DD))

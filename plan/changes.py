@@ -8,16 +8,12 @@ change together, in docs/model.md §3 order.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from breastplan import Primitive, to_model_units
-from breastplan.deform.by_degree import deform_by_degree, learnt_position, pick_condition
-from breastplan.deform.degree import condition_extent, continuous_degree, reference_extents
-from breastplan.deform.global_deformations import Deformation, apply_kind
-from breastplan.deform.names import DD
-from breastplan.model_file import load_model
+from breastplan import Primitive
+from breastplan.deform.by_degree import deform_by_degree
+from breastplan.deform.global_deformations import Deformation
 
 
 @dataclass(frozen=True)
@@ -39,20 +35,10 @@ def solve_change(local_mm: np.ndarray, kind: str, degree: float, primitive: Prim
     """The change (kind, degree) of the breast `local_mm` (fitted surface, mm, primitive frame).
 
     `method`: exact, learnt, or the path of a `breastplan.model/1` file of one of kind's conditions."""
-    if method in ("exact", "learnt"):
-        r = deform_by_degree(local_mm, kind, degree, method=method, primitive=primitive)
-        cond, t, params, reached = r.condition, r.t, r.params, r.degree_reached
-    else:
-        model = load_model(Path(method))
-        cond = pick_condition(kind, model.meta.get("condition"))
-        t = learnt_position(model, local_mm, kind, degree)
-        params = cond.at(t)
-        p_mu = to_model_units(local_mm)
-        moved = apply_kind(p_mu, kind, params, primitive)
-        reached = float(continuous_degree(condition_extent(cond, p_mu, moved, primitive), reference_extents(cond, DD)))
-    details = {"kind": kind, "degree": degree, "condition": cond.name, "t": float(t),
-               "params": [float(v) for v in params], "degree_reached": float(reached)}
-    return Change(change_name(kind, degree), ((kind, degree),), Deformation.single(kind, params), (details,))
+    r = deform_by_degree(local_mm, kind, degree, method=method, primitive=primitive)
+    details = {"kind": kind, "degree": degree, "condition": r.condition.name, "t": float(r.t),
+               "params": [float(v) for v in r.params], "degree_reached": r.degree_reached}
+    return Change(change_name(kind, degree), ((kind, degree),), Deformation.single(kind, r.params), (details,))
 
 
 def combine(changes: list[Change]) -> Change:

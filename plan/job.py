@@ -15,6 +15,7 @@ import os
 import secrets
 import shutil
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from importlib import resources
 from pathlib import Path
 from typing import Callable, Iterator
@@ -74,6 +75,11 @@ class SidePlan:
 
     def planned(self, change: Change) -> PlannedChange:
         return PlannedChange(change.deformation, self.primitive, self.to_primitive)
+
+    @cached_property
+    def surface_input(self) -> np.ndarray:
+        """The fitted surface's vertices (fit.ply) in the input frame, mm."""
+        return transform_points(self.to_input, self.fit.vertices)
 
     def local_surface(self) -> np.ndarray:
         """The fitted surface in the anatomical primitive frame, mm: what degrees are measured on."""
@@ -139,11 +145,10 @@ def _sides(source: Path, folder: Path, options: PlanOptions, clock: Clock, progr
     sides = {}
     for side, case in cases.items():
         fit, fit_reused = _fit(case, scans[side], clock, progress, side)
+        unsolved = SidePlan(side, case, scans[side], fit, (), tuple(reused[side] + fit_reused))
         with clock(f"changes {side}"):
             progress(f"changes {side}")
-            partial = SidePlan(side, case, scans[side], fit, ())
-            changes = solve_changes(partial, options)
-        sides[side] = SidePlan(side, case, scans[side], fit, changes, tuple(reused[side] + fit_reused))
+            sides[side] = replace(unsolved, changes=solve_changes(unsolved, options))
     return sides
 
 

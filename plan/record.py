@@ -67,15 +67,14 @@ def _save_change(sp: SidePlan, change, folder: Path) -> dict:
     """Write one change of one side (model and scan points in the breast frame); its plan.json entry."""
     planned = sp.planned(change)
     to_breast = sp.scan.camera_to_breast
-    model = transform_points(to_breast, planned.model(transform_points(sp.to_input, sp.fit.vertices)))
+    model = transform_points(to_breast, planned.model(sp.surface_input))
     shift = planned.displacement(transform_points(sp.to_input, sp.scan.points)) @ to_breast[:3, :3].T
     details = [dict(d) for d in change.details]
     record = {"name": change.name, "requested": [list(r) for r in change.requested], "details": details,
-              "displacement_mm": shift, "volume_cc": None}
+              "displacement_mm": shift}
     fit_npz = sp.case.path(Case.FIT_NPZ)
     provenance = Provenance({Case.FIT_NPZ: sha256(fit_npz)}, {"requested": record["requested"]})
-    paths = sp.case.save_change(change.name, (model, sp.fit.faces), sp.scan.points + shift,
-                                {k: v for k, v in record.items() if k != "volume_cc"}, provenance)
+    paths = sp.case.save_change(change.name, (model, sp.fit.faces), sp.scan.points + shift, record, provenance)
     moved = np.linalg.norm(shift, axis=1)
     return {"name": change.name, "requested": record["requested"], "details": details,
             "scan_displacement_mm": {"mean": round(float(moved.mean()), 3), "max": round(float(moved.max()), 3)},
@@ -90,7 +89,7 @@ def plan_measures(plan: Plan) -> dict:
                                first.scan.view_from_camera)
     before, after = {}, {}
     for side, sp in plan.sides.items():
-        verts, nipple = transform_points(sp.to_input, sp.fit.vertices), sp.scan.nipple_camera_mm
+        verts, nipple = sp.surface_input, sp.scan.nipple_camera_mm
         planned = sp.planned(sp.changes[-1])
         before[side] = breast_measures(landmarks, nipple, verts, sp.fit.faces)
         after[side] = breast_measures(landmarks, planned.model(nipple[None])[0], planned.model(verts), sp.fit.faces)
@@ -102,7 +101,7 @@ def plan_measures(plan: Plan) -> dict:
 
 
 def _finite(x):
-    """Rounded plain values for JSON: floats to 0.01 (None where not finite), arrays to lists."""
+    """Plain values for JSON: floats to 4 decimals below 10, else 2 (None where not finite); arrays to lists."""
     if isinstance(x, dict):
         return {k: _finite(v) for k, v in x.items()}
     if isinstance(x, np.ndarray):

@@ -15,11 +15,10 @@ import base64
 import html
 import json
 from importlib import metadata
-from pathlib import Path
 
 import numpy as np
 
-from .job import Plan, input_record
+from .job import Plan
 from .views import Views, build_views, quantise
 
 SKIN = "rgb(236,188,160)"
@@ -53,7 +52,6 @@ def page_data(plan: Plan, views: Views) -> dict:
             "scans": {s: _points(views.scans[s]) for s in sides},
             "meshes": {s: {**_points(views.meshes[s][0]), "faces": _b64(views.meshes[s][1], "<i4"),
                            "m": int(len(views.meshes[s][1]))} for s in sides},
-            "nipples": {s: [float(v) for v in views.nipples[s]] for s in sides},
             "states": states, "sliders": sliders, "cmax": max([1.0] + [float(np.linalg.norm(st.torso - patch, axis=1).max(
                 initial=0.0)) for st in views.states]), "combined": len(plan.options.changes) > 1, "skin": SKIN}
 
@@ -127,11 +125,6 @@ def tables(record: dict) -> str:
             ["options", json.dumps(record["options"])]] + [[k, v] for k, v in record["versions"].items()]
     parts.append("<h2>Inputs, options and versions</h2>" + _table(["", ""], rows, "about"))
     return "\n".join(parts)
-
-
-def write_page(path: Path, plan: Plan, record: dict) -> Path:
-    path.write_text(render(plan, record), encoding="utf-8")
-    return path
 
 
 _TEMPLATE = """<!DOCTYPE html>

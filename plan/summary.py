@@ -24,7 +24,7 @@ def summary_png(plan: Plan, record: dict, path: Path) -> Path:
     for row, side in zip(axes, sides):
         sp = plan.sides[side]
         show = VIEW_TO_DISPLAY @ sp.scan.view_from_camera
-        verts = transform_points(sp.to_input, sp.fit.vertices)
+        verts = sp.surface_input
         before = transform_points(show, verts)
         after = transform_points(show, sp.planned(sp.changes[-1]).model(verts))
         for ax, (u, v, title) in zip(row[:2], ((0, 2, "front"), (1, 2, "side"))):

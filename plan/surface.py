@@ -54,14 +54,16 @@ class PlannedChange:
 
     def weights(self, points_mm) -> np.ndarray:
         """(N,) blending weight of input-frame points: 1 on the footprint, 0 past the band."""
-        local = transform_points(self.to_primitive, np.asarray(points_mm, dtype=float))
-        return smoothstep((self.footprint_radius(local) - 1.0) / self.band)
+        return self._weights(transform_points(self.to_primitive, np.asarray(points_mm, dtype=float)))
+
+    def _weights(self, local_mm: np.ndarray) -> np.ndarray:
+        return smoothstep((self.footprint_radius(local_mm) - 1.0) / self.band)
 
     def displacement(self, points_mm) -> np.ndarray:
         """(N, 3) blended displacement of input-frame points, mm, input frame."""
         pts = np.asarray(points_mm, dtype=float).reshape(-1, 3)
         local = transform_points(self.to_primitive, pts)
-        w = smoothstep((self.footprint_radius(local) - 1.0) / self.band)
+        w = self._weights(local)
         out = np.zeros_like(pts)
         moving = w > 0
         if moving.any():
@@ -69,6 +71,11 @@ class PlannedChange:
             moved = to_mm(self._seamless(to_model_units(near)))
             out[moving] = (moved - near) * w[moving, None] @ self.to_primitive[:3, :3]   # back by Rᵀ
         return out
+
+    def __call__(self, points_mm) -> np.ndarray:
+        """Input-frame points (mm) with the change applied, blended into the chest."""
+        pts = np.asarray(points_mm, dtype=float)
+        return pts + self.displacement(pts).reshape(pts.shape)
 
     def _seamless(self, p_mu: np.ndarray) -> np.ndarray:
         """The deformation of primitive-frame points (model units), top-shape faded in above y = 0."""
@@ -78,11 +85,6 @@ class PlannedChange:
         lifted = top.apply(p_mu, self.primitive)
         fade = 1.0 - smoothstep(p_mu[:, 1] / (SEAM * self.primitive.a3))
         return rest.apply(p_mu + (lifted - p_mu) * fade[:, None], self.primitive)
-
-    def __call__(self, points_mm) -> np.ndarray:
-        """Input-frame points (mm) with the change applied, blended into the chest."""
-        pts = np.asarray(points_mm, dtype=float)
-        return pts + self.displacement(pts).reshape(pts.shape)
 
     def model(self, vertices_mm) -> np.ndarray:
         """Input-frame vertices of the fitted model moved by the full change (no blending)."""

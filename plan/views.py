@@ -41,7 +41,6 @@ class Views:
     patch: np.ndarray                   # (P, 3) torso points near the breasts (they move)
     scans: dict[str, np.ndarray]        # side → (N, 3) scan points
     meshes: dict[str, tuple[np.ndarray, np.ndarray]]   # side → fitted (V, 3), (F, 3)
-    nipples: dict[str, np.ndarray]      # side → (3,)
     states: list[State]
 
 
@@ -62,7 +61,7 @@ def build_views(plan: Plan) -> Views:
         near |= side.planned(side.changes[0]).weights(torso_in) > 0
     patch_in = torso_in[near]
     show = lambda p: transform_points(to_display, p)  # noqa: E731
-    meshes = {s: (show(transform_points(sp.to_input, sp.fit.vertices)), sp.fit.faces) for s, sp in plan.sides.items()}
+    meshes = {s: (show(sp.surface_input), sp.fit.faces) for s, sp in plan.sides.items()}
     states = []
     for kind, degree in plan.options.changes:
         for d in slider_degrees(degree):
@@ -73,8 +72,7 @@ def build_views(plan: Plan) -> Views:
                              "combined", None, None))
     return Views(torso=show(torso_in[~near]), patch=show(patch_in),
                  scans={s: show(transform_points(sp.to_input, sp.scan.points)) for s, sp in plan.sides.items()},
-                 meshes=meshes, nipples={s: show(sp.scan.nipple_camera_mm) for s, sp in plan.sides.items()},
-                 states=states)
+                 meshes=meshes, states=states)
 
 
 def _single(side: SidePlan, plan: Plan, kind: str, degree: float) -> Change:
@@ -92,7 +90,7 @@ def _state(plan: Plan, changes: dict[str, Change], patch_in: np.ndarray, show, k
     for s, sp in plan.sides.items():
         planned = sp.planned(changes[s])
         moved += planned.displacement(patch_in)
-        mesh[s] = show(planned.model(transform_points(sp.to_input, sp.fit.vertices)))
+        mesh[s] = show(planned.model(sp.surface_input))
     return State(key, kind, degree, mesh, show(moved))
 
 
