@@ -209,6 +209,6 @@ def _make_folders(folder: Path) -> list[Path]:
 
 
 def _remove_folders(folders: list[Path]) -> None:
-    for folder in folders:                           # deepest first; a folder not empty stays
+    for folder in sorted(folders, key=lambda f: len(f.parts), reverse=True):   # deepest first; a folder not empty stays
         with contextlib.suppress(OSError):
             folder.rmdir()

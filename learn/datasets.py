@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from breastplan import ArtefactError, load_npz, save_npz, to_mm, to_model_units
+from breastplan import ArtefactError, load_npz, save_npz, to_mm
 from breastplan.deform.conditions import Condition, find_condition
 from breastplan.deform.degree import (condition_extent, continuous_degree, discrete_degree,
                                       reference_extents)
