@@ -32,6 +32,8 @@ def deform(
                                             f"(defaults: {', '.join(DEFAULT_CONDITION.values())})."),
     method: str = typer.Option("exact", "--method", help="How --degree finds the parameters: exact (the inverse "
                                "solver) or learnt (the shipped regression models)."),
+    model: Optional[Path] = typer.Option(None, "--model", help="A statistical model (train-statistical's .npz) that "
+                                         "deforms by --degree instead: it moves the points by its learnt FFD field."),
     primitive: Optional[str] = typer.Option(None, "--primitive", help="a1=..,a2=..,a3=..,a4=..,a5=..[,eps1=..,eps2=..] "
                                             "in model units (1 mu = 6 mm); needed by top-shape, flatten-side, turn-top "
                                             "when INPUT carries none; overrides the one it carries."),
@@ -57,6 +59,8 @@ def deform(
         raise usage_error(f"{kind} takes {', '.join(KIND_PARAMS[kind])}, not {', '.join(unknown)}", "--param")
     if degree is not None and method not in METHODS:
         raise usage_error(f"'{method}' is not a method; choose one of {', '.join(METHODS)}", "--method")
+    if model is not None and degree is None:
+        raise usage_error("--model deforms by degree: give --degree too", "--model")
     geometry, carried, pose = _breast(input)
     problem = breast_units_problem(geometry.points)
     if problem:
@@ -76,13 +80,21 @@ def deform(
     else:
         from breastplan.deform.by_degree import deform_by_degree
 
+        if model is not None:                                   # a statistical model works in the breast frame
+            from breastplan import require_file
+
+            method = str(require_file(model, "statistical model file"))
         try:
-            result = deform_by_degree(local, kind, degree, condition=condition, method=method, primitive=prim)
+            result = deform_by_degree(local if model is None else geometry.points, kind, degree, condition=condition,
+                                      method=method, primitive=prim)
         except ValueError as exc:
             raise usage_error(str(exc), "--degree") from None
         moved, params = result.points_mm, dict(zip(KIND_PARAMS[kind], result.params))
+        if model is not None:
+            moved = transform_points(np.linalg.inv(pose), moved)
         extra = {"condition": result.condition.name, "method": method, "degree": degree,
-                 "degree_reached": round(result.degree_reached, 4), "t": round(result.t, 6),
+                 "degree_reached": round(result.degree_reached, 4),
+                 "t": round(result.t, 6) if np.isfinite(result.t) else None,
                  "params": {k: round(float(v), 6) for k, v in params.items()}}
     with np.errstate(over="ignore", invalid="ignore"):
         shift = np.linalg.norm(moved - local, axis=1)          # the pose is rigid: the same in the breast frame

@@ -14,14 +14,19 @@ from .output import progress, report, usage_error
 
 @command()
 def evaluate(
-    study: str = typer.Option(..., "--study", help=f"{' | '.join(STUDIES)} | all."),
+    study: str = typer.Option(..., "--study", help=f"{' | '.join(STUDIES)} | all | statistical (FFD models "
+                                                   "learnt from before/after pairs)."),
     dd: int = typer.Option(8, "--dd", help="Number of degrees of deformation: 4 or 8 (thesis)."),
     quick: bool = typer.Option(False, "--quick", help="Small grid, FS5 only, 4 breasts per shape and split, 2500 points (CI)."),
     out: Path = typer.Option(..., "--out", help="Folder for report.md, report.json and figures/."),
+    cache: Path = typer.Option(None, "--cache", help="Folder of cached FFD fits (statistical study; default: "
+                                                     "$BREASTPLAN_CACHE or ~/.cache/breastplan/ffd)."),
     as_json: bool = JSON,
 ):
-    """Run the thesis study of deformation-parameter regressions; write its report."""
+    """Run the thesis study of deformation-parameter regressions, or of statistical models; write its report."""
     clock = Clock()
+    if study == "statistical":
+        return _statistical(quick, out, cache, as_json, clock)
     names = list(STUDIES) if study == "all" else [study]
     if any(n not in STUDIES for n in names):
         raise usage_error(f"'{study}' is not a study; choose one of {', '.join(STUDIES)} or all", "--study")
@@ -44,3 +49,23 @@ def evaluate(
             for h in written["best"]}
     report({"report": str(out / "report.md"), "rows": len(written["rows"]), "best": best,
             "seconds": clock.seconds}, as_json, f"study {study}")
+
+
+def _statistical(quick: bool, out: Path, cache: Path | None, as_json: bool, clock: Clock) -> None:
+    from threadpoolctl import threadpool_limits
+
+    from breastplan.learn.displacements import FitCache, default_cache
+    from breastplan.learn.statistical_report import write_report
+    from breastplan.learn.statistical_study import StudyPlan, run_study, study_database
+
+    plan = StudyPlan(quick=quick, lattices=(5,) if quick else (5, 6))
+    db = study_database(quick)
+    with progress("statistical study", plan.steps(len(db), len(db) * 8)) as advance, threadpool_limits(1, "blas"):
+        results, seconds = run_study(plan, FitCache(cache or default_cache()), advance)
+    meta = {"study": "statistical", "quick": quick, "fit_seconds": seconds, "seconds": clock.seconds}
+    written = write_report(out, results, meta)
+    best = {f"{h['condition']} {h['control_points']} CP {h['fit']}": {
+        "best": h["best"], "euclidean_mean_pct": round(h["euclidean"], 4), "hausdorff_mean_pct": round(h["hausdorff"], 4),
+        "spike_free_pct": round(h["spike_free_pct"], 1)} for h in written["best"]}
+    report({"report": str(out / "report.md"), "rows": len(written["rows"]), "best": best,
+            "fit_seconds": seconds, "seconds": clock.seconds}, as_json, "statistical study")

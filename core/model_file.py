@@ -1,8 +1,9 @@
 """Trained regressors as `breastplan.model/1` NPZ files, run without pickle or scikit-learn.
 
 A model is a fitted `TransformedTargetRegressor(Pipeline([MinMaxScaler, PolynomialFeatures?,
-R]), transformer=MinMaxScaler)` with R a LinearRegression, an SVR (linear, poly or rbf
-kernel), a MultiOutputRegressor of such SVRs, or an MLPRegressor (docs/artefacts.md).
+R]), transformer=MinMaxScaler)` with R a LinearRegression or Ridge, an SVR (linear, poly or rbf
+kernel), a MultiOutputRegressor of such SVRs, a KernelRidge (rbf kernel) or an MLPRegressor
+(docs/artefacts.md).
 `export_arrays` flattens it into plain arrays; `ModelFile.predict` replays the forward pass
 in numpy in scikit-learn's order of operations, so predictions match the estimator's to the
 last bit or within a few ulps.
@@ -15,6 +16,7 @@ Arrays: `kind` ("linear" | "svr" | "mlp"), `out_ndim` (1: predictions of shape (
 * linear: `lin_coef` (n_outputs, n_terms), `lin_intercept` (n_outputs,);
 * svr: `svr_kernel`, and per output `svr_gamma`, `svr_degree`, `svr_coef0`, `svr_intercept`
   (n_outputs,) with `svr<k>_support` (n_sv, n_terms) and `svr<k>_dual_coef` (n_sv,);
+* kernel: `krr_gamma` (), `krr_support` (n_fit, n_terms), `krr_dual_coef` (n_fit, n_outputs);
 * mlp: `mlp_activation`, and per layer `mlp_w<i>` (n_in, n_out) and `mlp_b<i>` (n_out,).
 
 Caller arrays (e.g. a PCA feature stage) are stored as `extra_<name>`.
@@ -66,12 +68,17 @@ def export_arrays(estimator) -> dict[str, np.ndarray]:
 
 def _regressor_arrays(reg) -> dict:
     """`kind` and the arrays of the pipeline's final regressor."""
-    from sklearn.linear_model import LinearRegression
+    from sklearn.kernel_ridge import KernelRidge
+    from sklearn.linear_model import LinearRegression, Ridge
     from sklearn.multioutput import MultiOutputRegressor
     from sklearn.neural_network import MLPRegressor
     from sklearn.svm import SVR
 
-    if type(reg) is LinearRegression:
+    if type(reg) is KernelRidge and reg.kernel == "rbf":
+        gamma = 1.0 / reg.X_fit_.shape[1] if reg.gamma is None else reg.gamma   # sklearn's default
+        return {"kind": np.str_("kernel"), "krr_gamma": np.float64(gamma), "krr_support": reg.X_fit_,
+                "krr_dual_coef": reg.dual_coef_.reshape(len(reg.X_fit_), -1)}
+    if type(reg) in (LinearRegression, Ridge):
         coef = np.atleast_2d(reg.coef_)
         return {"kind": np.str_("linear"), "lin_coef": coef,
                 "lin_intercept": np.broadcast_to(reg.intercept_, coef.shape[:1])}
@@ -87,8 +94,8 @@ def _regressor_arrays(reg) -> dict:
         for k, s in enumerate(svrs):
             arrays[f"svr{k}_support"], arrays[f"svr{k}_dual_coef"] = s.support_vectors_, s.dual_coef_[0]
         return arrays
-    raise ValueError(f"unsupported regressor {reg!r}: expected LinearRegression, SVR with a "
-                     f"{'/'.join(KERNELS)} kernel, MultiOutputRegressor(SVR) or MLPRegressor")
+    raise ValueError(f"unsupported regressor {reg!r}: expected LinearRegression, Ridge, SVR with a "
+                     f"{'/'.join(KERNELS)} kernel, MultiOutputRegressor(SVR), KernelRidge (rbf) or MLPRegressor")
 
 
 def save_model(path: str | Path, estimator, *, meta: Mapping,
@@ -197,6 +204,18 @@ def _powi(base: np.ndarray, times: int) -> np.ndarray:
     return result
 
 
+def _kernel(a: dict, X: np.ndarray) -> np.ndarray:
+    """KernelRidge's rbf prediction: exp(−γ‖x − s‖²) against the training rows s, times the dual
+    coefficients; the squared distances are summed in scikit-learn's order (−2x·s + ‖x‖² + ‖s‖²)."""
+    S = a["krr_support"]
+    d2 = -2.0 * (X @ S.T)
+    d2 += np.einsum("ij,ij->i", X, X)[:, None]
+    d2 += np.einsum("ij,ij->i", S, S)[None, :]
+    np.maximum(d2, 0, out=d2)
+    d2 *= -float(a["krr_gamma"])
+    return np.exp(d2, out=d2) @ a["krr_dual_coef"]
+
+
 def _mlp(a: dict, X: np.ndarray) -> np.ndarray:
     act, n_layers = ACTIVATIONS[str(a["mlp_activation"])], _count(a, "mlp_w")
     for i in range(n_layers):
@@ -207,7 +226,7 @@ def _mlp(a: dict, X: np.ndarray) -> np.ndarray:
     return X
 
 
-_PREDICT = {"linear": _linear, "svr": _svr, "mlp": _mlp}
+_PREDICT = {"linear": _linear, "svr": _svr, "kernel": _kernel, "mlp": _mlp}
 
 
 # ---------------------------------------------------------------- validation
@@ -233,6 +252,8 @@ def _spec(a: Mapping) -> dict[str, tuple[str, tuple]]:
         for k in range(np.size(a.get("y_min", ()))):
             spec[f"svr{k}_support"] = ("f", (f"sv{k}", terms))
             spec[f"svr{k}_dual_coef"] = ("f", (f"sv{k}",))
+    elif kind == "kernel":
+        spec.update(krr_gamma=("f", ()), krr_support=("f", ("fit", terms)), krr_dual_coef=("f", ("fit", "out")))
     elif kind == "mlp":
         spec["mlp_activation"] = ("U", ())
         n = max(_count(a, "mlp_w"), _count(a, "mlp_b"), 1)

@@ -70,7 +70,9 @@ def deform_by_degree(points_mm, kind: str, degree: float, *, condition: str | No
     """Deform a breast (mm, breast frame) to `degree` ∈ [1, 8] of `kind` along `condition`.
 
     `method`: exact, learnt (the condition's model in `models`), or the path of a `breastplan.model/1`
-    file (`.npz`) trained for one condition of `kind`, whose condition is then the default."""
+    file (`.npz`): a parametric model trained for one condition of `kind` (whose condition is then the
+    default), or a statistical one (`train-statistical`), which moves the points by its predicted
+    FFD field (its result has no position t or parameters: NaN and none)."""
     if method not in METHODS and not str(method).endswith(".npz"):
         raise ValueError(f"unknown method '{method}'; choose one of {', '.join(METHODS)} or a model file")
     given = None if method in METHODS else load_model(Path(method))
@@ -78,11 +80,21 @@ def deform_by_degree(points_mm, kind: str, degree: float, *, condition: str | No
     if not 1.0 <= degree <= DD:
         raise ValueError(f"the degree must lie in [1, {DD}], got {degree:g}")
     p_mu = to_model_units(np.asarray(points_mm, dtype=float))
+    if given is not None and given.meta.get("model") == "statistical":
+        from breastplan.learn.field_file import load_field_model
+
+        moved_mm = load_field_model(Path(method)).deform(np.asarray(points_mm, dtype=float), kind, degree)
+        return ByDegree(moved_mm, cond, method, float("nan"), np.zeros(0),
+                        _reached(cond, p_mu, to_model_units(moved_mm), primitive))
     if method == "exact":
         t = solve_degree(p_mu, cond, DD, degree, primitive).t
     else:
         t = learnt_position(given or load_model(models / f"{slug(cond)}.npz"), points_mm, kind, degree)
     params = cond.at(t)
     moved = apply_kind(p_mu, kind, params, primitive)
-    reached = continuous_degree(condition_extent(cond, p_mu, moved, primitive), reference_extents(cond, DD))
-    return ByDegree(to_mm(moved), cond, method, t, params, float(reached))
+    return ByDegree(to_mm(moved), cond, method, t, params, _reached(cond, p_mu, moved, primitive))
+
+
+def _reached(cond: Condition, p_mu, moved_mu, primitive) -> float:
+    """The continuous degree of a breast moved from p_mu to moved_mu (model units) on `cond`."""
+    return float(continuous_degree(condition_extent(cond, p_mu, moved_mu, primitive), reference_extents(cond, DD)))

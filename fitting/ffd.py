@@ -55,15 +55,18 @@ class FFDFit:
 
 
 def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 5, smoothness: float = 1e-9,
-            held: np.ndarray | None = None, max_iterations: int = MAX_ITERATIONS) -> FFDFit:
+            held: np.ndarray | None = None, max_iterations: int = MAX_ITERATIONS, *,
+            box: Lattice | None = None, stop: float = STOP_RESIDUAL) -> FFDFit:
     """Deform the closed surface (vertices, faces; mm) by an n³ lattice to fit data (N, 3) mm.
 
     `held` (V, 3): weight, as a share of the data's total weight, that holds each vertex
-    coordinate where it starts — for the parts of the surface no data point sees.
+    coordinate where it starts — for the parts of the surface no data point sees. `box`: the
+    lattice whose box and shape to fit (it starts at rest and must hold every vertex; default: an
+    n³ one around data and vertices). `stop`: the mean normalised residual that ends the fit.
     """
     start = time.perf_counter()
     sub = seeded_subset(data, FIT_POINTS)
-    lattice = Lattice.around(np.vstack([data, vertices]), n)
+    lattice = Lattice.around(np.vstack([data, vertices]), n) if box is None else Lattice(box.lo, box.hi, box.shape)
     B = lattice.basis(vertices)
     K = lattice.size
     L = lattice.laplacian()                                # sparse; K ≤ 343, so LL is solved dense
@@ -80,7 +83,7 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
     match = products = None                                # their basis rows and normals, the normal matrix's
     residual, it, stalled = np.mean(hit[1] / norm), 0, False   # products: made when a step needs them
     history = [residual]                                   # the residual after each iteration
-    target = STOP_RESIDUAL                                 # on the subset; tightened if the whole cloud misses it
+    target = stop                                          # on the subset; tightened if the whole cloud misses it
     data_norm = np.maximum(np.linalg.norm(data, axis=1), 1e-9)
 
     while True:
@@ -105,11 +108,11 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
             stalled = stalled or (it >= CREEP[0] and residual > (1 - CREEP[1]) * history[it - CREEP[0]])
         dist = hit[1] if sub is data else _closest(current, faces32, data)[1]
         final = float(np.mean(dist / data_norm))
-        if final < STOP_RESIDUAL or residual >= target or stalled or it >= max_iterations:
+        if final < stop or residual >= target or stalled or it >= max_iterations:
             break
         target *= 0.9
     lattice.points = P.reshape(3, K).T
-    converged = final < STOP_RESIDUAL or stalled
+    converged = final < stop or stalled
     return FFDFit(lattice, current, final, dist, it, time.perf_counter() - start, converged)
 
 

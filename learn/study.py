@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from breastplan import to_mm
 from breastplan.deform.conditions import Condition, find_condition
 from breastplan.deform.inverse import solve_degree
 

@@ -1,0 +1,181 @@
+"""Before/after pairs as FFD displacement fields: what the statistical models learn (docs/model.md §8).
+
+The breast before the change is fitted with the breast model (`fit_breast`: superquadric, then an
+n³ FFD) and its closed surface is boxed in an n³ lattice (`box_around`). The same lattice, at rest
+on that box, is then FFD-fitted to the breast after the change by closest points (`fit_ffd`: no
+point correspondence needed, as between a clinic's two scans), or by least squares when the two
+clouds correspond point for point (`corresponding`: a synthetic pair). A pair becomes the control
+points' displacements in box units, (P − R) / (hi − lo): a field that does not depend on the
+breast's size, which a model predicts and `Lattice`'s box of a new breast turns back into mm.
+
+Every fit is cached on disk by the content hash of its inputs and options (`FitCache`), so a
+study or a training run fits each breast and each pair once.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from breastplan import ArtefactError, load_npz, save_npz
+from breastplan.deform.lattice import Lattice
+from breastplan.options import FitOptions
+
+CACHE_SCHEMA = "breastplan.ffd-cache/1"
+MARGIN = 0.25
+"""Padding of the box around the before surface, as a share of its extent: room for the lattice
+to carry the breast's surface where the change takes it."""
+
+
+@dataclass(frozen=True)
+class PairOptions:
+    """How pairs are fitted: control points per lattice axis (5 = 125 CP, 6 = 216), the mean
+    normalised residual that ends a closest-point fit (tighter than the thesis's 0.0015: the field
+    is learnt, so its fitting error is every prediction's floor), and whether the two clouds
+    correspond point for point."""
+
+    lattice: int = 5
+    stop: float = 5e-4
+    corresponding: bool = False
+
+    def __post_init__(self):
+        if not 3 <= self.lattice <= 7:
+            raise ValueError(f"the lattice must have 3..7 control points per axis, got {self.lattice}")
+        if not 0 < self.stop < 0.1:
+            raise ValueError(f"the stopping residual must lie in (0, 0.1), got {self.stop}")
+
+
+@dataclass(frozen=True)
+class Before:
+    """A breast before the change: its fitted closed surface (mm, breast frame), the fitted model's
+    control points (mm; the thesis's features), its volume (cc) and the rest lattice of the pair fits."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    control_points: np.ndarray
+    volume_cc: float
+
+    def box(self, n: int) -> Lattice:
+        return box_around(self.vertices, n)
+
+
+def box_around(vertices: np.ndarray, n: int) -> Lattice:
+    """The n³ rest lattice of a before surface (mm): its bounding box padded by MARGIN."""
+    return Lattice.around(vertices, n, margin=MARGIN)
+
+
+def field_to_mm(field: np.ndarray, box: Lattice) -> np.ndarray:
+    """(K, 3) displacements in mm of a field in box units ((K·3,) or (K, 3))."""
+    return np.asarray(field, float).reshape(-1, 3) * (box.hi - box.lo)
+
+
+def apply_field(points: np.ndarray, field: np.ndarray, box: Lattice) -> np.ndarray:
+    """Points (mm, breast frame) moved by a displacement field in box units on `box`."""
+    moved = Lattice(box.lo, box.hi, box.shape)
+    moved.displacements = field_to_mm(field, box)
+    return moved(points)
+
+
+class FitCache:
+    """Fits on disk, one NPZ per content hash, under `folder` (None: no cache)."""
+
+    def __init__(self, folder: str | Path | None):
+        self.folder = Path(folder) if folder is not None else None
+
+    @staticmethod
+    def key(*parts) -> str:
+        """Hash of arrays (their dtype, shape and bytes) and plain values."""
+        h = hashlib.sha256(CACHE_SCHEMA.encode())
+        for part in parts:
+            if isinstance(part, np.ndarray):
+                a = np.ascontiguousarray(part)
+                h.update(f"{a.dtype.str}{a.shape}".encode())
+                h.update(a.tobytes())
+            else:
+                h.update(repr(part).encode())
+        return h.hexdigest()
+
+    def get(self, key: str) -> dict | None:
+        if self.folder is None or not (self.folder / f"{key}.npz").is_file():
+            return None
+        try:
+            return dict(load_npz(self.folder / f"{key}.npz", CACHE_SCHEMA))
+        except ArtefactError:                  # a damaged entry is refitted and rewritten
+            return None
+
+    def put(self, key: str, arrays: dict) -> None:
+        if self.folder is not None:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            save_npz(self.folder / f"{key}.npz", CACHE_SCHEMA, arrays)
+
+
+def default_cache() -> Path:
+    """$BREASTPLAN_CACHE, or the user's cache folder (XDG) / breastplan / ffd."""
+    if os.environ.get("BREASTPLAN_CACHE"):
+        return Path(os.environ["BREASTPLAN_CACHE"])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "breastplan" / "ffd"
+
+
+def fit_before(points: np.ndarray, n: int, cache: FitCache = FitCache(None)) -> Before:
+    """The breast model fitted to a before cloud (mm, breast frame) with an n³ lattice."""
+    points = np.asarray(points, float)
+    key = FitCache.key("before", points, n)
+    hit = cache.get(key)
+    if hit is None:
+        from breastplan.fitting.breast_fit import fit_breast
+
+        fit = fit_breast(points, FitOptions(lattice=n))
+        hit = {"vertices": fit.vertices, "faces": fit.faces, "control_points": fit.ffd.lattice.points,
+               "volume_cc": np.float64(fit.volume_cc)}
+        cache.put(key, hit)
+    return Before(hit["vertices"], hit["faces"], hit["control_points"], float(hit["volume_cc"]))
+
+
+def fit_pair(before: Before, before_points: np.ndarray, after: np.ndarray, options: PairOptions = PairOptions(),
+             cache: FitCache = FitCache(None)) -> np.ndarray:
+    """(K·3,) displacement field, in box units, that takes the before breast to the after cloud (mm).
+
+    Closest points: the before's fitted surface is FFD-fitted to the after cloud. Corresponding:
+    least squares of the Bernstein rows of the before points against their displacements."""
+    before_points, after = np.asarray(before_points, float), np.asarray(after, float)
+    box = before.box(options.lattice)
+    key = FitCache.key("pair", before.vertices, before_points if options.corresponding else 0, after,
+                       sorted(asdict(options).items()))
+    hit = cache.get(key)
+    if hit is None:
+        if options.corresponding:
+            if before_points.shape != after.shape:
+                raise ValueError(f"corresponding clouds must have equal shapes, got {before_points.shape} "
+                                 f"and {after.shape}")
+            moved, *_ = np.linalg.lstsq(box.basis(before_points), after - before_points, rcond=None)
+        else:
+            from breastplan.fitting.ffd import fit_ffd
+
+            moved = fit_ffd(after, before.vertices, before.faces, box=box, stop=options.stop).lattice.displacements
+        hit = {"field": (moved / (box.hi - box.lo)).ravel()}
+        cache.put(key, hit)
+    return hit["field"]
+
+
+KINDS = ("ptosis", "turn", "top-shape")
+"""The deformation types a model can learn, in the order of its one-hot features."""
+FEATURES = ("degree", "volume_cc", "width_mm", "height_mm", "projection_mm")
+
+
+def pair_features(befores: list[Before], degree, kinds=None, types=(), *, thesis: bool = False) -> np.ndarray:
+    """One row of features per pair, from its before breast, degree and type.
+
+    Ours: degree, volume (cc), the before surface's extents (mm: width, height, projection) and,
+    for a model of several `types`, each pair's kind (`kinds`) one-hot over them.
+    Thesis (§4.3): the before model's control-point coordinates (mm), its volume and the degree.
+    """
+    degree = np.asarray(degree, float)[:, None]
+    volume = np.array([[b.volume_cc] for b in befores])
+    if thesis:
+        return np.hstack([np.stack([b.control_points.ravel() for b in befores]), volume, degree])
+    extents = np.stack([np.ptp(b.vertices, axis=0) for b in befores])
+    one_hot = (np.asarray(kinds)[:, None] == np.array(types)[None, :]).astype(float) if len(types) > 1 else []
+    return np.hstack([degree, volume, extents] + ([one_hot] if len(one_hot) else []))

@@ -1,0 +1,111 @@
+"""A statistical deformation model as a `breastplan.model/1` file, and training it from a pairs folder.
+
+The file holds the FieldModel's weights regressor (exported without pickle by `breastplan.model_file`),
+its PCA modes as extra arrays (`mean`, `components`: fields in box units) and, in its metadata,
+`"model": "statistical"`, the lattice, the types it learnt and its features. `FieldFile.deform`
+needs numpy and the breast fit only: it fits the breast model to her points, boxes the fitted
+surface, predicts the field for the type and degree, and moves her points.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from breastplan import ArtefactError
+from breastplan.model_file import ModelFile, load_model
+
+from .displacements import FEATURES, KINDS, FitCache, PairOptions, apply_field, fit_before, fit_pair, pair_features
+
+STATISTICAL = "statistical"
+
+
+@dataclass
+class FieldFile:
+    """A loaded statistical model (`load_field_model`)."""
+
+    model: ModelFile
+    path: Path
+
+    @property
+    def kinds(self) -> list[str]:
+        return list(self.model.meta["kinds"])
+
+    @property
+    def lattice(self) -> int:
+        return int(self.model.meta["lattice"])
+
+    def field(self, before, kind: str, degree: float) -> np.ndarray:
+        """(K·3,) predicted field, box units, for a fitted before breast."""
+        if kind not in self.kinds:
+            raise ArtefactError(self.path, f"models {', '.join(self.kinds)}, not {kind}")
+        X = pair_features([before], [degree], [kind], self.kinds)
+        scores = self.model.predict(X).reshape(1, -1)
+        return (scores @ self.model.extra["components"] + self.model.extra["mean"])[0]
+
+    def deform(self, points_mm: np.ndarray, kind: str, degree: float) -> np.ndarray:
+        """Her breast points (mm, breast frame) after `kind` at `degree`."""
+        before = fit_before(points_mm, self.lattice)
+        return apply_field(points_mm, self.field(before, kind, degree), before.box(self.lattice))
+
+
+def is_field_model(model: ModelFile) -> bool:
+    return model.meta.get("model") == STATISTICAL
+
+
+def load_field_model(path: str | Path) -> FieldFile:
+    """Load a statistical model file; ArtefactError naming it if it is not one or is inconsistent."""
+    model = load_model(path)
+    if not is_field_model(model):
+        raise ArtefactError(path, "is a parametric model, not a statistical one (train-statistical writes those)")
+    mean, components = model.extra.get("mean"), model.extra.get("components")
+    n = model.meta.get("lattice")
+    if (mean is None or components is None or not isinstance(n, int) or mean.shape != (3 * n ** 3,)
+            or components.shape != (model.n_outputs, mean.size) or not set(model.meta.get("kinds", ())) <= set(KINDS)
+            or not model.meta.get("kinds")):
+        raise ArtefactError(path, "holds an inconsistent statistical model (its modes, lattice or types)")
+    return FieldFile(model, Path(path))
+
+
+def train_from_pairs(rows, options: PairOptions = PairOptions(), cache: FitCache = FitCache(None),
+                     regressor: str = "kernel-ridge", advance=lambda: None):
+    """A FieldModel trained on the training rows of a pairs folder (`learn.pair_folder.read_pairs`).
+
+    Returns (estimator, meta): hyper-parameters are chosen by 4-fold cross-validation
+    grouped by before scan when there are at least 4 of them."""
+    from .pair_folder import breast_cloud
+    from .statistical_study import GRIDS, _select
+    from .statistical import FieldModel
+
+    train = [r for r in rows if r.split != "test"]
+    clouds, befores = {}, {}
+    for r in train:
+        if r.before not in befores:
+            clouds[r.before] = breast_cloud(r.before)
+            befores[r.before] = fit_before(clouds[r.before], options.lattice, cache)
+        advance()
+    fields = np.stack([fit_pair(befores[r.before], clouds[r.before], breast_cloud(r.after), options, cache)
+                       for r in train])
+    kinds = sorted({r.kind for r in train}, key=KINDS.index)
+    X = pair_features([befores[r.before] for r in train], [r.degree for r in train], [r.kind for r in train], kinds)
+    groups = np.array([str(r.before) for r in train])
+    if len(set(groups)) >= 4:
+        est, hyper, cv = _select(FieldModel(regressor), GRIDS[regressor], X, fields, groups)
+    else:
+        est, hyper, cv = FieldModel(regressor).fit(X, fields), {}, float("nan")
+    meta = {"model": STATISTICAL, "lattice": options.lattice, "kinds": kinds, "regressor": regressor,
+            "hyper": {k: float(v) for k, v in hyper.items()}, "cv_field_rmse_pct": cv,
+            "features": list(FEATURES) + ([f"type={k}" for k in kinds] if len(kinds) > 1 else []),
+            "target": "PCA weights of the FFD displacement field, box units",
+            "training": {"pairs": len(train), "befores": len(befores), "fit": "corresponding" if options.corresponding
+                         else "closest"}}
+    return est, meta
+
+
+def save_field_model(path: str | Path, estimator, meta: dict) -> Path:
+    """Write a trained FieldModel as a `breastplan.model/1` file, atomically."""
+    from breastplan.model_file import save_model
+
+    extra = {"mean": estimator.pca_.mean_, "components": estimator.pca_.components_}
+    return save_model(path, estimator.weights_, meta=meta, extra=extra)

@@ -1,0 +1,218 @@
+"""The study of statistical deformation models (thesis §4.3, §5.2, Table 5.8), reproduced and beaten.
+
+For each condition: every breast of database S before, and deformed to each of 8 degrees, is
+turned into displacement fields of an n³ FFD lattice (`learn.displacements`, cached on disk). On
+the training split, models learn the field from the before breast, the degree (and the type, for
+the model of all types); on the test split each predicted field moves the original breast
+("Modelled"), which is compared with the truly deformed one ("Original") by the indirect metrics
+(docs/model.md §7) and by the largest/median ratio of its vertex errors (local spikes).
+
+Rows: "FFD fit" (each test pair's own fitted field: the floor every model stands on), the
+thesis's MLP (125 and 216 control points, as many hidden neurons as control points, and a
+cross-validated sweep), and our FieldModel with each regressor (hyper-parameters by 4-fold
+cross-validation grouped by breast). Features and targets are scaled on the training split.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.model_selection import GridSearchCV, GroupKFold
+
+from breastplan.deform.conditions import find_condition
+
+from .databases import Database, build_database
+from .datasets import Dataset, build_dataset
+from .displacements import Before, FitCache, PairOptions, apply_field, fit_before, fit_pair, pair_features
+from .metrics import indirect_metrics, spike_ratios
+from .statistical import REGRESSORS, FieldModel, thesis_mlp
+
+CONDITIONS = ("ptosis b0>b1", "ptosis b1>=b0", "turn c0>c1", "turn c1>c0", "top-shape s0->s1+", "top-shape s1->s0+")
+THESIS_CONDITION = "ptosis b0>b1"
+THESIS_HAUSDORFF = {5: 210.76, 6: 341.13}
+"""Thesis Table 5.8: Hausdorff µ (%) of its statistical model with 125 and 216 control points."""
+SPIKE = 3.0
+"""A modelled breast has a local spike when its largest vertex error exceeds SPIKE × its median."""
+GRIDS = {
+    "ridge": {"n_modes": (3, 6, 10), "alpha": (1e-4, 1e-3, 1e-2)},
+    "kernel-ridge": {"n_modes": (3, 6, 10), "alpha": (1e-4, 1e-3, 1e-2), "gamma": (0.3, 1.0, 3.0)},
+    "gp": {"n_modes": (3, 6, 10)},
+    "mlp": {"n_modes": (6,), "alpha": (1e-4, 1e-2)},
+}
+QUICK_GRIDS = {"ridge": {"n_modes": (6,)}, "kernel-ridge": {"n_modes": (6,), "gamma": (1.0,)},
+               "gp": {"n_modes": (6,)}, "mlp": {"n_modes": (6,)}}
+HIDDEN = (0.2, 1.0, 2.0)
+"""The thesis MLP's sweep: hidden neurons as multiples of the control points."""
+QUICK_BREASTS = 4
+FITS = ("corresponding", "closest")
+"""How pairs are fitted: database S's breasts correspond point for point (least squares), or by
+closest points as between a clinic's scans (the thesis's way)."""
+
+
+@dataclass
+class Pairs:
+    """One condition's pairs on one lattice: befores per breast, fields per example (box units)."""
+
+    dataset: Dataset
+    options: PairOptions
+    befores: list[Before]
+    fields: np.ndarray             # (n_examples, K·3)
+
+    @property
+    def train(self) -> np.ndarray:
+        return np.flatnonzero(self.dataset.split == "train")
+
+    @property
+    def test(self) -> np.ndarray:
+        return np.flatnonzero(self.dataset.split == "test")
+
+    def features(self, examples, thesis: bool = False) -> np.ndarray:
+        ds = self.dataset
+        return pair_features([self.befores[int(i)] for i in ds.breast[examples]], ds.degree[examples], thesis=thesis)
+
+    def modelled(self, examples, fields) -> np.ndarray:
+        """(n, N, 3) original breasts of the examples moved by the fields, mm."""
+        ds = self.dataset
+        return np.stack([apply_field(ds.original_points(k), f, self.befores[int(ds.breast[k])].box(self.options.lattice))
+                         for k, f in zip(examples, fields)])
+
+
+def fit_condition(db: Database, condition: str, options: PairOptions, cache: FitCache, advance=lambda: None) -> Pairs:
+    """Every breast of `db` before and after each degree of `condition`, as FFD fields."""
+    ds = build_dataset(db, find_condition(condition), 8)
+    befores = []
+    for i in range(len(db)):
+        befores.append(fit_before(db.points[i], options.lattice, cache))
+        advance()
+    fields = []
+    for k in range(len(ds)):
+        fields.append(fit_pair(befores[int(ds.breast[k])], ds.original_points(k), ds.deformed_points(k), options, cache))
+        advance()
+    return Pairs(ds, options, befores, np.stack(fields))
+
+
+@dataclass
+class StatResult:
+    """One method on one condition's test split."""
+
+    condition: str
+    lattice: int                       # control points per axis
+    fit: str                           # one of FITS
+    method: str
+    hyper: dict
+    cv_rmse_pct: float                 # field RMSE, % of the box, cross-validated on the training split
+    rmse_pct: float                    # the same on the test split
+    distances: dict = field(default_factory=dict)   # INDIRECT_KEYS → (n_test,) %
+    spikes: np.ndarray = field(default_factory=lambda: np.zeros(0))   # (n_test,) largest / median vertex error
+
+    @property
+    def control_points(self) -> int:
+        return self.lattice ** 3
+
+    @property
+    def spike_free_pct(self) -> float:
+        return float(np.mean(self.spikes <= SPIKE) * 100.0)
+
+
+def fit_name(options: PairOptions) -> str:
+    return FITS[0] if options.corresponding else FITS[1]
+
+
+def field_rmse_pct(predicted, target) -> float:
+    """RMSE of fields in box units, as % of the box."""
+    return float(np.sqrt(np.mean((np.asarray(predicted) - np.asarray(target)) ** 2)) * 100.0)
+
+
+def _select(estimator, grid: dict, X, Y, groups) -> tuple[object, dict, float]:
+    """The grid point with the lowest grouped 4-fold CV field RMSE, refitted on all of X."""
+    search = GridSearchCV(estimator, {k: list(v) for k, v in grid.items()}, cv=GroupKFold(4),
+                          scoring="neg_root_mean_squared_error", n_jobs=1, error_score="raise")
+    with warnings.catch_warnings():            # an optimiser at its budget or a kernel at a bound: still a model
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        search.fit(X, Y, groups=groups)
+    return search.best_estimator_, search.best_params_, float(-search.best_score_ * 100.0)
+
+
+def evaluate(pairs: Pairs, method: str, hyper: dict, cv: float, predicted: np.ndarray) -> StatResult:
+    """Metrics of predicted test fields."""
+    ds, test = pairs.dataset, pairs.test
+    truth = np.stack([ds.deformed_points(k) for k in test])
+    modelled = pairs.modelled(test, predicted)
+    return StatResult(ds.condition.name, pairs.options.lattice, fit_name(pairs.options), method, hyper, cv,
+                      field_rmse_pct(predicted, pairs.fields[test]), indirect_metrics(truth, modelled),
+                      spike_ratios(truth, ds.database.grid, modelled))
+
+
+def run_condition(pairs: Pairs, quick: bool, thesis: bool, advance=lambda: None) -> list[StatResult]:
+    """The rows of one condition on one lattice (module docstring); `thesis` adds the thesis's MLPs."""
+    train, test, ds = pairs.train, pairs.test, pairs.dataset
+    Y, groups = pairs.fields[train], ds.breast[train]
+    results = [evaluate(pairs, "FFD fit", {}, float("nan"), pairs.fields[test])]
+    advance()
+    if thesis:
+        X, Xt = pairs.features(train, thesis=True), pairs.features(test, thesis=True)
+        K = pairs.options.lattice ** 3
+        est, _, cv = _select(thesis_mlp(K), {}, X, Y, groups)
+        results.append(evaluate(pairs, "MLP (thesis)", {"hidden": K}, cv, est.predict(Xt)))
+        advance()
+        sweep = (1.0,) if quick else HIDDEN
+        grid = {"regressor__regressor__hidden_layer_sizes": [(max(1, round(h * K)),) for h in sweep]}
+        est, params, cv = _select(thesis_mlp(K), grid, X, Y, groups)
+        results.append(evaluate(pairs, "MLP (thesis, swept)", {"hidden": params[next(iter(grid))][0]}, cv,
+                                est.predict(Xt)))
+        advance()
+    X, Xt = pairs.features(train), pairs.features(test)
+    for regressor in REGRESSORS:
+        grid = (QUICK_GRIDS if quick else GRIDS)[regressor]
+        est, params, cv = _select(FieldModel(regressor), grid, X, Y, groups)
+        results.append(evaluate(pairs, f"PCA + {regressor}", params, cv, est.predict(Xt)))
+        advance()
+    return results
+
+
+def study_database(quick: bool) -> Database:
+    """Database S (10 000 points per breast), or 4 breasts per shape and split of 2 500 points."""
+    db = build_database("S", n_points=2500 if quick else 10_000)
+    if quick:
+        keep = np.concatenate([np.flatnonzero((db.shape == s) & (db.split == sp))[:QUICK_BREASTS]
+                               for s in np.unique(db.shape) for sp in ("train", "test")])
+        db = db.subset(keep)
+    return db
+
+
+@dataclass(frozen=True)
+class StudyPlan:
+    """What the study runs: conditions, lattices and ways of fitting the pairs (the thesis's
+    condition gets them all, the others the first of each), quick grids."""
+
+    conditions: tuple[str, ...] = CONDITIONS
+    lattices: tuple[int, ...] = (5, 6)
+    fits: tuple[str, ...] = FITS
+    quick: bool = False
+
+    def runs(self) -> list[tuple[str, PairOptions]]:
+        """(condition, pair options) of every run."""
+        return [(c, PairOptions(lattice=n, corresponding=f == "corresponding")) for c in self.conditions
+                for n in (self.lattices if c == THESIS_CONDITION else self.lattices[:1])
+                for f in (self.fits if c == THESIS_CONDITION else self.fits[:1])]
+
+    def steps(self, breasts: int, examples: int) -> int:
+        """Progress steps: fits, then rows."""
+        rows = 1 + len(REGRESSORS)
+        return sum(breasts + examples + rows + (2 if c == THESIS_CONDITION else 0) for c, _ in self.runs())
+
+
+def run_study(plan: StudyPlan, cache: FitCache, advance=lambda: None) -> tuple[list[StatResult], dict]:
+    """Every run of `plan`; returns the results and the fitting seconds per (condition, lattice)."""
+    import time
+
+    db = study_database(plan.quick)
+    results, seconds = [], {}
+    for condition, options in plan.runs():
+        start = time.perf_counter()
+        pairs = fit_condition(db, condition, options, cache, advance)
+        seconds[f"{condition} {options.lattice ** 3} CP {fit_name(options)}"] = time.perf_counter() - start
+        results += run_condition(pairs, plan.quick, thesis=condition == THESIS_CONDITION, advance=advance)
+    return results, seconds
