@@ -58,7 +58,7 @@ def _statistical(quick: bool, out: Path, cache: Path | None, as_json: bool, cloc
     from breastplan.learn.statistical_report import write_report
     from breastplan.learn.statistical_study import StudyPlan, run_study, study_database
 
-    plan = StudyPlan(quick=quick, lattices=(5,) if quick else (5, 6))
+    plan = StudyPlan.quick_plan() if quick else StudyPlan()
     db = study_database(quick)
     with progress("statistical study", plan.steps(len(db), len(db) * 8)) as advance, threadpool_limits(1, "blas"):
         results, seconds = run_study(plan, FitCache(cache or default_cache()), advance)

@@ -157,11 +157,11 @@ def run_condition(pairs: Pairs, quick: bool, thesis: bool, advance=lambda: None)
         est, _, cv = _select(thesis_mlp(K), {}, X, Y, groups)
         results.append(evaluate(pairs, "MLP (thesis)", {"hidden": K}, cv, est.predict(Xt)))
         advance()
-        sweep = (1.0,) if quick else HIDDEN
-        grid = {"regressor__regressor__hidden_layer_sizes": [(max(1, round(h * K)),) for h in sweep]}
-        est, params, cv = _select(thesis_mlp(K), grid, X, Y, groups)
-        results.append(evaluate(pairs, "MLP (thesis, swept)", {"hidden": params[next(iter(grid))][0]}, cv,
-                                est.predict(Xt)))
+        if not quick:
+            grid = {"regressor__regressor__hidden_layer_sizes": [(max(1, round(h * K)),) for h in HIDDEN]}
+            est, params, cv = _select(thesis_mlp(K), grid, X, Y, groups)
+            results.append(evaluate(pairs, "MLP (thesis, swept)", {"hidden": params[next(iter(grid))][0]}, cv,
+                                    est.predict(Xt)))
         advance()
     X, Xt = pairs.features(train), pairs.features(test)
     for regressor in REGRESSORS:
@@ -191,6 +191,11 @@ class StudyPlan:
     lattices: tuple[int, ...] = (5, 6)
     fits: tuple[str, ...] = FITS
     quick: bool = False
+
+    @classmethod
+    def quick_plan(cls) -> "StudyPlan":
+        """The thesis's condition alone, 125 CP from corresponding points, small grids (CI)."""
+        return cls(conditions=(THESIS_CONDITION,), lattices=(5,), fits=FITS[:1], quick=True)
 
     def runs(self) -> list[tuple[str, PairOptions]]:
         """(condition, pair options) of every run."""

@@ -1,0 +1,206 @@
+"""Statistical deformation models: FFD displacement fields of before/after pairs, their estimators,
+their model files and commands. Truths: a field the lattice holds exactly, fields linear in the
+features, synthetic pairs whose after breast is known."""
+import json
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from sklearn.base import clone
+
+from breastplan import ArtefactError, read_ply
+from breastplan.deform.lattice import Lattice
+from breastplan.learn.databases import build_database
+from breastplan.learn.datasets import build_dataset
+from breastplan.learn.displacements import Before, FitCache, PairOptions, apply_field, fit_pair, pair_features
+from breastplan.learn.field_file import load_field_model
+from breastplan.learn.metrics import indirect_distances
+from breastplan.learn.statistical import FieldModel
+from breastplan.learn.statistical_study import StudyPlan
+from clitools import assert_bad_input, run
+
+
+@pytest.fixture(scope="module")
+def pair():
+    """A database S breast (900 points) before and after ptosis b0>b1 at its 6th row, and its mesh."""
+    from breastplan.deform.breast_model import BreastModel
+    from breastplan.deform.global_deformations import Deformation
+
+    db = build_database("S", n_points=900)
+    ds = build_dataset(db, "ptosis b0>b1", 8)
+    k = int(np.flatnonzero((ds.breast == 0) & (ds.row == 5))[0])
+    V, F = BreastModel(db.primitive(0), Deformation.from_vector(db.deformation[0])).mesh(40, 96, closed=True)
+    before = Before(V, F, np.zeros((125, 3)), float(db.volume_cc[0]))
+    return before, ds.original_points(k), ds.deformed_points(k)
+
+
+def test_a_field_the_lattice_holds_is_recovered_exactly_from_corresponding_points(pair):
+    before, points, _ = pair
+    box = before.box(5)
+    truth = np.random.default_rng(0).normal(0, 0.02, box.size * 3)          # box units
+    after = apply_field(points, truth, box)
+    field = fit_pair(before, points, after, PairOptions(corresponding=True))
+    assert np.allclose(field, truth, atol=1e-9)
+
+
+def test_ptosis_is_a_field_of_a_5_cubed_lattice(pair):
+    """Ptosis moves points by a polynomial of degree ≤ 4 per axis, which a 5³ Bernstein lattice holds."""
+    before, points, after = pair
+    field = fit_pair(before, points, after, PairOptions(corresponding=True))
+    assert np.abs(apply_field(points, field, before.box(5)) - after).max() < 1e-8
+
+
+def test_a_closest_point_fit_lands_on_the_after_surface(pair, tmp_path):
+    before, points, after = pair
+    options = PairOptions(stop=5e-4)
+    field = fit_pair(before, points, after, options, FitCache(tmp_path))
+    moved = apply_field(before.vertices, field, before.box(5))
+    far, near = _to_surface(after, before.vertices, before.faces), _to_surface(after, moved, before.faces)
+    assert np.median(near) < np.median(far) / 10 and near.max() < 1.0     # mm
+    cached = fit_pair(before, points, after, options, FitCache(tmp_path))   # read back from the cache
+    assert len(list(tmp_path.glob("*.npz"))) == 1 and np.array_equal(cached, field)
+
+
+def _to_surface(points, vertices, faces):
+    """Distances (mm) of points to a triangle mesh."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32)))
+    return scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy()
+
+
+def test_a_damaged_cache_entry_is_refitted(pair, tmp_path):
+    before, points, after = pair
+    options = PairOptions(corresponding=True)
+    field = fit_pair(before, points, after, options, FitCache(tmp_path))
+    entry = next(tmp_path.glob("*.npz"))
+    entry.write_bytes(b"not an npz")
+    assert np.array_equal(fit_pair(before, points, after, options, FitCache(tmp_path)), field)
+
+
+@settings(max_examples=25, deadline=None)
+@given(scale=st.floats(0.5, 2.0), shift=st.floats(-30, 30))
+def test_a_field_in_box_units_does_not_depend_on_size_or_position(pair, scale, shift):
+    before, points, _ = pair
+    box = before.box(5)
+    field = np.random.default_rng(1).normal(0, 0.02, box.size * 3)
+    moved = apply_field(points, field, box)
+    other = Lattice(box.lo * scale + shift, box.hi * scale + shift, 5)       # the box of the scaled breast
+    assert np.allclose(apply_field(points * scale + shift, field, other), moved * scale + shift, atol=1e-9)
+
+
+def test_the_field_model_follows_the_estimator_contract():
+    model = FieldModel("ridge", n_modes=2, alpha=1e-6)
+    assert clone(model).get_params() == model.get_params()
+    rng = np.random.default_rng(2)
+    X = rng.uniform(0, 1, (40, 3))
+    modes = rng.normal(size=(2, 30))
+    Y = X[:, :2] @ modes                                   # fields linear in the features, two modes
+    assert model.fit(X, Y) is model
+    assert {"pca_", "weights_"} <= set(vars(model)) and model.pca_.n_components_ == 2
+    Xt = rng.uniform(0, 1, (10, 3))
+    assert np.allclose(model.predict(Xt), Xt[:, :2] @ modes, atol=1e-3)
+
+
+def test_features_name_the_type_only_for_a_model_of_several():
+    before = Before(np.array([[0, 0, 0], [100, 80, 0], [50, 40, 60.0]]), np.zeros((1, 3), int), np.zeros((125, 3)), 400.0)
+    one = pair_features([before], [3.0])
+    assert one.tolist() == [[3.0, 400.0, 100.0, 80.0, 60.0]]
+    two = pair_features([before, before], [3.0, 5.0], ["turn", "ptosis"], ("ptosis", "turn"))
+    assert two[:, -2:].tolist() == [[0.0, 1.0], [1.0, 0.0]]
+    thesis = pair_features([before], [3.0], thesis=True)
+    assert thesis.shape == (1, 125 * 3 + 2) and thesis[0, -2:].tolist() == [400.0, 3.0]
+
+
+@pytest.fixture(scope="module")
+def trained(cli, tmp_path_factory):
+    """synth --pairs → train-statistical: a ptosis model from corresponding synthetic pairs."""
+    tmp = tmp_path_factory.mktemp("statistical")
+    res = run(cli, "synth", "--db", "S", "--points", "900", "--pairs", "ptosis b0>b1", "--out", tmp / "pairs", "--json")
+    assert res.returncode == 0, res.stderr
+    res = run(cli, "train-statistical", "--pairs", tmp / "pairs", "--out", tmp / "model.npz", "--corresponding",
+              "--regressor", "ridge", "--cache", tmp / "cache", "--json")
+    assert res.returncode == 0, res.stderr
+    return tmp, json.loads(res.stdout)
+
+
+def test_train_statistical_learns_from_the_training_pairs(trained):
+    tmp, out = trained
+    assert out["kinds"] == ["ptosis"] and out["pairs"] == 48 * 8 and out["befores"] == 48
+    model = load_field_model(tmp / "model.npz")
+    assert model.lattice == 5 and model.kinds == ["ptosis"]
+
+
+@pytest.mark.parametrize("row", [1, 5])
+def test_deform_with_the_model_comes_close_to_the_true_after_breast(cli, trained, row):
+    """On a test breast (never trained on), the model's breast is far nearer the true one than the original."""
+    tmp, _ = trained
+    lines = (tmp / "pairs" / "pairs.csv").read_text().splitlines()[1:]
+    test = [line.split(",") for line in lines if line.split(",")[4] == "test" and line.split(",")[3] == str(row + 1)]
+    before, after = tmp / "pairs" / test[0][0], tmp / "pairs" / test[0][1]
+    res = run(cli, "deform", before, "--kind", "ptosis", "--degree", row + 1, "--model", tmp / "model.npz",
+              "--out", tmp / f"out-{row}.ply", "--json")
+    assert res.returncode == 0, res.stderr
+    truth, original, modelled = read_ply(after).points, read_ply(before).points, read_ply(tmp / f"out-{row}.ply").points
+    key = "modelled_to_original_euclidean"
+    assert indirect_distances(truth, modelled)[key] < indirect_distances(truth, original)[key] / 5
+    assert abs(json.loads(res.stdout)["degree_reached"] - (row + 1)) < 1.0
+
+
+def test_a_model_of_another_type_or_a_parametric_file_is_refused(cli, trained, tmp_path):
+    from breastplan.deform.by_degree import MODELS
+
+    tmp, _ = trained
+    before = next((tmp / "pairs" / "before").glob("*.ply"))
+    res = run(cli, "deform", before, "--kind", "turn", "--degree", 3, "--model", tmp / "model.npz", "--out", tmp_path / "out.ply")
+    assert_bad_input(res, tmp / "model.npz", tmp_path)
+    assert "not turn" in res.stderr
+    with pytest.raises(ArtefactError, match="parametric"):
+        load_field_model(next(MODELS.glob("*.npz")))
+
+
+def test_bad_model_files_and_pairs_folders_exit_3(cli, trained, tmp_path):
+    tmp, _ = trained
+    before = next((tmp / "pairs" / "before").glob("*.ply"))
+    broken = tmp_path / "broken.npz"
+    broken.write_bytes(b"PK\x03\x04 not really")
+    res = run(cli, "deform", before, "--kind", "ptosis", "--degree", 3, "--model", broken, "--out", tmp_path / "out.ply")
+    assert_bad_input(res, broken, tmp_path)
+    (tmp_path / "pairs").mkdir()
+    (tmp_path / "pairs" / "pairs.csv").write_text("before,after,type,degree\nmissing.ply,also.ply,ptosis,3\n")
+    res = run(cli, "train-statistical", "--pairs", tmp_path / "pairs", "--out", tmp_path / "out.npz")
+    assert_bad_input(res, tmp_path / "pairs" / "pairs.csv", tmp_path)
+
+
+@pytest.mark.parametrize("args, option", [(["--regressor", "gp"], "--regressor"), (["--lattice", "9"], "--lattice"),
+                                          (["--out", "model.txt"], "--out")])
+def test_train_statistical_usage_errors_exit_2(cli, trained, tmp_path, args, option):
+    tmp, _ = trained
+    base = {"--pairs": str(tmp / "pairs"), "--out": str(tmp_path / "m.npz")}
+    base.update(dict(zip(args[::2], args[1::2])))
+    res = run(cli, "train-statistical", *[x for kv in base.items() for x in kv])
+    assert res.returncode == 2 and option in res.stderr
+
+
+def test_deform_model_needs_a_degree(cli, trained, tmp_path):
+    tmp, _ = trained
+    before = next((tmp / "pairs" / "before").glob("*.ply"))
+    res = run(cli, "deform", before, "--kind", "ptosis", "--model", tmp / "model.npz", "--out", tmp_path / "o.ply")
+    assert res.returncode == 2 and "--degree" in res.stderr
+
+
+def test_the_quick_study_writes_its_report_with_the_thesis_beside_ours(cli, tmp_path):
+    res = run(cli, "evaluate", "--study", "statistical", "--quick", "--out", tmp_path / "study",
+              "--cache", tmp_path / "cache", "--json")
+    assert res.returncode == 0, res.stderr
+    report = json.loads((tmp_path / "study" / "report.json").read_text())
+    methods = {r["method"] for r in report["rows"]}
+    assert {"FFD fit", "MLP (thesis)", "PCA + ridge", "PCA + kernel-ridge", "PCA + gp", "PCA + mlp"} <= methods
+    field = [r for r in report["rows"] if r["method"] == "FFD fit"]
+    assert all(r["euclidean_mean_pct"] < 1e-6 for r in field)        # ptosis is a field of the 5³ lattice
+    thesis = [r for r in report["rows"] if r.get("thesis_hausdorff_mean_pct")]
+    assert thesis and thesis[0]["thesis_hausdorff_mean_pct"] == 210.76
+    assert "Table 5.8" in (tmp_path / "study" / "report.md").read_text()
+    assert StudyPlan.quick_plan().runs()[0][1].lattice == 5
