@@ -111,9 +111,9 @@ def _check_model(path: Path) -> None:
     """Usage error unless the model file plans one of the plannable kinds."""
     from breastplan.model_file import load_model
 
-    kind = load_model(path).meta.get("kind")
-    if kind not in DEGREE_KINDS:
-        raise usage_error(f"{path} models '{kind}', which has no degrees to plan", "--method")
+    kinds = load_model(path).kinds
+    if not set(kinds) & set(DEGREE_KINDS):
+        raise usage_error(f"{path} models {', '.join(map(str, kinds))}, which has no degrees to plan", "--method")
 
 
 def _read_record(out: Path) -> dict:

@@ -126,6 +126,11 @@ class ModelFile:
     n_outputs: int
     arrays: dict[str, np.ndarray] = field(repr=False)
 
+    @property
+    def kinds(self) -> list[str]:
+        """The deformation types the model makes: a statistical model's `kinds`, a parametric one's `kind`."""
+        return list(self.meta.get("kinds") or [self.meta.get("kind")])
+
     def predict(self, X) -> np.ndarray:
         """Predictions for the rows of X: shape (n,) or (n, n_outputs), as the estimator's."""
         a = self.arrays

@@ -18,6 +18,7 @@ from breastplan.model_file import ModelFile, load_model
 from .conditions import CONDITIONS, Condition, find_condition
 from .degree import condition_extent, continuous_degree, reference_extents
 from .descriptors import breast_scalars
+from .lattice import Lattice
 from .global_deformations import apply_kind
 from .inverse import solve_degree
 from .names import DD, DEFAULT_CONDITION, METHODS
@@ -36,6 +37,7 @@ class ByDegree:
     t: float                    # position on the condition's line
     params: np.ndarray          # the condition's kind's parameters, model units
     degree_reached: float       # continuous degree of the result (docs/model.md §5)
+    lattice: Lattice | None = None   # a statistical model's deformation (mm, the points' frame)
 
 
 def slug(condition: Condition) -> str:
@@ -83,9 +85,10 @@ def deform_by_degree(points_mm, kind: str, degree: float, *, condition: str | No
     if given is not None and given.meta.get("model") == "statistical":
         from breastplan.learn.field_file import load_field_model
 
-        moved_mm = load_field_model(Path(method)).deform(np.asarray(points_mm, dtype=float), kind, degree)
+        lattice = load_field_model(Path(method)).deformation(np.asarray(points_mm, dtype=float), kind, degree)
+        moved_mm = lattice(points_mm)
         return ByDegree(moved_mm, cond, method, float("nan"), np.zeros(0),
-                        _reached(cond, p_mu, to_model_units(moved_mm), primitive))
+                        _reached(cond, p_mu, to_model_units(moved_mm), primitive), lattice)
     if method == "exact":
         t = solve_degree(p_mu, cond, DD, degree, primitive).t
     else:

@@ -72,18 +72,27 @@ def field_to_mm(field: np.ndarray, box: Lattice) -> np.ndarray:
     return np.asarray(field, float).reshape(-1, 3) * (box.hi - box.lo)
 
 
-def apply_field(points: np.ndarray, field: np.ndarray, box: Lattice) -> np.ndarray:
-    """Points (mm, breast frame) moved by a displacement field in box units on `box`."""
+def field_lattice(field: np.ndarray, box: Lattice) -> Lattice:
+    """The lattice on `box` whose control points a field in box units displaces (a deformation, mm)."""
     moved = Lattice(box.lo, box.hi, box.shape)
     moved.displacements = field_to_mm(field, box)
-    return moved(points)
+    return moved
+
+
+def apply_field(points: np.ndarray, field: np.ndarray, box: Lattice) -> np.ndarray:
+    """Points (mm, breast frame) moved by a displacement field in box units on `box`."""
+    return field_lattice(field, box)(points)
 
 
 class FitCache:
-    """Fits on disk, one NPZ per content hash, under `folder` (None: no cache)."""
+    """Fits by content hash: the last MEMORY ones in memory, and all on disk as one NPZ each under
+    `folder` (None: memory only)."""
+
+    MEMORY = 16
 
     def __init__(self, folder: str | Path | None):
         self.folder = Path(folder) if folder is not None else None
+        self.memory: dict[str, dict] = {}
 
     @staticmethod
     def key(*parts) -> str:
@@ -99,14 +108,17 @@ class FitCache:
         return h.hexdigest()
 
     def get(self, key: str) -> dict | None:
-        if self.folder is None or not (self.folder / f"{key}.npz").is_file():
-            return None
+        if key in self.memory or self.folder is None or not (self.folder / f"{key}.npz").is_file():
+            return self.memory.get(key)
         try:
             return dict(load_npz(self.folder / f"{key}.npz", CACHE_SCHEMA))
         except ArtefactError:                  # a damaged entry is refitted and rewritten
             return None
 
     def put(self, key: str, arrays: dict) -> None:
+        self.memory[key] = arrays
+        while len(self.memory) > self.MEMORY:
+            self.memory.pop(next(iter(self.memory)))
         if self.folder is not None:
             self.folder.mkdir(parents=True, exist_ok=True)
             save_npz(self.folder / f"{key}.npz", CACHE_SCHEMA, arrays)
@@ -119,7 +131,11 @@ def default_cache() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "breastplan" / "ffd"
 
 
-def fit_before(points: np.ndarray, n: int, cache: FitCache = FitCache(None)) -> Before:
+MEMORY = FitCache(None)
+"""This process's fits in memory: a plan asks for one breast's field at many degrees."""
+
+
+def fit_before(points: np.ndarray, n: int, cache: FitCache = MEMORY) -> Before:
     """The breast model fitted to a before cloud (mm, breast frame) with an n³ lattice."""
     points = np.asarray(points, float)
     key = FitCache.key("before", points, n)

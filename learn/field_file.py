@@ -2,9 +2,9 @@
 
 The file holds the FieldModel's weights regressor (exported without pickle by `breastplan.model_file`),
 its PCA modes as extra arrays (`mean`, `components`: fields in box units) and, in its metadata,
-`"model": "statistical"`, the lattice, the types it learnt and its features. `FieldFile.deform`
+`"model": "statistical"`, the lattice, the types it learnt and its features. `FieldFile.deformation`
 needs numpy and the breast fit only: it fits the breast model to her points, boxes the fitted
-surface, predicts the field for the type and degree, and moves her points.
+surface and predicts the field for the type and degree: a lattice that moves her points.
 """
 from __future__ import annotations
 
@@ -16,7 +16,9 @@ import numpy as np
 from breastplan import ArtefactError
 from breastplan.model_file import ModelFile, load_model
 
-from .displacements import FEATURES, KINDS, FitCache, PairOptions, apply_field, fit_before, fit_pair, pair_features
+from breastplan.deform.lattice import Lattice
+
+from .displacements import FEATURES, KINDS, FitCache, PairOptions, field_lattice, fit_before, fit_pair, pair_features
 
 STATISTICAL = "statistical"
 
@@ -44,10 +46,10 @@ class FieldFile:
         scores = self.model.predict(X).reshape(1, -1)
         return (scores @ self.model.extra["components"] + self.model.extra["mean"])[0]
 
-    def deform(self, points_mm: np.ndarray, kind: str, degree: float) -> np.ndarray:
-        """Her breast points (mm, breast frame) after `kind` at `degree`."""
+    def deformation(self, points_mm: np.ndarray, kind: str, degree: float) -> Lattice:
+        """The lattice (mm, the points' frame) that makes `kind` at `degree` of her breast points."""
         before = fit_before(points_mm, self.lattice)
-        return apply_field(points_mm, self.field(before, kind, degree), before.box(self.lattice))
+        return field_lattice(self.field(before, kind, degree), before.box(self.lattice))
 
 
 def is_field_model(model: ModelFile) -> bool:

@@ -2,8 +2,9 @@
 
 A change is a (kind, degree) pair; its parameters lie on the kind's condition line at the
 position that gives this breast that degree (`deform.by_degree`: the exact inverse, the shipped
-regressions, or a given `breastplan.model/1` file). The combination applies every requested
-change together, in docs/model.md §3 order.
+regressions, or a given `breastplan.model/1` file), or, for a statistical model file, the FFD
+lattice it predicts. The combination applies every requested change together: the global
+deformations in docs/model.md §3 order, then the lattices.
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import numpy as np
 from breastplan import Primitive
 from breastplan.deform.by_degree import deform_by_degree
 from breastplan.deform.global_deformations import Deformation
+from breastplan.deform.lattice import Lattice
 
 
 @dataclass(frozen=True)
@@ -24,6 +26,7 @@ class Change:
     requested: tuple[tuple[str, float], ...]
     deformation: Deformation
     details: tuple[dict, ...]              # per kind: condition, t, params, degree reached
+    fields: tuple[Lattice, ...] = ()       # a statistical model's deformations (mm, primitive frame), after it
 
 
 def change_name(kind: str, degree: float) -> str:
@@ -36,8 +39,11 @@ def solve_change(local_mm: np.ndarray, kind: str, degree: float, primitive: Prim
 
     `method`: exact, learnt, or the path of a `breastplan.model/1` file of one of kind's conditions."""
     r = deform_by_degree(local_mm, kind, degree, method=method, primitive=primitive)
-    details = {"kind": kind, "degree": degree, "condition": r.condition.name, "t": float(r.t),
-               "params": [float(v) for v in r.params], "degree_reached": r.degree_reached}
+    details = {"kind": kind, "degree": degree, "condition": r.condition.name,
+               "t": float(r.t) if r.lattice is None else None, "params": [float(v) for v in r.params],
+               "degree_reached": r.degree_reached, "model": "statistical" if r.lattice is not None else "parametric"}
+    if r.lattice is not None:
+        return Change(change_name(kind, degree), ((kind, degree),), Deformation(), (details,), (r.lattice,))
     return Change(change_name(kind, degree), ((kind, degree),), Deformation.single(kind, r.params), (details,))
 
 
@@ -48,4 +54,5 @@ def combine(changes: list[Change]) -> Change:
         for kind, _ in change.requested:
             deformation = deformation.plus(kind, change.deformation.params(kind))
     requested = tuple(r for c in changes for r in c.requested)
-    return Change("combined", requested, deformation, tuple(d for c in changes for d in c.details))
+    return Change("combined", requested, deformation, tuple(d for c in changes for d in c.details),
+                  tuple(f for c in changes for f in c.fields))

@@ -74,7 +74,7 @@ class SidePlan:
         return np.linalg.inv(self.scan.camera_to_breast)
 
     def planned(self, change: Change) -> PlannedChange:
-        return PlannedChange(change.deformation, self.primitive, self.to_primitive)
+        return PlannedChange(change.deformation, self.primitive, self.to_primitive, fields=change.fields)
 
     @cached_property
     def surface_input(self) -> np.ndarray:
@@ -166,7 +166,7 @@ def method_for(method: str, kind: str) -> str:
         return method
     from breastplan.model_file import load_model
 
-    return method if load_model(Path(method)).meta.get("kind") == kind else "exact"
+    return method if kind in load_model(Path(method)).kinds else "exact"
 
 
 def _cases_of(source: Path, folder: Path, options: PlanOptions) -> dict[str, Case]:

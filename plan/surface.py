@@ -1,6 +1,7 @@
 """A planned change carried onto the patient's own surface, blended into the chest around the breast.
 
-The change is a global deformation of the fitted breast (docs/model.md §3) in its primitive frame.
+The change is a global deformation of the fitted breast (docs/model.md §3) in its primitive frame,
+followed by the FFD lattices of a statistical model, if any.
 Points of the breast's footprint (the base superellipse of semi-axes a1..a4) move as the model
 moves; beyond it the displacement fades to zero over a band of BAND footprint radii, with a C²
 quintic step, so that the changed breast meets the unchanged chest without a step.
@@ -19,6 +20,7 @@ import numpy as np
 from breastplan import Primitive, to_mm, to_model_units, transform_points
 from breastplan.units import MM_PER_MU
 from breastplan.deform.global_deformations import Deformation
+from breastplan.deform.lattice import Lattice
 
 BAND = 0.5
 """Width of the blending band outside the footprint, in footprint radii."""
@@ -44,6 +46,7 @@ class PlannedChange:
     primitive: Primitive
     to_primitive: np.ndarray          # (4, 4)
     band: float = BAND
+    fields: tuple[Lattice, ...] = ()  # FFD lattices applied after the deformation (mm, primitive frame)
 
     def footprint_radius(self, local_mm: np.ndarray) -> np.ndarray:
         """Normalised radius of primitive-frame points over the base superellipse (1 on its rim)."""
@@ -68,7 +71,7 @@ class PlannedChange:
         moving = w > 0
         if moving.any():
             near = local[moving]
-            moved = to_mm(self._seamless(to_model_units(near)))
+            moved = self._lattices(to_mm(self._seamless(to_model_units(near))))
             out[moving] = (moved - near) * w[moving, None] @ self.to_primitive[:3, :3]   # back by Rᵀ
         return out
 
@@ -86,8 +89,13 @@ class PlannedChange:
         fade = 1.0 - smoothstep(p_mu[:, 1] / (SEAM * self.primitive.a3))
         return rest.apply(p_mu + (lifted - p_mu) * fade[:, None], self.primitive)
 
+    def _lattices(self, local_mm: np.ndarray) -> np.ndarray:
+        for lattice in self.fields:
+            local_mm = lattice(local_mm)
+        return local_mm
+
     def model(self, vertices_mm) -> np.ndarray:
         """Input-frame vertices of the fitted model moved by the full change (no blending)."""
         local = transform_points(self.to_primitive, np.asarray(vertices_mm, dtype=float))
-        moved = to_mm(self.deformation.apply(to_model_units(local), self.primitive))
+        moved = self._lattices(to_mm(self.deformation.apply(to_model_units(local), self.primitive)))
         return transform_points(np.linalg.inv(self.to_primitive), moved)

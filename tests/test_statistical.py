@@ -204,3 +204,19 @@ def test_the_quick_study_writes_its_report_with_the_thesis_beside_ours(cli, tmp_
     assert thesis and thesis[0]["thesis_hausdorff_mean_pct"] == 210.76
     assert "Table 5.8" in (tmp_path / "study" / "report.md").read_text()
     assert StudyPlan.quick_plan().runs()[0][1].lattice == 5
+
+
+def test_plan_with_a_statistical_model_lowers_her_nipples(cli, trained, tmp_path):
+    """On the bundled realistic patient, a ptosis model learnt from synthetic pairs plans ptosis (the
+    nipple drops, its degree near the one asked for); the other kinds are solved exactly."""
+    tmp, _ = trained
+    res = run(cli, "plan", "--method", tmp / "model.npz", "--deform", "ptosis:5", "--deform", "turn:2",
+              "--out", tmp_path / "case", "--json")
+    assert res.returncode == 0, res.stderr
+    record = json.loads((tmp_path / "case" / "plan.json").read_text())
+    measures = record["measures"]
+    for side, r in record["sides"].items():
+        details = {d["kind"]: d for c in r["changes"] if c["name"] != "combined" for d in c["details"]}
+        assert details["ptosis"]["model"] == "statistical" and details["turn"]["model"] == "parametric"
+        assert abs(details["ptosis"]["degree_reached"] - 5) < 1.0
+        assert measures["after"][side]["nipple_below_notch_mm"] > measures["before"][side]["nipple_below_notch_mm"] + 2
