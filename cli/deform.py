@@ -79,14 +79,17 @@ def deform(
         extra = {"params": {n: params.get(n, 0.0) for n in KIND_PARAMS[kind]}}
     else:
         from breastplan.deform.by_degree import deform_by_degree
+        from breastplan.learn.field_file import by_degree
 
         if model is not None:                                   # a statistical model works in the breast frame
             from breastplan import require_file
 
             method = str(require_file(model, "statistical model file"))
         try:
-            result = deform_by_degree(local if model is None else geometry.points, kind, degree, condition=condition,
-                                      method=method, primitive=prim)
+            if model is None:
+                result = deform_by_degree(local, kind, degree, condition=condition, method=method, primitive=prim)
+            else:
+                result = by_degree(geometry.points, kind, degree, method=method, primitive=prim)
         except ValueError as exc:
             raise usage_error(str(exc), "--degree") from None
         moved, params = result.points_mm, dict(zip(KIND_PARAMS[kind], result.params))

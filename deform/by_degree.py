@@ -37,7 +37,7 @@ class ByDegree:
     t: float                    # position on the condition's line
     params: np.ndarray          # the condition's kind's parameters, model units
     degree_reached: float       # continuous degree of the result (docs/model.md §5)
-    lattice: Lattice | None = None   # a statistical model's deformation (mm, the points' frame)
+    lattice: Lattice | None = None   # a statistical model's deformation (mm, the points' frame); then t is NaN
 
 
 def slug(condition: Condition) -> str:
@@ -72,9 +72,8 @@ def deform_by_degree(points_mm, kind: str, degree: float, *, condition: str | No
     """Deform a breast (mm, breast frame) to `degree` ∈ [1, 8] of `kind` along `condition`.
 
     `method`: exact, learnt (the condition's model in `models`), or the path of a `breastplan.model/1`
-    file (`.npz`): a parametric model trained for one condition of `kind` (whose condition is then the
-    default), or a statistical one (`train-statistical`), which moves the points by its predicted
-    FFD field (its result has no position t or parameters: NaN and none)."""
+    file (`.npz`) trained for one condition of `kind`, whose condition is then the default.
+    (`learn.field_file.by_degree` also takes statistical model files.)"""
     if method not in METHODS and not str(method).endswith(".npz"):
         raise ValueError(f"unknown method '{method}'; choose one of {', '.join(METHODS)} or a model file")
     given = None if method in METHODS else load_model(Path(method))
@@ -82,22 +81,15 @@ def deform_by_degree(points_mm, kind: str, degree: float, *, condition: str | No
     if not 1.0 <= degree <= DD:
         raise ValueError(f"the degree must lie in [1, {DD}], got {degree:g}")
     p_mu = to_model_units(np.asarray(points_mm, dtype=float))
-    if given is not None and given.meta.get("model") == "statistical":
-        from breastplan.learn.field_file import load_field_model
-
-        lattice = load_field_model(Path(method)).deformation(np.asarray(points_mm, dtype=float), kind, degree)
-        moved_mm = lattice(points_mm)
-        return ByDegree(moved_mm, cond, method, float("nan"), np.zeros(0),
-                        _reached(cond, p_mu, to_model_units(moved_mm), primitive), lattice)
     if method == "exact":
         t = solve_degree(p_mu, cond, DD, degree, primitive).t
     else:
         t = learnt_position(given or load_model(models / f"{slug(cond)}.npz"), points_mm, kind, degree)
     params = cond.at(t)
     moved = apply_kind(p_mu, kind, params, primitive)
-    return ByDegree(to_mm(moved), cond, method, t, params, _reached(cond, p_mu, moved, primitive))
+    return ByDegree(to_mm(moved), cond, method, t, params, degree_reached(cond, p_mu, moved, primitive))
 
 
-def _reached(cond: Condition, p_mu, moved_mu, primitive) -> float:
+def degree_reached(cond: Condition, p_mu, moved_mu, primitive) -> float:
     """The continuous degree of a breast moved from p_mu to moved_mu (model units) on `cond`."""
     return float(continuous_degree(condition_extent(cond, p_mu, moved_mu, primitive), reference_extents(cond, DD)))

@@ -13,7 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from breastplan import ArtefactError
+from breastplan import ArtefactError, to_model_units
+from breastplan.deform.by_degree import ByDegree, deform_by_degree, degree_reached, pick_condition
+from breastplan.deform.names import DD
 from breastplan.model_file import ModelFile, load_model
 
 from breastplan.deform.lattice import Lattice
@@ -50,6 +52,21 @@ class FieldFile:
         """The lattice (mm, the points' frame) that makes `kind` at `degree` of her breast points."""
         before = fit_before(points_mm, self.lattice)
         return field_lattice(self.field(before, kind, degree), before.box(self.lattice))
+
+
+def by_degree(points_mm, kind: str, degree: float, *, method: str = "exact", primitive=None) -> ByDegree:
+    """`deform_by_degree` (mm, the points' frame), or, when `method` is a statistical model file, the
+    breast moved by its FFD lattice (the result's `lattice`; no position t or parameters)."""
+    if not (str(method).endswith(".npz") and is_field_model(load_model(Path(method)))):
+        return deform_by_degree(points_mm, kind, degree, method=method, primitive=primitive)
+    cond = pick_condition(kind)
+    if not 1.0 <= degree <= DD:
+        raise ValueError(f"the degree must lie in [1, {DD}], got {degree:g}")
+    points_mm = np.asarray(points_mm, dtype=float)
+    lattice = load_field_model(method).deformation(points_mm, kind, degree)
+    moved = lattice(points_mm)
+    reached = degree_reached(cond, to_model_units(points_mm), to_model_units(moved), primitive)
+    return ByDegree(moved, cond, str(method), float("nan"), np.zeros(0), reached, lattice)
 
 
 def is_field_model(model: ModelFile) -> bool:

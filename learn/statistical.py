@@ -27,6 +27,9 @@ from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import MinMaxScaler, PolynomialFeatures
 
 REGRESSORS = ("ridge", "kernel-ridge", "gp", "mlp")
+THESIS_EPOCHS = 500
+"""L-BFGS iterations of the thesis's network, a budget in iterations (never in seconds): each one maps
+hundreds of features to hundreds of outputs for every training pair."""
 EXPORTABLE = ("ridge", "kernel-ridge", "mlp")
 """Regressors a `breastplan.model/1` file holds (a Gaussian process is studied, not shipped)."""
 
@@ -40,7 +43,7 @@ def scaled(regressor, poly: int = 0) -> TransformedTargetRegressor:
 def thesis_mlp(hidden: int, seed: int = 0) -> TransformedTargetRegressor:
     """The thesis's network: one hidden layer of `hidden` neurons, features and targets in [0, 1]
     (scaled conjugate gradient in the thesis; L-BFGS here, the closest full-batch method)."""
-    return scaled(MLPRegressor(hidden_layer_sizes=(hidden,), solver="lbfgs", max_iter=2000, random_state=seed))
+    return scaled(MLPRegressor(hidden_layer_sizes=(hidden,), solver="lbfgs", max_iter=THESIS_EPOCHS, random_state=seed))
 
 
 class FieldModel(RegressorMixin, BaseEstimator):

@@ -11,7 +11,7 @@ from .metrics import summary, ttest
 from .report import DIRECTIONS, _f, _plain, _write_text
 from .statistical_study import SPIKE, THESIS_CONDITION, THESIS_HAUSDORFF, StatResult
 
-FIELD_ROW = "FFD fit"
+FIELD_ROW, UNCHANGED_ROW = "FFD fit", "no change"
 THESIS_ROW = "MLP (thesis)"
 
 
@@ -59,6 +59,7 @@ def write_report(out: Path, results: list[StatResult], meta: dict) -> dict:
                      "euclidean": _mean(b, "euclidean"), "hausdorff": _mean(b, "hausdorff"),
                      "hausdorff_max": float(np.max(b.distances["modelled_to_original_hausdorff"])),
                      "spike_free_pct": b.spike_free_pct, "field": {m: _mean(pick[FIELD_ROW], m) for m in ("euclidean", "hausdorff")},
+                     "unchanged": {m: _mean(pick[UNCHANGED_ROW], m) for m in ("euclidean", "hausdorff")},
                      "thesis_model": ({m: _mean(pick[THESIS_ROW], m) for m in ("euclidean", "hausdorff")}
                                       if THESIS_ROW in pick else None),
                      "thesis_hausdorff": THESIS_HAUSDORFF.get(n) if cond == THESIS_CONDITION else None})
@@ -78,19 +79,21 @@ def markdown(report: dict, results: list[StatResult]) -> str:
     lines = ["# breastplan statistical study report", "", f"Run: {json.dumps(report['meta'])}", "",
              "Database S, test split, modelled ⇒ original, % of ‖o‖ (docs/model.md §7). Each pair is an FFD",
              "displacement field, fitted from corresponding points or by closest points; *FFD fit* applies each",
-             "test pair's own fitted field (the floor of every model). *Best*: the learnt row with the lowest",
+             "test pair's own fitted field (the floor of every model), *no change* the original breast (the ceiling). *Best*: the learnt row with the lowest",
              f"cross-validated field RMSE. *Spike-free*: share of test breasts whose largest vertex error is at most {SPIKE:g}×",
              "their median vertex error (distances to the true surface).", "",
              "## Headline (thesis Table 5.8 beside ours)", "",
              "| condition | CP | fit | thesis Hausd. µ | thesis MLP (ours) Eucl. µ | Hausd. µ | best | best Eucl. µ | "
-             "best Hausd. µ | best Hausd. max | spike-free % | FFD fit Eucl. µ | FFD fit Hausd. µ |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "best Hausd. µ | best Hausd. max | spike-free % | FFD fit Eucl. µ | FFD fit Hausd. µ | no change Eucl. µ | "
+             "no change Hausd. µ |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for h in report["best"]:
         t = h["thesis_model"] or {}
         lines.append(f"| {h['condition']} | {h['control_points']} | {h['fit']} | {_f(h['thesis_hausdorff'])} | "
                      f"{_f(t.get('euclidean'))} | {_f(t.get('hausdorff'))} | {h['best']} | {_f(h['euclidean'])} | "
                      f"{_f(h['hausdorff'])} | {_f(h['hausdorff_max'])} | {_f(h['spike_free_pct'])} | "
-                     f"{_f(h['field']['euclidean'])} | {_f(h['field']['hausdorff'])} |")
+                     f"{_f(h['field']['euclidean'])} | {_f(h['field']['hausdorff'])} | "
+                     f"{_f(h['unchanged']['euclidean'])} | {_f(h['unchanged']['hausdorff'])} |")
     lines += ["", "## Every method", "",
               "| condition | CP | fit | method | CV field RMSE | field RMSE | M⇒O Eucl. µ | M⇒O Hausd. µ | Hausd. max | "
               "O⇒M Eucl. µ | O⇒M Hausd. µ | spike-free % | hyper-parameters |",

@@ -7,7 +7,8 @@ the model of all types); on the test split each predicted field moves the origin
 ("Modelled"), which is compared with the truly deformed one ("Original") by the indirect metrics
 (docs/model.md §7) and by the largest/median ratio of its vertex errors (local spikes).
 
-Rows: "FFD fit" (each test pair's own fitted field: the floor every model stands on), the
+Rows: "no change" (the original breast as the prediction: the ceiling), "FFD fit" (each test
+pair's own fitted field: the floor every model stands on), the
 thesis's MLP (125 and 216 control points, as many hidden neurons as control points, and a
 cross-validated sweep), and our FieldModel with each regressor (hyper-parameters by 4-fold
 cross-validation grouped by breast). Features and targets are scaled on the training split.
@@ -43,7 +44,7 @@ GRIDS = {
 }
 QUICK_GRIDS = {"ridge": {"n_modes": (6,)}, "kernel-ridge": {"n_modes": (6,), "gamma": (1.0,)},
                "gp": {"n_modes": (6,)}, "mlp": {"n_modes": (6,)}}
-HIDDEN = (0.2, 1.0, 2.0)
+HIDDEN = (0.2, 0.5, 1.0)
 """The thesis MLP's sweep: hidden neurons as multiples of the control points."""
 QUICK_BREASTS = 4
 FITS = ("corresponding", "closest")
@@ -149,7 +150,8 @@ def run_condition(pairs: Pairs, quick: bool, thesis: bool, advance=lambda: None)
     """The rows of one condition on one lattice (module docstring); `thesis` adds the thesis's MLPs."""
     train, test, ds = pairs.train, pairs.test, pairs.dataset
     Y, groups = pairs.fields[train], ds.breast[train]
-    results = [evaluate(pairs, "FFD fit", {}, float("nan"), pairs.fields[test])]
+    results = [evaluate(pairs, "no change", {}, float("nan"), np.zeros_like(pairs.fields[test])),
+               evaluate(pairs, "FFD fit", {}, float("nan"), pairs.fields[test])]
     advance()
     if thesis:
         X, Xt = pairs.features(train, thesis=True), pairs.features(test, thesis=True)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from breastplan import Primitive
-from breastplan.deform.by_degree import deform_by_degree
+from breastplan.learn.field_file import by_degree
 from breastplan.deform.global_deformations import Deformation
 from breastplan.deform.lattice import Lattice
 
@@ -38,7 +38,7 @@ def solve_change(local_mm: np.ndarray, kind: str, degree: float, primitive: Prim
     """The change (kind, degree) of the breast `local_mm` (fitted surface, mm, primitive frame).
 
     `method`: exact, learnt, or the path of a `breastplan.model/1` file of one of kind's conditions."""
-    r = deform_by_degree(local_mm, kind, degree, method=method, primitive=primitive)
+    r = by_degree(local_mm, kind, degree, method=method, primitive=primitive)
     details = {"kind": kind, "degree": degree, "condition": r.condition.name,
                "t": float(r.t) if r.lattice is None else None, "params": [float(v) for v in r.params],
                "degree_reached": r.degree_reached, "model": "statistical" if r.lattice is not None else "parametric"}

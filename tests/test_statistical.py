@@ -220,3 +220,10 @@ def test_plan_with_a_statistical_model_lowers_her_nipples(cli, trained, tmp_path
         assert details["ptosis"]["model"] == "statistical" and details["turn"]["model"] == "parametric"
         assert abs(details["ptosis"]["degree_reached"] - 5) < 1.0
         assert measures["after"][side]["nipple_below_notch_mm"] > measures["before"][side]["nipple_below_notch_mm"] + 2
+
+
+def test_the_command_offers_exactly_the_regressors_a_model_file_holds():
+    from breastplan.cli.train_statistical import REGRESSORS
+    from breastplan.learn.statistical import EXPORTABLE
+
+    assert REGRESSORS == EXPORTABLE
