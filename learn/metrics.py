@@ -108,30 +108,13 @@ def indirect_metrics(originals, modelled, threads: int | None = None) -> dict[st
     return dict(zip(INDIRECT_KEYS, values.T.copy()))
 
 
-def surface_errors(truth: np.ndarray, grid: tuple[int, int], modelled: np.ndarray) -> np.ndarray:
-    """(M,) distance (mm) of each modelled point to the true surface: the triangle mesh of `truth`,
-    a breast sampled on the (u, v) `grid` (`Primitive.sample` order, nipple row last), so that the
-    error does not count the spacing of the truth's samples."""
-    import open3d as o3d
-
-    from breastplan.primitive import grid_faces
-
-    n_u, n_v = grid
-    vertices = np.vstack([truth[:(n_u - 1) * n_v], truth[-1:]]).astype(np.float32)
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(vertices), o3d.core.Tensor(grid_faces(n_u - 1, n_v, False).astype(np.uint32)))
-    hit = scene.compute_closest_points(o3d.core.Tensor(np.asarray(modelled, np.float32)))
-    return np.linalg.norm(hit["points"].numpy() - modelled, axis=1)
-
-
-def spike_ratios(truths: np.ndarray, grid: tuple[int, int], modelled: np.ndarray) -> np.ndarray:
-    """(n,) largest / median `surface_errors` of each modelled breast: a smooth error field stays
-    within a few times its median; a control point gone astray makes a local spike far above it."""
-    ratios = []
-    for truth, m in zip(truths, modelled):
-        e = surface_errors(truth, grid, m)
-        ratios.append(e.max() / max(float(np.median(e)), 1e-9))
-    return np.array(ratios)
+def spike_ratios(truths: np.ndarray, modelled: np.ndarray) -> np.ndarray:
+    """(n,) largest / median vertex error of each modelled breast, the vertex error being the distance
+    (mm) of each modelled point to its true position (`truths` correspond to `modelled` point for
+    point). A smooth error field stays within a few times its median; a control point gone astray
+    makes a local spike far above it."""
+    errors = np.linalg.norm(np.asarray(modelled, float) - np.asarray(truths, float), axis=-1)
+    return errors.max(axis=1) / np.maximum(np.median(errors, axis=1), 1e-12)
 
 
 def summary(values) -> dict[str, float]:

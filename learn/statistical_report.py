@@ -81,7 +81,7 @@ def markdown(report: dict, results: list[StatResult]) -> str:
              "displacement field, fitted from corresponding points or by closest points; *FFD fit* applies each",
              "test pair's own fitted field (the floor of every model), *no change* the original breast (the ceiling). *Best*: the learnt row with the lowest",
              f"cross-validated field RMSE. *Spike-free*: share of test breasts whose largest vertex error is at most {SPIKE:g}×",
-             "their median vertex error (distances to the true surface).", "",
+             "their median vertex error (the distance of each moved point to its true position).", "",
              "## Headline (thesis Table 5.8 beside ours)", "",
              "| condition | CP | fit | thesis Hausd. µ | thesis MLP (ours) Eucl. µ | Hausd. µ | best | best Eucl. µ | "
              "best Hausd. µ | best Hausd. max | spike-free % | FFD fit Eucl. µ | FFD fit Hausd. µ | no change Eucl. µ | "

@@ -143,7 +143,7 @@ def evaluate(pairs: Pairs, method: str, hyper: dict, cv: float, predicted: np.nd
     modelled = pairs.modelled(test, predicted)
     return StatResult(ds.condition.name, pairs.options.lattice, fit_name(pairs.options), method, hyper, cv,
                       field_rmse_pct(predicted, pairs.fields[test]), indirect_metrics(truth, modelled),
-                      spike_ratios(truth, ds.database.grid, modelled))
+                      spike_ratios(truth, modelled))
 
 
 def run_condition(pairs: Pairs, quick: bool, thesis: bool, advance=lambda: None) -> list[StatResult]:

@@ -170,3 +170,15 @@ def test_six_plot_writes_png_atomically(tmp_path):
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert image.imread(path).shape[:2] == (550, 900)           # 9 × 5.5 in at 100 dpi
     assert [p.name for p in tmp_path.iterdir()] == ["six.png"]  # no temporary file left
+
+
+def test_spike_ratio_is_one_for_a_uniform_error_and_large_for_one_stray_point():
+    from breastplan.learn.metrics import spike_ratios
+
+    truth = np.random.default_rng(0).normal(size=(2, 200, 3)) * 50
+    shifted = truth + [1.0, -2.0, 0.5]                  # every vertex off by the same vector
+    stray = shifted.copy()
+    stray[1, 7] += [0.0, 0.0, 40.0]                     # one vertex of the second breast astray
+    assert np.allclose(spike_ratios(truth, shifted), 1.0)
+    ratios = spike_ratios(truth, stray)
+    assert ratios[0] == pytest.approx(1.0) and ratios[1] > 10
