@@ -5,24 +5,34 @@ The page draws the torso (grey points), each original breast (dark points) and t
 it, a degree slider per planned kind, the combination as planned, front/side/top views, the
 measures before and after with the asymmetry between sides, the fits' quality, and the inputs,
 options and versions. Geometry travels as base64 typed arrays (`views`); a small script decodes
-it and restyles the plot when a slider moves. The page is painted first (`window.breastplanShown`), then the 3-D scene is built;
-`window.breastplanState` names the state shown, `window.breastplanDrawn` the state last drawn,
-and `window.breastplanReady` turns true once the plot is first drawn.
+it and restyles the plot when a slider moves.
+
+The page opens on a poster, a front view of the first state drawn here (a PNG), above its tables:
+plain HTML, painted before any heavy script runs. plotly.js and the data wait in inert blocks
+(`<script type="text/plain">`, `application/json`) until the poster is painted
+(`window.breastplanShown`, performance mark `breastplan-shown`); then plotly.js runs, builds the 3-D
+scene under the poster and removes it once drawn (`window.breastplanReady`, mark `breastplan-ready`).
+`window.breastplanState` names the state shown, `window.breastplanDrawn` the state last drawn.
 """
 from __future__ import annotations
 
 import base64
 import html
+import io
 import json
+import re
 from importlib import metadata
 
 import numpy as np
 
 from .job import Plan
-from .views import Views, build_views, quantise
+from .views import State, Views, build_views, quantise
 
-SKIN = "rgb(236,188,160)"
+SKIN_RGB = (236, 188, 160)
+SKIN = "rgb({},{},{})".format(*SKIN_RGB)
 TITLE = "breastplan — surgical plan"
+POSTER_PX = (760, 640)
+"""The poster's width and height, px: those of the plot it stands in for."""
 
 
 def _b64(array: np.ndarray, dtype: str) -> str:
@@ -34,7 +44,7 @@ def _points(p: np.ndarray) -> dict:
 
 
 def page_data(plan: Plan, views: Views) -> dict:
-    """The JSON the page's script reads: geometry, states and sliders."""
+    """The JSON the page's script reads: geometry, states, sliders and the state it opens on."""
     sides = list(plan.sides)
     patch = views.patch
     states = []
@@ -52,8 +62,60 @@ def page_data(plan: Plan, views: Views) -> dict:
             "scans": {s: _points(views.scans[s]) for s in sides},
             "meshes": {s: {**_points(views.meshes[s][0]), "faces": _b64(views.meshes[s][1], "<i4"),
                            "m": int(len(views.meshes[s][1]))} for s in sides},
-            "states": states, "sliders": sliders, "cmax": max([1.0] + [float(np.linalg.norm(st.torso - patch, axis=1).max(
-                initial=0.0)) for st in views.states]), "combined": len(plan.options.changes) > 1, "skin": SKIN}
+            "states": states, "sliders": sliders, "cmax": cmax(views), "first": first_state(plan, views).key,
+            "skin": SKIN}
+
+
+def cmax(views: Views) -> float:
+    """The top of the colour scale of the moved surface, mm: its largest move, at least 1."""
+    return max([1.0] + [float(np.linalg.norm(st.torso - views.patch, axis=1).max(initial=0.0)) for st in views.states])
+
+
+def first_state(plan: Plan, views: Views) -> State:
+    """The state the page opens on: the combination as planned, or the one planned change."""
+    if len(plan.options.changes) > 1:
+        return next(st for st in views.states if st.key == "combined")
+    kind, degree = plan.options.changes[0]
+    return next(st for st in views.states if st.kind == kind and st.degree == degree)
+
+
+def poster_png(views: Views, state: State, top: float) -> bytes:
+    """PNG (POSTER_PX) of `state` seen from the front (x right, z up, equal mm scales): the torso grey,
+    the surface the plan moves coloured by how far (viridis, 0..`top` mm), each scanned breast dark
+    and each planned breast a shaded skin-coloured surface over it."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    width, height = POSTER_PX
+    fig = Figure(figsize=(width / 100, height / 100), dpi=100, facecolor="white")
+    FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.01, 0.01, 0.98, 0.98))
+    ax.set_axis_off()
+    ax.scatter(views.torso[:, 0], views.torso[:, 2], s=3.0, c="#b9b9b9", linewidths=0)
+    moved = np.linalg.norm(state.torso - views.patch, axis=1)
+    ax.scatter(state.torso[:, 0], state.torso[:, 2], s=5.0, c=moved, cmap="viridis", vmin=0.0, vmax=top,
+               linewidths=0)
+    for side, scan in views.scans.items():
+        ax.scatter(scan[:, 0], scan[:, 2], s=3.0, c="#2b2b2b", linewidths=0)
+        ax.add_collection(_surface(state.mesh[side], views.meshes[side][1]))
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    out = io.BytesIO()
+    fig.savefig(out, format="png", pil_kwargs={"compress_level": 3})
+    return out.getvalue()
+
+
+def _surface(vertices: np.ndarray, faces: np.ndarray):
+    """The mesh's triangles seen from the front, far ones first, lit from the viewer (−y)."""
+    from matplotlib.collections import PolyCollection
+
+    tri = vertices[faces]                                                   # (F, 3 corners, xyz) mm
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    facing = np.abs(normal[:, 1]) / np.maximum(np.linalg.norm(normal, axis=1), 1e-12)
+    light = (0.45 + 0.55 * facing)[:, None]
+    order = np.argsort(-tri[:, :, 1].mean(axis=1))
+    return PolyCollection(tri[order][:, :, [0, 2]], facecolors=np.array(SKIN_RGB) / 255 * light[order],
+                          edgecolors="none", antialiased=False, alpha=0.8)
 
 
 def versions() -> dict[str, str]:
@@ -83,12 +145,12 @@ def render(plan: Plan, record: dict) -> str:
     from plotly.offline import get_plotlyjs
 
     views = build_views(plan)
-    data = json.dumps(page_data(plan, views), separators=(",", ":"))
-    return (_TEMPLATE.replace("%TITLE%", TITLE)
-            .replace("%PLOTLY%", get_plotlyjs())
-            .replace("%DATA%", data.replace("</", "<\\/"))
-            .replace("%TABLES%", tables(record))
-            .replace("%SCRIPT%", _SCRIPT))
+    data = page_data(plan, views)
+    poster = poster_png(views, first_state(plan, views), data["cmax"])
+    parts = {"TITLE": TITLE, "POSTER": base64.b64encode(poster).decode("ascii"), "TABLES": tables(record),
+             "SCRIPT": _SCRIPT, "PLOTLY": get_plotlyjs(),
+             "DATA": json.dumps(data, separators=(",", ":")).replace("</", "<\\/")}
+    return re.sub(r"%([A-Z]+)%", lambda m: parts[m[1]], _TEMPLATE)
 
 
 def tables(record: dict) -> str:
@@ -135,7 +197,9 @@ _TEMPLATE = """<!DOCTYPE html>
 body{font-family:system-ui,sans-serif;margin:0;color:#222;background:#fafafa}
 header{padding:10px 16px;background:#3b3b52;color:#fff}header h1{margin:0;font-size:20px}
 main{display:flex;flex-wrap:wrap;gap:12px;padding:12px}
-#plot{width:760px;height:640px;background:#fff;border:1px solid #ddd}
+#plot{position:relative;width:760px;height:640px;background:#fff;border:1px solid #ddd}
+#poster{position:absolute;inset:0;z-index:10;margin:0;background:#fff}#poster img{display:block}
+#poster figcaption{position:absolute;left:8px;bottom:6px;font-size:13px;color:#555}
 #controls{min-width:300px;max-width:420px}
 .slider{margin:8px 0}.slider label{display:block;font-weight:600}.slider input{width:260px}
 button{margin:2px;padding:4px 10px}button.on{background:#3b3b52;color:#fff}
@@ -144,7 +208,8 @@ td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4p
 #tables{padding:0 16px 16px}
 </style></head><body>
 <header><h1>%TITLE%</h1></header>
-<main><div id="plot"><p id="drawing" style="padding:16px">Drawing the 3-D view…</p></div>
+<main><div id="plot"><figure id="poster"><img src="data:image/png;base64,%POSTER%" width="760" height="640" alt="Front view of the plan">
+<figcaption>Front view as planned; the interactive 3-D view is being drawn…</figcaption></figure></div>
 <div id="controls">
 <div><b>View</b><br><button data-view="front">Front</button><button data-view="side">Side</button><button data-view="top">Top</button></div>
 <div id="sliders"></div>
@@ -153,9 +218,9 @@ td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4p
 <p>Dark points: the scan of the breast. Skin-coloured surface: the planned breast. Coloured points: how far the plan moves the patient's surface (mm).</p>
 </div></main>
 <div id="tables">%TABLES%</div>
-<script>%PLOTLY%</script>
-<script>const PLAN = %DATA%;</script>
 <script>%SCRIPT%</script>
+<script type="text/plain" id="plotly-js">%PLOTLY%</script>
+<script type="application/json" id="plan-data">%DATA%</script>
 </body></html>
 """
 
@@ -166,31 +231,40 @@ function split(f,n,T){T=T||Float32Array;const x=new T(n),y=new T(n),z=new T(n);f
 function pts(p){return split(b64(p.xyz,Float32Array),p.n);}
 function moved(base,n,d){const q=b64(d.d,Int8Array);const f=new Float32Array(3*n);let m=new Float32Array(n);
  for(let i=0;i<n;i++){let s=0;for(let k=0;k<3;k++){const v=q[3*i+k]*d.scale;f[3*i+k]=base[3*i+k]+v;s+=v*v;}m[i]=Math.sqrt(s);}return [split(f,n),m];}
-const P=PLAN, traces=[], idx={};
+const painted=()=>new Promise(r=>requestAnimationFrame(()=>setTimeout(r,0)));   // after the next frame is painted
+const shown=document.querySelector('#poster img').decode().catch(()=>{}).then(painted)
+ .then(()=>{window.breastplanShown=true;performance.mark('breastplan-shown');});   // poster and tables painted
+const loaded=new Promise(r=>addEventListener('load',()=>setTimeout(r,0)));   // plotly.js and the data read; not in the event
+Promise.all([shown,loaded]).then(()=>{
+ const js=document.createElement('script');js.textContent=document.getElementById('plotly-js').textContent;
+ document.head.appendChild(js);
+ draw(JSON.parse(document.getElementById('plan-data').textContent));
+});
+function draw(P){
+const traces=[], idx={};
 const torso=pts(P.torso);
 traces.push({type:'scatter3d',mode:'markers',name:'torso',x:torso[0],y:torso[1],z:torso[2],marker:{size:1.4,color:'#b9b9b9'},hoverinfo:'skip'});
-const patchBase=b64(P.patch.xyz,Float32Array), patch=split(patchBase,P.patch.n);
+const patchBase=b64(P.patch.xyz,Float32Array);
 idx.patch=traces.length;
-traces.push({type:'scatter3d',mode:'markers',name:'moved surface',x:patch[0],y:patch[1],z:patch[2],
- marker:{size:1.8,color:new Float32Array(P.patch.n),colorscale:'Viridis',cmin:0,cmax:P.cmax,colorbar:{title:{text:'mm'},len:0.5,x:0.98}},hovertemplate:'%{marker.color:.1f} mm<extra></extra>'});
+traces.push({type:'scatter3d',mode:'markers',name:'moved surface',
+ marker:{size:1.8,colorscale:'Viridis',cmin:0,cmax:P.cmax,colorbar:{title:{text:'mm'},len:0.5,x:0.98}},hovertemplate:'%{marker.color:.1f} mm<extra></extra>'});
 const meshBase={};
 for(const s of P.sides){
  const sc=pts(P.scans[s]);
  traces.push({type:'scatter3d',mode:'markers',name:s+' breast (scan)',x:sc[0],y:sc[1],z:sc[2],marker:{size:1.6,color:'#2b2b2b'},hoverinfo:'skip'});
- const m=P.meshes[s]; meshBase[s]=b64(m.xyz,Float32Array); const v=split(meshBase[s],m.n);
+ const m=P.meshes[s]; meshBase[s]=b64(m.xyz,Float32Array);
  const f=split(b64(m.faces,Int32Array),m.m,Int32Array);
  idx[s]=traces.length;
- traces.push({type:'mesh3d',name:s+' breast (planned)',x:v[0],y:v[1],z:v[2],i:f[0],j:f[1],k:f[2],color:P.skin,opacity:0.8,showlegend:true,
+ traces.push({type:'mesh3d',name:s+' breast (planned)',i:f[0],j:f[1],k:f[2],color:P.skin,opacity:0.8,showlegend:true,
   flatshading:false,lighting:{ambient:0.55,diffuse:0.7,specular:0.15},hoverinfo:'skip'});
 }
 const views={front:{eye:{x:0,y:-1.9,z:0.15},up:{x:0,y:0,z:1}},side:{eye:{x:1.9,y:-0.3,z:0.1},up:{x:0,y:0,z:1}},top:{eye:{x:0,y:-0.2,z:1.9},up:{x:0,y:1,z:0}}};
 const layout={margin:{l:0,r:0,t:0,b:0},showlegend:true,legend:{x:0,y:1},hovermode:false,
  scene:{aspectmode:'data',xaxis:{visible:false},yaxis:{visible:false},zaxis:{visible:false},camera:views.front}};
 const gd=document.getElementById('plot');
-function arrays(state){
+function arrays(state){   // the moving traces' coordinates (and the surface's colours) in `state`; null: the original
  const upd={x:[],y:[],z:[],'marker.color':[]};
- let col=new Float32Array(P.patch.n), pos=patch;
- if(state){[pos,col]=moved(patchBase,P.patch.n,state.torso);}
+ const [pos,col]=state?moved(patchBase,P.patch.n,state.torso):[split(patchBase,P.patch.n),new Float32Array(P.patch.n)];
  upd.x.push(pos[0]);upd.y.push(pos[1]);upd.z.push(pos[2]);upd['marker.color'].push(col);
  for(const s of P.sides){const v=state?moved(meshBase[s],P.meshes[s].n,state.mesh[s])[0]:split(meshBase[s],P.meshes[s].n);
   upd.x.push(v[0]);upd.y.push(v[1]);upd.z.push(v[2]);upd['marker.color'].push(undefined);}
@@ -221,13 +295,14 @@ function planned(){for(const sl of P.sliders){const inp=document.getElementById(
  inp.value=sl.degrees.indexOf(sl.requested);inp.previousSibling.textContent=sl.kind+': degree '+sl.requested+' (planned)';}}
 document.getElementById('original').onclick=()=>show(null);
 const comb=document.getElementById('combined');
-if(P.combined){comb.onclick=()=>{planned();return show(byKey['combined']);};}else{comb.style.display='none';}
+if(byKey['combined']){comb.onclick=()=>{planned();return show(byKey['combined']);};}else{comb.style.display='none';}
 for(const b of document.querySelectorAll('button[data-view]'))b.onclick=()=>Plotly.relayout(gd,{'scene.camera':views[b.dataset.view]});
-const first=P.combined?byKey['combined']:P.states.find(st=>st.kind===P.sliders[0].kind&&st.degree===P.sliders[0].requested);
+const first=byKey[P.first];
 put(arrays(first));
 label(first);
-window.breastplanShown=true;   // the page (controls, tables) is painted before the 3-D scene is built
-requestAnimationFrame(()=>setTimeout(()=>{document.getElementById('drawing').remove();
- Plotly.newPlot(gd,traces,layout,{displaylogo:false,responsive:true}).then(()=>{window.breastplanDrawn=window.breastplanState;window.breastplanReady=true;});},0));
+Plotly.newPlot(gd,traces,layout,{displaylogo:false,responsive:true}).then(()=>{document.getElementById('poster').remove();
+ window.breastplanDrawn=window.breastplanState;return painted();})
+ .then(()=>{window.breastplanReady=true;performance.mark('breastplan-ready');});   // the 3-D scene painted
+}
 })();
 """

@@ -11,7 +11,10 @@ path is given to `Service`, so nothing is downloaded.
         with chromium() as b:
             seconds = b.open(tmp_path / "report.html", wait_for_js="window.breastplanReady === true")
             assert b.requests() == []
+            shown = b.timings()["breastplan-shown"]      # s from navigation start, the browser's clock
             b.screenshot(tmp_path / "report.png")
+            with b.scripts_off():                        # as with JavaScript off
+                b.open(tmp_path / "report.html")
 
 Timeouts here detect failures (a page that never becomes ready); they are not speed
 assertions.  The viewport is exactly `width` x `height` CSS pixels at device pixel ratio 1,
@@ -51,6 +54,24 @@ FLAGS = (
     "--disable-sync",
     "--disable-extensions",
 )
+
+# Milliseconds of the page's paint entries, largest contentful paint and marks. Paints are reported
+# when the frame is presented, some time after it is drawn: an observer gets those already reported
+# at once (buffered) and waits up to 1 s for first-contentful- and largest-contentful-paint.
+_TIMINGS = """new Promise(done => {
+  const out = {};
+  const finish = () => {
+    for (const e of performance.getEntriesByType('mark')) out[e.name] = e.startTime;
+    done(out);
+  };
+  const seen = new PerformanceObserver(list => {
+    for (const e of list.getEntries()) out[e.entryType === 'paint' ? e.name : e.entryType] = e.startTime;
+    if ('first-contentful-paint' in out && 'largest-contentful-paint' in out) finish();
+  });
+  for (const type of ['paint', 'largest-contentful-paint'])
+    if (PerformanceObserver.supportedEntryTypes.includes(type)) seen.observe({type, buffered: true});
+  setTimeout(finish, 1000);
+})"""
 
 # Requests that are not network traffic: inline data, blobs made by the page, blank frames.
 _NOT_NETWORK = ("data:", "blob:", "about:")
@@ -93,6 +114,7 @@ class Browser:
         self._page: str | None = None      # file:// URL of the page last opened
         self._logged: list[str] = []        # requests from the performance log since then
         self._console: list[str] = []       # SEVERE console messages since then
+        self._scripts = True                # whether pages run their scripts (and timers, frame callbacks)
 
     # -- loading -------------------------------------------------------------------------
     def open(self, path, wait_for_js: str | None = None, *,
@@ -169,6 +191,27 @@ class Browser:
         self._drain()
         return list(self._console)
 
+    @contextmanager
+    def scripts_off(self) -> Iterator["Browser"]:
+        """Pages opened inside run none of their own scripts, as in a browser with JavaScript off;
+        the harness's own calls (`js`, `rect`, `screenshot`) still work."""
+        self.driver.execute_cdp_cmd("Emulation.setScriptExecutionDisabled", {"value": True})
+        self._scripts = False
+        try:
+            yield self
+        finally:
+            self.driver.execute_cdp_cmd("Emulation.setScriptExecutionDisabled", {"value": False})
+            self._scripts = True
+
+    def timings(self) -> dict[str, float]:
+        """Seconds from navigation start, by the browser's own clock, of the page opened last: its
+        paint entries (first-paint, first-contentful-paint), its largest-contentful-paint (when it
+        had one: an image or text, not a WebGL canvas; waited for up to 1 s) and its performance
+        marks, by name.
+        Not inside `scripts_off` (it needs the page's timers)."""
+        assert self._scripts, "timings(): the page's timers do not run inside scripts_off()"
+        return {name: ms / 1e3 for name, ms in self.js(_TIMINGS).items()}
+
     # -- looking at it ---------------------------------------------------------------------
     def js(self, expr: str, *args):
         """Value of the JavaScript expression `expr` (`arguments[i]` are `args`); a Promise is awaited."""
@@ -182,8 +225,10 @@ class Browser:
         return round(r["left"]), round(r["top"]), round(r["right"]), round(r["bottom"])
 
     def screenshot(self, path) -> Path:
-        """Save the viewport as a PNG of width x height pixels, after the next frames are drawn."""
-        self.js("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
+        """Save the viewport as a PNG of width x height pixels, after the next frames are drawn
+        (inside `scripts_off`, where frame callbacks do not run: a frame drawn for the screenshot)."""
+        if self._scripts:
+            self.js("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
         path = Path(path)
         assert self.driver.save_screenshot(str(path)), f"could not save a screenshot to {path}"
         return path

@@ -105,3 +105,28 @@ def test_a_page_that_never_gets_ready_fails_clearly(browser, tmp_path):
         browser.open(page, wait_for_js="window.neverReady === true", timeout=1)
     with pytest.raises(AssertionError, match="no such file"):
         browser.open(tmp_path / "absent.html")
+
+
+def test_timings_are_the_pages_own_clock(browser, tmp_path):
+    """The page's paint entries, its largest paint (here its only text) and its marks, in seconds."""
+    page = _page(tmp_path / "marks.html", "<p>painted</p><script>performance.mark('start'); requestAnimationFrame("
+                 "() => setTimeout(() => { performance.mark('after-paint'); window.marked = true; }))</script>")
+    browser.open(page, wait_for_js="window.marked === true")
+    clock = browser.timings()
+    assert 0 < clock["start"] < clock["after-paint"]
+    assert 0 < clock["first-paint"] <= clock["first-contentful-paint"]
+    assert clock["largest-contentful-paint"] > 0
+
+
+def test_scripts_off_runs_none_of_the_pages_scripts(browser, tmp_path):
+    page = _page(tmp_path / "script.html", "<p id='p'>html</p><script>document.getElementById('p').textContent = 'js'"
+                 "</script>")
+    with browser.scripts_off():
+        browser.open(page)
+        assert browser.js("document.getElementById('p').textContent") == "html"
+        shot = np.asarray(Image.open(browser.screenshot(tmp_path / "off.png")).convert("L"))
+        assert shot.min() < 100                                            # the text is drawn
+        with pytest.raises(AssertionError, match="scripts_off"):
+            browser.timings()
+    browser.open(page)
+    assert browser.js("document.getElementById('p').textContent") == "js"

@@ -297,6 +297,36 @@ def _plot_pixels(png, box) -> np.ndarray:
 
 
 @requires_chromium
+def test_the_report_opens_on_a_picture_of_the_plan_and_its_measures_without_any_script(planned, tmp_path):
+    """The first view is plain HTML: with JavaScript off (so no plotly, no 3-D) the page shows its
+    title, a front-view poster of her torso with the planned breasts over the surface the plan
+    moves, and the measures; with scripts, it is painted (`breastplan-shown`) before the 3-D is."""
+    case, _, _ = planned
+    with chromium(1280, 900) as b:
+        with b.scripts_off():
+            b.open(case / "report.html")
+            assert b.requests() == []
+            assert b.js("window.breastplanShown") is None                   # no script of the page ran
+            box = b.rect("#poster img")
+            assert (box[2] - box[0], box[3] - box[1]) == (760, 640) and box[3] <= b.height
+            poster = _plot_pixels(b.screenshot(tmp_path / "poster.png"), box)
+            r, g, bl = poster[..., 0], poster[..., 1], poster[..., 2]
+            assert len(np.unique(poster.reshape(-1, 3), axis=0)) > 200        # a picture, not a blank image
+            assert ((r > 150) & (r - bl > 40) & (g > bl)).sum() > 5000         # the skin-coloured planned breasts
+            assert ((abs(r - g) < 8) & (abs(g - bl) < 8) & (r > 150) & (r < 215)).sum() > 5000   # the grey torso
+            assert (bl > g + 40).sum() > 2000                                  # the moved surface (viridis: purple to green)
+            assert b.js("document.querySelector('h1').innerText") == "breastplan — surgical plan"
+            table = b.rect("table.measures")
+            assert table[3] > table[1] and table[1] < b.height                 # in the first screen
+            assert "volume" in b.js("document.querySelector('table.measures').innerText")
+        b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
+        clock = b.timings()
+        assert 0 < clock["breastplan-shown"] < clock["breastplan-ready"]
+        assert b.js("document.getElementById('poster')") is None              # the 3-D took its place
+        assert b.requests() == [] and b.console_errors() == []
+
+
+@requires_chromium
 def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(planned, tmp_path):
     """Headless Chromium opens report.html from disk, draws it without a single request leaving the
     page, and redraws the patient when a degree slider moves and when the view changes."""
@@ -304,6 +334,7 @@ def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(pl
     with chromium(1280, 900) as b:
         b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
         assert b.js("window.breastplanDrawn") == "combined"
+        assert b.js("document.getElementById('poster')") is None              # the 3-D, not the poster
         box = b.rect("#plot")
         first = _plot_pixels(b.screenshot(tmp_path / "combined.png"), box)
         assert len(np.unique(first.reshape(-1, 3), axis=0)) > 200          # a 3-D drawing, not a blank canvas
