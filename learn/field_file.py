@@ -115,7 +115,8 @@ def train_from_pairs(rows, options: PairOptions = PairOptions(), cache: FitCache
         est, hyper, cv = FieldModel(regressor).fit(X, fields), {}, float("nan")
     meta = {"model": STATISTICAL, "lattice": options.lattice, "kinds": kinds, "regressor": regressor,
             "hyper": {k: float(v) for k, v in hyper.items()}, "cv_field_rmse_pct": cv,
-            "features": list(FEATURES) + ([f"type={k}" for k in kinds] if len(kinds) > 1 else []),
+            "features": list(FEATURES) if len(kinds) < 2 else
+                        [f"type={k}" for k in kinds] + [f"{f} if type={k}" for k in kinds for f in FEATURES],
             "target": "PCA weights of the FFD displacement field, box units",
             "training": {"pairs": len(train), "befores": len(befores), "fit": "corresponding" if options.corresponding
                          else "closest"}}

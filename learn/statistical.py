@@ -51,20 +51,21 @@ class FieldModel(RegressorMixin, BaseEstimator):
 
     regressor: one of REGRESSORS; n_modes: PCA modes kept (at most the training rows − 1);
     alpha: ridge / kernel-ridge regularisation (in [0, 1]-scaled units); gamma: rbf width of the
-    kernel ridge; seed: the MLP's initialisation.
+    kernel ridge; poly: degree of the ridge's polynomial features; seed: the MLP's initialisation.
     """
 
     def __init__(self, regressor: str = "kernel-ridge", n_modes: int = 6, alpha: float = 1e-3,
-                 gamma: float = 1.0, seed: int = 0):
+                 gamma: float = 1.0, poly: int = 2, seed: int = 0):
         self.regressor = regressor
         self.n_modes = n_modes
         self.alpha = alpha
         self.gamma = gamma
+        self.poly = poly
         self.seed = seed
 
     def _weights_model(self, n_features: int) -> TransformedTargetRegressor:
         if self.regressor == "ridge":
-            return scaled(Ridge(self.alpha), poly=2)
+            return scaled(Ridge(self.alpha), poly=self.poly)
         if self.regressor == "kernel-ridge":
             return scaled(KernelRidge(alpha=self.alpha, kernel="rbf", gamma=self.gamma))
         if self.regressor == "gp":

@@ -26,7 +26,7 @@ from breastplan.deform.conditions import find_condition
 
 from .databases import Database, build_database
 from .datasets import Dataset, build_dataset
-from .displacements import Before, FitCache, PairOptions, apply_field, fit_before, fit_pair, pair_features
+from .displacements import KINDS, Before, FitCache, PairOptions, apply_field, fit_before, fit_pair, pair_features
 from .metrics import indirect_metrics, spike_ratios
 from .statistical import REGRESSORS, FieldModel, thesis_mlp
 
@@ -37,13 +37,15 @@ THESIS_HAUSDORFF = {5: 210.76, 6: 341.13}
 SPIKE = 3.0
 """A modelled breast has a local spike when its largest vertex error exceeds SPIKE × its median."""
 GRIDS = {
-    "ridge": {"n_modes": (3, 6, 10), "alpha": (1e-4, 1e-3, 1e-2)},
-    "kernel-ridge": {"n_modes": (3, 6, 10), "alpha": (1e-4, 1e-3, 1e-2), "gamma": (0.3, 1.0, 3.0)},
+    "ridge": {"n_modes": (3, 6, 10, 20), "alpha": (1e-4, 1e-3, 1e-2)},
+    "kernel-ridge": {"n_modes": (3, 6, 10, 20), "alpha": (1e-4, 1e-3, 1e-2), "gamma": (0.3, 1.0, 3.0)},
     "gp": {"n_modes": (3, 6, 10)},
     "mlp": {"n_modes": (6,), "alpha": (1e-4, 1e-2)},
 }
-QUICK_GRIDS = {"ridge": {"n_modes": (6,)}, "kernel-ridge": {"n_modes": (6,), "gamma": (1.0,)},
+QUICK_GRIDS = {"ridge": {"n_modes": (6, 20)}, "kernel-ridge": {"n_modes": (6, 20), "gamma": (1.0,)},
                "gp": {"n_modes": (6,)}, "mlp": {"n_modes": (6,)}}
+ALL_TYPES = ("ptosis b0>b1", "turn c0>c1", "top-shape s1->s0+")
+"""The conditions one model learns together, a condition per type (the types' default conditions)."""
 HIDDEN = (0.2, 0.5, 1.0)
 """The thesis MLP's sweep: hidden neurons as multiples of the control points."""
 QUICK_BREASTS = 4
@@ -69,9 +71,11 @@ class Pairs:
     def test(self) -> np.ndarray:
         return np.flatnonzero(self.dataset.split == "test")
 
-    def features(self, examples, thesis: bool = False) -> np.ndarray:
+    def features(self, examples, thesis: bool = False, types=()) -> np.ndarray:
+        """Features of the examples (`pair_features`): the thesis's, or ours with the type one-hot over `types`."""
         ds = self.dataset
-        return pair_features([self.befores[int(i)] for i in ds.breast[examples]], ds.degree[examples], thesis=thesis)
+        return pair_features([self.befores[int(i)] for i in ds.breast[examples]], ds.degree[examples],
+                             [ds.condition.kind] * len(examples), types, thesis=thesis)
 
     def modelled(self, examples, fields) -> np.ndarray:
         """(n, N, 3) original breasts of the examples moved by the fields, mm."""
@@ -206,9 +210,9 @@ class StudyPlan:
                 for f in (self.fits if c == THESIS_CONDITION else self.fits[:1])]
 
     def steps(self, breasts: int, examples: int) -> int:
-        """Progress steps: fits, then rows."""
+        """Progress steps: fits, then rows, then the model of all types."""
         rows = 1 + len(REGRESSORS)
-        return sum(breasts + examples + rows + (2 if c == THESIS_CONDITION else 0) for c, _ in self.runs())
+        return sum(breasts + examples + rows + (2 if c == THESIS_CONDITION else 0) for c, _ in self.runs()) + 1
 
 
 def run_study(plan: StudyPlan, cache: FitCache, advance=lambda: None) -> tuple[list[StatResult], dict]:
@@ -217,9 +221,31 @@ def run_study(plan: StudyPlan, cache: FitCache, advance=lambda: None) -> tuple[l
 
     db = study_database(plan.quick)
     results, seconds = [], {}
+    first, per_type = plan.runs()[0][1], []
     for condition, options in plan.runs():
         start = time.perf_counter()
         pairs = fit_condition(db, condition, options, cache, advance)
         seconds[f"{condition} {options.lattice ** 3} CP {fit_name(options)}"] = time.perf_counter() - start
         results += run_condition(pairs, plan.quick, thesis=condition == THESIS_CONDITION, advance=advance)
+        if condition in ALL_TYPES and options == first:
+            per_type.append(pairs)
+    if len(per_type) > 1:
+        results += run_all_types(per_type, plan.quick)
+        advance()
     return results, seconds
+
+
+def run_all_types(per_type: list[Pairs], quick: bool) -> list[StatResult]:
+    """One model learnt from the pairs of every type together, the type one-hot among its features,
+    evaluated on each type's test split. Its cross-validated RMSE spans the types, so it is kept in
+    `hyper` and the row is not a candidate for a condition's best."""
+    X = np.vstack([p.features(p.train, types=KINDS) for p in per_type])
+    Y = np.vstack([p.fields[p.train] for p in per_type])
+    groups = np.concatenate([p.dataset.breast[p.train] for p in per_type])      # the same breasts in every type
+    results = []
+    for regressor in ("ridge", "kernel-ridge"):
+        est, params, cv = _select(FieldModel(regressor), (QUICK_GRIDS if quick else GRIDS)[regressor], X, Y, groups)
+        for p in per_type:
+            results.append(evaluate(p, f"PCA + {regressor}, all types", {**params, "cv_all_types": cv}, float("nan"),
+                                    est.predict(p.features(p.test, types=KINDS))))
+    return results

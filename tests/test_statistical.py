@@ -15,7 +15,7 @@ from breastplan.learn.databases import build_database
 from breastplan.learn.datasets import build_dataset
 from breastplan.learn.displacements import Before, FitCache, PairOptions, apply_field, fit_pair, pair_features
 from breastplan.learn.field_file import load_field_model
-from breastplan.learn.metrics import indirect_distances
+from breastplan.learn.metrics import indirect_distances, indirect_metrics
 from breastplan.learn.statistical import FieldModel
 from breastplan.learn.statistical_study import StudyPlan
 from clitools import assert_bad_input, run
@@ -35,20 +35,33 @@ def pair():
     return before, ds.original_points(k), ds.deformed_points(k)
 
 
-def test_a_field_the_lattice_holds_is_recovered_exactly_from_corresponding_points(pair):
+def test_a_field_the_lattice_holds_is_recovered_exactly_from_corresponding_points(pair, monkeypatch):
+    from breastplan.learn import displacements
+
     before, points, _ = pair
     box = before.box(5)
     truth = np.random.default_rng(0).normal(0, 0.02, box.size * 3)          # box units
     after = apply_field(points, truth, box)
+    monkeypatch.setattr(displacements, "SMOOTHNESS", 0.0)                   # plain least squares
     field = fit_pair(before, points, after, PairOptions(corresponding=True))
-    assert np.allclose(field, truth, atol=1e-9)
+    assert np.allclose(field, truth, atol=1e-6)                            # box units: 0.2 µm on this box
+
+
+def test_the_smoothness_penalty_leaves_a_translation_alone(pair):
+    """The lattice Laplacian of a constant displacement is zero: a shift is recovered exactly."""
+    before, points, _ = pair
+    box = before.box(5)
+    shift = np.tile([0.01, -0.02, 0.005], box.size)                        # box units
+    field = fit_pair(before, points, apply_field(points, shift, box), PairOptions(corresponding=True))
+    assert np.allclose(field, shift, atol=1e-9)
 
 
 def test_ptosis_is_a_field_of_a_5_cubed_lattice(pair):
-    """Ptosis moves points by a polynomial of degree ≤ 4 per axis, which a 5³ Bernstein lattice holds."""
+    """Ptosis moves points by a polynomial of degree ≤ 4 per axis, which a 5³ Bernstein lattice holds:
+    the smoothness penalty alone keeps the fit off exact, by hundredths of a mm."""
     before, points, after = pair
     field = fit_pair(before, points, after, PairOptions(corresponding=True))
-    assert np.abs(apply_field(points, field, before.box(5)) - after).max() < 1e-8
+    assert np.linalg.norm(apply_field(points, field, before.box(5)) - after, axis=1).max() < 0.05   # mm
 
 
 def test_a_closest_point_fit_lands_on_the_after_surface(pair, tmp_path):
@@ -109,7 +122,9 @@ def test_features_name_the_type_only_for_a_model_of_several():
     one = pair_features([before], [3.0])
     assert one.tolist() == [[3.0, 400.0, 100.0, 80.0, 60.0]]
     two = pair_features([before, before], [3.0, 5.0], ["turn", "ptosis"], ("ptosis", "turn"))
-    assert two[:, -2:].tolist() == [[0.0, 1.0], [1.0, 0.0]]
+    assert two[:, :2].tolist() == [[0.0, 1.0], [1.0, 0.0]]             # the types one-hot
+    assert two[0, 2:7].tolist() == [0.0] * 5 and two[0, 7:].tolist() == [3.0, 400.0, 100.0, 80.0, 60.0]
+    assert two[1, 2:7].tolist() == [5.0, 400.0, 100.0, 80.0, 60.0] and two[1, 7:].tolist() == [0.0] * 5
     thesis = pair_features([before], [3.0], thesis=True)
     assert thesis.shape == (1, 125 * 3 + 2) and thesis[0, -2:].tolist() == [400.0, 3.0]
 
@@ -199,7 +214,7 @@ def test_the_quick_study_writes_its_report_with_the_thesis_beside_ours(cli, tmp_
     methods = {r["method"] for r in report["rows"]}
     assert {"FFD fit", "MLP (thesis)", "PCA + ridge", "PCA + kernel-ridge", "PCA + gp", "PCA + mlp"} <= methods
     field = [r for r in report["rows"] if r["method"] == "FFD fit"]
-    assert all(r["euclidean_mean_pct"] < 1e-6 for r in field)        # ptosis is a field of the 5³ lattice
+    assert all(r["euclidean_mean_pct"] < 0.05 for r in field)        # ptosis is a field of the 5³ lattice
     thesis = [r for r in report["rows"] if r.get("thesis_hausdorff_mean_pct")]
     assert thesis and thesis[0]["thesis_hausdorff_mean_pct"] == 210.76
     assert "Table 5.8" in (tmp_path / "study" / "report.md").read_text()
@@ -227,3 +242,25 @@ def test_the_command_offers_exactly_the_regressors_a_model_file_holds():
     from breastplan.learn.statistical import EXPORTABLE
 
     assert REGRESSORS == EXPORTABLE
+
+
+def test_one_model_of_all_types_tells_the_types_apart(tmp_path):
+    """Learnt from ptosis, turn and top-shape pairs together, with the type as an input, the model
+    brings ptosis's and turn's test breasts (changes the lattice holds) far closer to their truth than
+    leaving them unchanged. (Top-shape's crease needs more than 8 training breasts: it is reported.)"""
+    from breastplan.learn.statistical_study import ALL_TYPES, fit_condition, run_all_types
+
+    db = build_database("S", n_points=400)
+    keep = np.concatenate([np.flatnonzero((db.shape == s) & (db.split == sp))[:2]
+                           for s in np.unique(db.shape) for sp in ("train", "test")])
+    db = db.subset(keep)
+    options, cache = PairOptions(corresponding=True), FitCache(tmp_path)
+    per_type = [fit_condition(db, c, options, cache) for c in ALL_TYPES]
+    results = run_all_types(per_type, quick=True)
+    assert {r.condition for r in results} == set(ALL_TYPES)
+    key = "modelled_to_original_euclidean"
+    for p in per_type[:2]:
+        truth = np.stack([p.dataset.deformed_points(k) for k in p.test])
+        unchanged = indirect_metrics(truth, np.stack([p.dataset.original_points(k) for k in p.test]))[key]
+        learnt = [r for r in results if r.condition == p.dataset.condition.name and "ridge," in r.method][0]
+        assert np.mean(learnt.distances[key]) < np.mean(unchanged) / 3
