@@ -38,6 +38,13 @@ boxes away, fields no model can learn; this keeps them within a few boxes (and p
 lattice holds, within 0.03 mm of exact)."""
 
 
+CLOSEST_SMOOTHNESS = 1e-4
+"""λ of the closest-point fit (`fit_ffd`'s smoothness, per data point). The breast fit's 10⁻⁹ lets
+control points far from the after cloud wander (fields up to 3 boxes); on ptosis b0>b1 (quick
+database) 10⁻⁹, 10⁻⁶, 10⁻⁵, 10⁻⁴ and 10⁻³ gave each pair's own field a Euclidean µ of 1.77, 1.32,
+0.91, 0.69 and 0.79 %, and the learnt models 3.1–3.4, 1.4, 1.3, 1.15 and 0.9 %."""
+
+
 @dataclass(frozen=True)
 class PairOptions:
     """How pairs are fitted: control points per lattice axis (5 = 125 CP, 6 = 216), the mean
@@ -168,7 +175,7 @@ def fit_pair(before: Before, before_points: np.ndarray, after: np.ndarray, optio
     before_points, after = np.asarray(before_points, float), np.asarray(after, float)
     box = before.box(options.lattice)
     key = FitCache.key("pair", before.vertices, before_points if options.corresponding else 0, after,
-                       sorted(asdict(options).items()), SMOOTHNESS)
+                       sorted(asdict(options).items()), SMOOTHNESS, CLOSEST_SMOOTHNESS)
     hit = cache.get(key)
     if hit is None:
         if options.corresponding:
@@ -179,7 +186,8 @@ def fit_pair(before: Before, before_points: np.ndarray, after: np.ndarray, optio
             normal = B.T @ B + SMOOTHNESS * len(B) * (L.T @ L).toarray()
             moved = np.linalg.solve(normal, B.T @ (after - before_points))
         else:
-            moved = fit_ffd(after, before.vertices, before.faces, box=box, stop=options.stop).lattice.displacements
+            moved = fit_ffd(after, before.vertices, before.faces, smoothness=CLOSEST_SMOOTHNESS, box=box,
+                            stop=options.stop).lattice.displacements
         hit = {"field": (moved / (box.hi - box.lo)).ravel()}
         cache.put(key, hit)
     return hit["field"]

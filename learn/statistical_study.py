@@ -204,10 +204,16 @@ class StudyPlan:
         return cls(conditions=(THESIS_CONDITION,), lattices=(5,), fits=FITS[:1], quick=True)
 
     def runs(self) -> list[tuple[str, PairOptions]]:
-        """(condition, pair options) of every run."""
-        return [(c, PairOptions(lattice=n, corresponding=f == "corresponding")) for c in self.conditions
-                for n in (self.lattices if c == THESIS_CONDITION else self.lattices[:1])
-                for f in (self.fits if c == THESIS_CONDITION else self.fits[:1])]
+        """(condition, pair options) of every run: the thesis's condition on every lattice with the
+        first way of fitting and on the first lattice with the others, then the other conditions on
+        the first lattice and way."""
+        def options(n: int, fit: str) -> PairOptions:
+            return PairOptions(lattice=n, corresponding=fit == "corresponding")
+
+        thesis = ([options(n, self.fits[0]) for n in self.lattices] + [options(self.lattices[0], f) for f in self.fits[1:]]
+                  if THESIS_CONDITION in self.conditions else [])
+        return ([(THESIS_CONDITION, o) for o in thesis]
+                + [(c, options(self.lattices[0], self.fits[0])) for c in self.conditions if c != THESIS_CONDITION])
 
     def steps(self, breasts: int, examples: int) -> int:
         """Progress steps: fits, then rows, then the model of all types."""
