@@ -96,9 +96,9 @@ def deform(
         if model is not None:
             moved = transform_points(np.linalg.inv(pose), moved)
         extra = {"condition": result.condition.name, "method": method, "degree": degree,
-                 "degree_reached": round(result.degree_reached, 4),
-                 "t": round(result.t, 6) if np.isfinite(result.t) else None,
-                 "params": {k: round(float(v), 6) for k, v in params.items()}}
+                 "degree_reached": round(result.degree_reached, 4)}
+        if model is None:                                       # a statistical model has no parameters
+            extra.update(t=round(result.t, 6), params={k: round(float(v), 6) for k, v in params.items()})
     with np.errstate(over="ignore", invalid="ignore"):
         shift = np.linalg.norm(moved - local, axis=1)          # the pose is rigid: the same in the breast frame
     if not np.isfinite(shift).all():

@@ -153,6 +153,13 @@ def render(plan: Plan, record: dict) -> str:
     return re.sub(r"%([A-Z]+)%", lambda m: parts[m[1]], _TEMPLATE)
 
 
+def _how(detail: dict) -> str:
+    """A change's condition and parameters, or the statistical model's lattice it came from."""
+    if detail.get("model") == "statistical":
+        return f"statistical model, degree reached {detail['degree_reached']:.2f}"
+    return f"{detail['condition']}, {' '.join(f'{p:.3g}' for p in detail['params'])}"
+
+
 def tables(record: dict) -> str:
     """The measures, fit quality and provenance tables of a plan.json record."""
     sides = list(record["sides"])
@@ -178,10 +185,9 @@ def tables(record: dict) -> str:
     parts.append("<h2>Fit quality</h2>" + _table(
         ["side", "volume cc", "rms mm", "normalised residual", f"stopping rule {record['stopping_rule']}", "points"],
         rows, "fit"))
-    rows = [[s, c["name"], ", ".join(f"{d['kind']} {d['degree']:g} ({d['condition']}, "
-                                     f"{' '.join(f'{p:.3g}' for p in d['params'])})" for d in c["details"])]
+    rows = [[s, c["name"], ", ".join(f"{d['kind']} {d['degree']:g} ({_how(d)})" for d in c["details"])]
             for s, r in record["sides"].items() for c in r["changes"]]
-    parts.append("<h2>Planned changes</h2>" + _table(["side", "change", "parameters (model units)"], rows))
+    parts.append("<h2>Planned changes</h2>" + _table(["side", "change", "how (parameters in model units)"], rows))
     inp = record["input"]
     rows = [["input", inp["path"]], ["input kind", inp["kind"]], ["input sha256", inp.get("sha256", "—")],
             ["options", json.dumps(record["options"])]] + [[k, v] for k, v in record["versions"].items()]
