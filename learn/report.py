@@ -163,6 +163,16 @@ def _f(v) -> str:
     return "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else f"{v:.3g}" if abs(v) < 10 else f"{v:.1f}"
 
 
+def hyper_text(hyper: dict) -> str:
+    """Hyper-parameters as `k=v, …` for a markdown cell."""
+    return ", ".join(f"{k}={_plain(v)}" for k, v in hyper.items())
+
+
+def ttest_cells(t: dict) -> str:
+    """A t-test's `t | p | significant` markdown cells."""
+    return f"{_f(t['t'])} | {t['p']:.3g} | {'yes' if t['significant'] else 'no'}"
+
+
 def markdown(report: dict, results: list[Result]) -> str:
     """report.md: headline table, per-condition indirect tables, model-selection table, t-tests."""
     lines = ["# breastplan study report", "", f"Run: {json.dumps(report['meta'])}", "",
@@ -195,16 +205,16 @@ def markdown(report: dict, results: list[Result]) -> str:
         e = parameter_errors(r)
         family = "SVR" if r.method.startswith("SVR") else r.method
         thesis = THESIS_RMSE.get((r.condition, family), {}).get(r.features) if r.degree == "discrete" else None
-        hyper = ", ".join(f"{k}={_plain(v)}" for k, v in r.hyper.items())
         lines.append(f"| {r.study} | {r.condition} | {r.method} | {r.features} | {r.degree} | {_f(r.cv_rmse_pct)} | "
                      f"{_f(e['rmse_pct'])} | {_f(e['mpe_pct'])} | "
                      f"{_f(float(np.mean(r.distances['modelled_to_original_euclidean'])))} | "
-                     f"{_f(float(np.mean(r.distances['modelled_to_original_hausdorff'])))} | {_f(thesis)} | {hyper} |")
+                     f"{_f(float(np.mean(r.distances['modelled_to_original_hausdorff'])))} | {_f(thesis)} | "
+                     f"{hyper_text(r.hyper)} |")
     lines += ["", "## t-tests (modelled ⇒ original Euclidean per test example, pooled, α = 0.05)", "",
               "| condition | comparison | t | p | significant |", "|---|---|---|---|---|"]
     for cond, tests in report["t_tests"].items():
         for name, t in tests.items():
-            lines.append(f"| {cond} | {name} | {_f(t['t'])} | {t['p']:.3g} | {'yes' if t['significant'] else 'no'} |")
+            lines.append(f"| {cond} | {name} | {ttest_cells(t)} |")
     lines += ["", "## The large differences from the thesis", "", *NOTES]
     lines += ["", "## Residual six-plots of the best learnt model", ""]
     for cond, paths in report["figures"].items():

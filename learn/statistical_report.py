@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .metrics import summary, ttest
-from .report import DIRECTIONS, _f, _plain, _write_text
+from .report import DIRECTIONS, _f, _plain, _write_text, hyper_text, ttest_cells
 from .statistical_study import SPIKE, THESIS_CONDITION, THESIS_HAUSDORFF, StatResult
 
 FIELD_ROW, UNCHANGED_ROW = "FFD fit", "no change"
@@ -100,15 +100,14 @@ def markdown(report: dict, results: list[StatResult]) -> str:
               "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         d = r.distances
-        hyper = ", ".join(f"{k}={_plain(v)}" for k, v in r.hyper.items())
         lines.append(f"| {r.condition} | {r.control_points} | {r.fit} | {r.method} | {_f(r.cv_rmse_pct)} | {_f(r.rmse_pct)} | "
                      f"{_f(float(np.mean(d['modelled_to_original_euclidean'])))} | "
                      f"{_f(float(np.mean(d['modelled_to_original_hausdorff'])))} | "
                      f"{_f(float(np.max(d['modelled_to_original_hausdorff'])))} | "
                      f"{_f(float(np.mean(d['original_to_modelled_euclidean'])))} | "
-                     f"{_f(float(np.mean(d['original_to_modelled_hausdorff'])))} | {_f(r.spike_free_pct)} | {hyper} |")
+                     f"{_f(float(np.mean(d['original_to_modelled_hausdorff'])))} | {_f(r.spike_free_pct)} | {hyper_text(r.hyper)} |")
     lines += ["", "## t-tests (modelled ⇒ original Euclidean per test example, pooled, α = 0.05)", "",
               "| comparison | t | p | significant |", "|---|---|---|---|"]
     for name, t in report["t_tests"].items():
-        lines.append(f"| {name} | {_f(t['t'])} | {t['p']:.3g} | {'yes' if t['significant'] else 'no'} |")
+        lines.append(f"| {name} | {ttest_cells(t)} |")
     return "\n".join(lines) + "\n"
