@@ -78,8 +78,7 @@ def deform_by_degree(points_mm, kind: str, degree: float, *, condition: str | No
         raise ValueError(f"unknown method '{method}'; choose one of {', '.join(METHODS)} or a model file")
     given = None if method in METHODS else load_model(Path(method))
     cond = pick_condition(kind, condition or (given.meta.get("condition") if given else None))
-    if not 1.0 <= degree <= DD:
-        raise ValueError(f"the degree must lie in [1, {DD}], got {degree:g}")
+    check_degree(degree)
     p_mu = to_model_units(np.asarray(points_mm, dtype=float))
     if method == "exact":
         t = solve_degree(p_mu, cond, DD, degree, primitive).t
@@ -88,6 +87,12 @@ def deform_by_degree(points_mm, kind: str, degree: float, *, condition: str | No
     params = cond.at(t)
     moved = apply_kind(p_mu, kind, params, primitive)
     return ByDegree(to_mm(moved), cond, method, t, params, degree_reached(cond, p_mu, moved, primitive))
+
+
+def check_degree(degree: float) -> None:
+    """ValueError unless the degree lies in [1, DD]."""
+    if not 1.0 <= degree <= DD:
+        raise ValueError(f"the degree must lie in [1, {DD}], got {degree:g}")
 
 
 def degree_reached(cond: Condition, p_mu, moved_mu, primitive) -> float:

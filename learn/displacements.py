@@ -166,7 +166,7 @@ def fit_before(points: np.ndarray, n: int, cache: FitCache = MEMORY) -> Before:
 
 
 def fit_pair(before: Before, before_points: np.ndarray, after: np.ndarray, options: PairOptions = PairOptions(),
-             cache: FitCache = FitCache(None)) -> np.ndarray:
+             cache: FitCache = MEMORY) -> np.ndarray:
     """(K·3,) displacement field, in box units, that takes the before breast to the after cloud (mm).
 
     Closest points: the before's fitted surface is FFD-fitted to the after cloud. Corresponding:

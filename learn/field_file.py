@@ -14,11 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from breastplan import ArtefactError, to_model_units
-from breastplan.deform.by_degree import ByDegree, deform_by_degree, degree_reached, pick_condition
-from breastplan.deform.names import DD
-from breastplan.model_file import ModelFile, load_model
-
+from breastplan.deform.by_degree import ByDegree, check_degree, deform_by_degree, degree_reached, pick_condition
 from breastplan.deform.lattice import Lattice
+from breastplan.model_file import ModelFile, load_model
 
 from .displacements import FEATURES, KINDS, FitCache, PairOptions, field_lattice, fit_before, fit_pair, pair_features
 
@@ -57,13 +55,13 @@ class FieldFile:
 def by_degree(points_mm, kind: str, degree: float, *, method: str = "exact", primitive=None) -> ByDegree:
     """`deform_by_degree` (mm, the points' frame), or, when `method` is a statistical model file, the
     breast moved by its FFD lattice (the result's `lattice`; no position t or parameters)."""
-    if not (str(method).endswith(".npz") and is_field_model(load_model(Path(method)))):
+    model = load_model(Path(method)) if str(method).endswith(".npz") else None
+    if model is None or not is_field_model(model):
         return deform_by_degree(points_mm, kind, degree, method=method, primitive=primitive)
     cond = pick_condition(kind)
-    if not 1.0 <= degree <= DD:
-        raise ValueError(f"the degree must lie in [1, {DD}], got {degree:g}")
+    check_degree(degree)
     points_mm = np.asarray(points_mm, dtype=float)
-    lattice = load_field_model(method).deformation(points_mm, kind, degree)
+    lattice = field_file(model, Path(method)).deformation(points_mm, kind, degree)
     moved = lattice(points_mm)
     reached = degree_reached(cond, to_model_units(points_mm), to_model_units(moved), primitive)
     return ByDegree(moved, cond, str(method), float("nan"), np.zeros(0), reached, lattice)
@@ -75,7 +73,12 @@ def is_field_model(model: ModelFile) -> bool:
 
 def load_field_model(path: str | Path) -> FieldFile:
     """Load a statistical model file; ArtefactError naming it if it is not one or is inconsistent."""
-    model = load_model(path)
+    return field_file(load_model(path), Path(path))
+
+
+def field_file(model: ModelFile, path: Path) -> FieldFile:
+    """The statistical model of a loaded model file (from `path`); ArtefactError naming it if the file
+    is not one or is inconsistent."""
     if not is_field_model(model):
         raise ArtefactError(path, "is a parametric model, not a statistical one (train-statistical writes those)")
     mean, components = model.extra.get("mean"), model.extra.get("components")
@@ -84,7 +87,7 @@ def load_field_model(path: str | Path) -> FieldFile:
             or components.shape != (model.n_outputs, mean.size) or not set(model.meta.get("kinds", ())) <= set(KINDS)
             or not model.meta.get("kinds")):
         raise ArtefactError(path, "holds an inconsistent statistical model (its modes, lattice or types)")
-    return FieldFile(model, Path(path))
+    return FieldFile(model, path)
 
 
 def train_from_pairs(rows, options: PairOptions = PairOptions(), cache: FitCache = FitCache(None),
@@ -94,7 +97,7 @@ def train_from_pairs(rows, options: PairOptions = PairOptions(), cache: FitCache
     Returns (estimator, meta): hyper-parameters are chosen by 4-fold cross-validation
     grouped by before scan when there are at least 4 of them."""
     from .pair_folder import breast_cloud
-    from .statistical_study import GRIDS, _select
+    from .statistical_study import GRIDS, grid_select
     from .statistical import FieldModel
 
     train = [r for r in rows if r.split != "test"]
@@ -110,7 +113,7 @@ def train_from_pairs(rows, options: PairOptions = PairOptions(), cache: FitCache
     X = pair_features([befores[r.before] for r in train], [r.degree for r in train], [r.kind for r in train], kinds)
     groups = np.array([str(r.before) for r in train])
     if len(set(groups)) >= 4:
-        est, hyper, cv = _select(FieldModel(regressor), GRIDS[regressor], X, fields, groups)
+        est, hyper, cv = grid_select(FieldModel(regressor), GRIDS[regressor], X, fields, groups)
     else:
         est, hyper, cv = FieldModel(regressor).fit(X, fields), {}, float("nan")
     meta = {"model": STATISTICAL, "lattice": options.lattice, "kinds": kinds, "regressor": regressor,

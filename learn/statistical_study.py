@@ -130,7 +130,7 @@ def field_rmse_pct(predicted, target) -> float:
     return float(np.sqrt(np.mean((np.asarray(predicted) - np.asarray(target)) ** 2)) * 100.0)
 
 
-def _select(estimator, grid: dict, X, Y, groups) -> tuple[object, dict, float]:
+def grid_select(estimator, grid: dict, X, Y, groups) -> tuple[object, dict, float]:
     """The grid point with the lowest grouped 4-fold CV field RMSE, refitted on all of X."""
     search = GridSearchCV(estimator, {k: list(v) for k, v in grid.items()}, cv=GroupKFold(4),
                           scoring="neg_root_mean_squared_error", n_jobs=1, error_score="raise")
@@ -160,19 +160,19 @@ def run_condition(pairs: Pairs, quick: bool, thesis: bool, advance=lambda: None)
     if thesis:
         X, Xt = pairs.features(train, thesis=True), pairs.features(test, thesis=True)
         K = pairs.options.lattice ** 3
-        est, _, cv = _select(thesis_mlp(K), {}, X, Y, groups)
+        est, _, cv = grid_select(thesis_mlp(K), {}, X, Y, groups)
         results.append(evaluate(pairs, "MLP (thesis)", {"hidden": K}, cv, est.predict(Xt)))
         advance()
         if not quick:
             grid = {"regressor__regressor__hidden_layer_sizes": [(max(1, round(h * K)),) for h in HIDDEN]}
-            est, params, cv = _select(thesis_mlp(K), grid, X, Y, groups)
+            est, params, cv = grid_select(thesis_mlp(K), grid, X, Y, groups)
             results.append(evaluate(pairs, "MLP (thesis, swept)", {"hidden": params[next(iter(grid))][0]}, cv,
                                     est.predict(Xt)))
         advance()
     X, Xt = pairs.features(train), pairs.features(test)
     for regressor in REGRESSORS:
         grid = (QUICK_GRIDS if quick else GRIDS)[regressor]
-        est, params, cv = _select(FieldModel(regressor), grid, X, Y, groups)
+        est, params, cv = grid_select(FieldModel(regressor), grid, X, Y, groups)
         results.append(evaluate(pairs, f"PCA + {regressor}", params, cv, est.predict(Xt)))
         advance()
     return results
@@ -250,7 +250,7 @@ def run_all_types(per_type: list[Pairs], quick: bool) -> list[StatResult]:
     groups = np.concatenate([p.dataset.breast[p.train] for p in per_type])      # the same breasts in every type
     results = []
     for regressor in ("ridge", "kernel-ridge"):
-        est, params, cv = _select(FieldModel(regressor), (QUICK_GRIDS if quick else GRIDS)[regressor], X, Y, groups)
+        est, params, cv = grid_select(FieldModel(regressor), (QUICK_GRIDS if quick else GRIDS)[regressor], X, Y, groups)
         for p in per_type:
             results.append(evaluate(p, f"PCA + {regressor}, all types", {**params, "cv_all_types": cv}, float("nan"),
                                     est.predict(p.features(p.test, types=KINDS))))
