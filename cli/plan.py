@@ -42,7 +42,7 @@ def plan(
         model = Path(method)
         if model.suffix.lower() != ".npz":
             raise usage_error(f"'{method}' is not a method; choose exact, learnt or a model file (.npz)", "--method")
-        _check_model(require_file(model, "model file"))
+        check_method(require_file(model, "model file"))
     if input is not None and not input.is_dir():
         require_file(input, "recording or scan file")
     if out is None:
@@ -107,7 +107,7 @@ def _number(v) -> str:
     return "—" if v is None else f"{v:.1f}" if abs(v) >= 10 else f"{v:.2f}"
 
 
-def _check_model(path: Path) -> None:
+def check_method(path: Path) -> None:
     """Usage error unless the model file plans one of the plannable kinds."""
     from breastplan.model_file import load_model
 

@@ -145,3 +145,30 @@ class PlanOptions:
 
     def as_dict(self) -> dict:
         return {"changes": [list(c) for c in self.changes], "sides": list(self.sides), "method": self.method}
+
+
+EXECUTORS = ("local", "dask")
+"""Where a batch's cases run: local worker processes, or the workers of a Dask cluster."""
+
+
+@dataclass(frozen=True)
+class BatchOptions:
+    """How `batch` plans a folder: the plan of every case, how many cases at once (one BLAS thread
+    each), and where (local processes, or Dask: a local cluster of `jobs` workers, or the scheduler at
+    `scheduler`, e.g. tcp://host:8786)."""
+
+    plan: PlanOptions = PlanOptions()
+    jobs: int = 1
+    executor: str = "local"
+    scheduler: str | None = None
+
+    def __post_init__(self):
+        if self.jobs < 1:
+            raise OptionError("jobs", f"a batch runs at least 1 case at once, got {self.jobs}")
+        if self.executor not in EXECUTORS:
+            raise OptionError("executor", f"'{self.executor}' is not an executor; choose {' or '.join(EXECUTORS)}")
+        if self.scheduler is not None and self.executor != "dask":
+            raise OptionError("scheduler", "a scheduler address needs --executor dask")
+
+    def as_dict(self) -> dict:
+        return {"plan": self.plan.as_dict(), "jobs": self.jobs, "executor": self.executor, "scheduler": self.scheduler}

@@ -1,0 +1,124 @@
+"""Where a batch's cases run: `local` worker processes or the workers of a Dask cluster.
+
+Both run `plan_case` on each task, one case per worker at a time with one BLAS thread, and yield
+(task, result) as cases finish, in any order. A worker that dies (killed, out of memory) fails the case
+it was planning, not the batch. Local workers die with the batch (Linux: the parent-death signal), so a
+killed batch leaves no worker writing behind it.
+"""
+from __future__ import annotations
+
+import ctypes
+import logging
+import multiprocessing
+import os
+import signal
+import sys
+from collections import Counter
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from typing import Iterator
+
+from breastplan import BadInputError
+
+from .task import Task, plan_case
+
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
+                    "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
+ATTEMPTS = 2
+"""A case whose worker died this many times is failed; the others it took down are retried."""
+PR_SET_PDEATHSIG = 1
+
+Results = Iterator[tuple[Task, dict]]
+
+
+def one_thread_environment() -> None:
+    """One BLAS/OpenMP thread in this process and the processes it starts (set before numpy loads)."""
+    for name in THREAD_VARIABLES:
+        os.environ[name] = "1"
+
+
+def _local_worker(parent: int) -> None:
+    """A local worker's start: one thread, and death with the batch."""
+    one_thread_environment()
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+        if os.getppid() != parent:   # the batch died before the signal was armed
+            os._exit(1)
+
+
+def run_local(tasks: list[Task], jobs: int) -> Results:
+    """Plan `tasks` in `jobs` worker processes (spawned: no state shared with the batch)."""
+    attempts: Counter = Counter()
+    pending = list(tasks)
+    while pending:
+        pool = ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=_local_worker, initargs=(os.getpid(),))
+        broken, running = [], set()
+        try:
+            futures = {pool.submit(plan_case, t): t for t in pending}
+            waiting = set(futures)
+            while waiting:
+                running = {futures[f].case for f in waiting if f.running()} or running
+                done, waiting = wait(waiting, return_when=FIRST_COMPLETED)
+                for future in done:
+                    try:
+                        yield futures[future], future.result()
+                    except BrokenProcessPool:
+                        broken.append(futures[future])
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+        suspects = {t.case for t in broken} & running or {t.case for t in broken}
+        pending = []
+        for task in broken:                       # the cases being planned when a worker died are charged
+            attempts[task.case] += task.case in suspects
+            if attempts[task.case] >= ATTEMPTS:
+                yield task, _died(task)
+            else:
+                pending.append(task)
+
+
+def run_dask(tasks: list[Task], jobs: int, scheduler: str | None) -> Results:
+    """Plan `tasks` on a Dask cluster: the scheduler at `scheduler`, or a local cluster of `jobs`
+    single-threaded worker processes. The workers write the case folders: with a remote scheduler the
+    output folder must be on storage they share."""
+    from distributed import Client, LocalCluster, as_completed
+    from distributed.client import FutureCancelledError
+
+    with _cluster(LocalCluster, scheduler, jobs) as cluster:
+        try:
+            client = Client(cluster if scheduler is None else scheduler, timeout="20s")
+        except (OSError, TimeoutError) as exc:
+            raise BadInputError(None, f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
+        with client:
+            futures = {client.submit(plan_case, t, pure=False, key=f"plan-{t.sha256[:12]}-{os.path.basename(t.case)}"): t
+                       for t in tasks}
+            for future in as_completed(futures):
+                task = futures[future]
+                try:
+                    yield task, future.result()
+                except (FutureCancelledError, Exception) as exc:  # a worker lost (KilledWorker) or a task undeliverable
+                    yield task, {"status": "failed", "seconds": 0.0,
+                                 "error": f"{task.input}: the Dask task failed ({type(exc).__name__}: {exc})."}
+
+
+class _cluster:
+    """A quiet LocalCluster of `jobs` single-threaded worker processes, unless a scheduler is given."""
+
+    def __init__(self, factory, scheduler: str | None, jobs: int):
+        self.factory, self.scheduler, self.jobs, self.cluster = factory, scheduler, jobs, None
+
+    def __enter__(self):
+        if self.scheduler is None:
+            one_thread_environment()          # inherited by the worker processes
+            self.cluster = self.factory(n_workers=self.jobs, threads_per_worker=1, processes=True,
+                                        dashboard_address=None, silence_logs=logging.ERROR)
+        return self.cluster
+
+    def __exit__(self, *exc):
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def _died(task: Task) -> dict:
+    return {"status": "failed", "seconds": 0.0,
+            "error": f"{task.input}: the worker process planning it died ({ATTEMPTS} times; out of memory or killed)."}

@@ -1,0 +1,82 @@
+"""The inputs of a batch: every scan and recording under a folder, each with the case it becomes.
+
+A folder is walked recursively (hidden entries and the batch's own output folder left out, symbolic
+links to folders not followed). Each file becomes an `Input`: one to plan, or one skipped with the
+reason — not a scan or recording, a symbolic link leading outside the folder, or a case name
+already taken by another input (`a.ply` and `a.mcap` both become case `a`; the first in sorted
+order is planned).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+SCAN_SUFFIXES = (".mcap", ".ply", ".obj", ".stl", ".pcd", ".xyz")
+"""A recording (.mcap) or a scan file of a format ingest reads."""
+
+
+@dataclass(frozen=True)
+class Input:
+    """One file of the input folder: its path, its name relative to the folder (POSIX), the case folder
+    it becomes (relative to the output folder) and, when it is not planned, why."""
+
+    path: Path
+    name: str
+    case: str
+    skipped: str | None = None
+
+
+def find_inputs(folder: Path, out: Path | None = None) -> list[Input]:
+    """Every file under `folder` (sorted by relative name), as an Input; `out` (the batch's output
+    folder, if inside `folder`) is not searched."""
+    folder = Path(folder)
+    root = folder.resolve()
+    skip_dir = out.resolve() if out is not None else None
+    found: list[Input] = []
+    unreadable = lambda e: found.append(_input(folder, Path(e.filename), f"a folder that cannot be read ({e.strerror})"))  # noqa: E731
+    for here, dirs, files in os.walk(folder, onerror=unreadable):
+        base = Path(here)
+        kept = []
+        for d in sorted(dirs):
+            path = base / d
+            if d.startswith(".") or path.resolve() == skip_dir:
+                continue
+            if path.is_symlink():
+                found.append(_input(folder, path, "a symbolic link to a folder, not followed"))
+                continue
+            kept.append(d)
+        dirs[:] = kept
+        for f in files:
+            if not f.startswith("."):
+                found.append(_classify(folder, root, base / f))
+    found.sort(key=lambda i: i.name)
+    return _mark_duplicates(found)
+
+
+def _classify(folder: Path, root: Path, path: Path) -> Input:
+    if path.is_symlink():
+        target = path.resolve()
+        if not target.is_relative_to(root):
+            return _input(folder, path, f"a symbolic link leading outside the input folder (to {target})")
+    if path.suffix.lower() not in SCAN_SUFFIXES:
+        return _input(folder, path, f"not a scan or recording (the planned kinds end in {', '.join(SCAN_SUFFIXES)})")
+    return _input(folder, path)
+
+
+def _input(folder: Path, path: Path, skipped: str | None = None) -> Input:
+    name = path.relative_to(folder).as_posix()
+    return Input(path, name, str(Path(name).with_suffix("").as_posix()), skipped)
+
+
+def _mark_duplicates(inputs: list[Input]) -> list[Input]:
+    """The second and later inputs of one case name skipped, naming the first."""
+    owner: dict[str, str] = {}
+    marked = []
+    for i in inputs:
+        if i.skipped is None:
+            first = owner.setdefault(i.case, i.name)
+            if first != i.name:
+                i = Input(i.path, i.name, i.case, f"a duplicate name: case '{i.case}' is planned from {first}")
+        marked.append(i)
+    return marked

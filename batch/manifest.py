@@ -1,0 +1,63 @@
+"""A batch's manifest: one row per file of the input folder, as CSV and JSON, rewritten all or nothing
+after every case so that a killed batch leaves a true one.
+
+Statuses: `done` (planned by this run), `reused` (a whole plan of the same input content and options was
+already there), `failed` (the error says why), `skipped` (not planned: the error says why), `pending`
+(not finished when the manifest was written).
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from breastplan.atomic import atomic_set
+
+MANIFEST_SCHEMA = "breastplan.batch/1"
+CSV_NAME, JSON_NAME = "manifest.csv", "manifest.json"
+STATUSES = ("done", "reused", "failed", "skipped", "pending")
+SUCCEEDED = ("done", "reused")
+
+
+@dataclass
+class Row:
+    """One input: its name relative to the input folder, its case relative to the output folder, status,
+    seconds spent planning it (0 when not planned), the error sentence and the input's SHA-256."""
+
+    input: str
+    case: str
+    status: str = "pending"
+    seconds: float = 0.0
+    error: str = ""
+    sha256: str = ""
+
+
+class Manifest:
+    """The rows of a batch (in input order) and what the batch was; `write()` puts both files in `out`."""
+
+    def __init__(self, out: Path, about: dict, rows: list[Row]):
+        self.out, self.about, self.rows = Path(out), about, rows
+
+    def summary(self) -> dict[str, int]:
+        counts = {s: 0 for s in STATUSES}
+        for row in self.rows:
+            counts[row.status] += 1
+        return {"inputs": len(self.rows), **counts}
+
+    def succeeded(self) -> bool:
+        return any(r.status in SUCCEEDED for r in self.rows)
+
+    def as_dict(self) -> dict:
+        return {"schema": MANIFEST_SCHEMA, **self.about, "summary": self.summary(),
+                "cases": [asdict(r) for r in self.rows]}
+
+    def write(self) -> None:
+        text = io.StringIO()
+        writer = csv.DictWriter(text, fieldnames=list(Row.__dataclass_fields__), lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(asdict(r) for r in self.rows)
+        with atomic_set() as stage:
+            Path(stage(self.out / CSV_NAME)).write_text(text.getvalue(), encoding="utf-8")
+            Path(stage(self.out / JSON_NAME)).write_text(json.dumps(self.as_dict(), indent=1), encoding="utf-8")

@@ -1,0 +1,101 @@
+"""A batch: every scan and recording of a folder planned as `plan` does, one case folder each.
+
+The output folder holds one case per input (its path relative to the input folder, suffix dropped)
+and the manifest. One batch writes a folder at a time (a lock); a batch resumes what an earlier one
+left: cases whose input content and options are unchanged are reused, the rest planned, and the
+hidden folders of a killed batch removed.
+"""
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterator
+
+from breastplan import BadInputError, __version__
+from breastplan.case import sha256
+from breastplan.errors import require_folder
+from breastplan.options import BatchOptions
+
+from .executors import run_dask, run_local
+from .inputs import find_inputs
+from .manifest import Manifest, Row
+from .task import Task, finished, remove_leftovers
+
+LOCK = ".batch.lock"
+
+Progress = Callable[[Row, int], None]
+"""Called with each row as it is settled and the number of inputs to plan."""
+
+
+@dataclass(frozen=True)
+class Batch:
+    """A finished batch: its manifest (rows, summary) and the leftovers of a killed batch it removed."""
+
+    manifest: Manifest
+    removed: tuple[Path, ...]
+
+
+def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress = lambda row, total: None) -> Batch:
+    """Plan every scan and recording under `folder` into `out` (docs/batch.md)."""
+    folder, out = Path(folder), Path(out)
+    require_folder(folder, "folder")
+    out.mkdir(parents=True, exist_ok=True)
+    with _locked(out):
+        removed = remove_leftovers(out)
+        rows, tasks = _rows_and_tasks(folder, out, options)
+        about = {"version": __version__, "input_folder": str(folder), "options": options.as_dict()}
+        manifest = Manifest(out, about, rows)
+        manifest.write()
+        by_case = {r.case: r for r in rows if r.status == "pending"}   # case names unique among the planned
+        for row in rows:
+            if row.status != "pending":
+                progress(row, len(tasks))
+        results = run_local(tasks, options.jobs) if options.executor == "local" else \
+            run_dask(tasks, options.jobs, options.scheduler)
+        for task, result in results:
+            row = by_case[Path(task.case).relative_to(out.resolve()).as_posix()]
+            shown = str(folder / row.input)           # errors name the input as the user gave its folder
+            row.status, row.seconds, row.error = result["status"], result["seconds"], result["error"].replace(task.input, shown)
+            manifest.write()
+            progress(row, len(tasks))
+    return Batch(manifest, tuple(removed))
+
+
+def _rows_and_tasks(folder: Path, out: Path, options: BatchOptions) -> tuple[list[Row], list[Task]]:
+    """A row for every input (settled for the skipped, unreadable and reused) and a task for the rest."""
+    plan = options.plan.as_dict()
+    rows, tasks = [], []
+    for i in find_inputs(folder, out):
+        row = Row(i.name, i.case)
+        rows.append(row)
+        if i.skipped:
+            row.status, row.error = "skipped", f"{i.path}: skipped: {i.skipped}."
+            continue
+        try:
+            row.sha256 = sha256(i.path)
+        except OSError as exc:
+            row.status, row.error = "failed", f"{i.path}: cannot be read ({exc.strerror})."
+            continue
+        case = out.resolve() / i.case
+        if finished(case, row.sha256, plan):
+            row.status = "reused"
+        else:
+            tasks.append(Task(str(i.path.absolute()), str(case), plan, row.sha256))
+    return rows, tasks
+
+
+@contextlib.contextmanager
+def _locked(out: Path) -> Iterator[None]:
+    """Hold `out`'s batch lock (released by the system if the batch is killed)."""
+    fd = os.open(out / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise BadInputError(out, "is being written by another batch (its lock is held); wait for it to finish") from None
+        yield
+    finally:
+        os.close(fd)

@@ -1,0 +1,114 @@
+"""One case of a batch, as a worker runs it, and how the batch tells a finished case.
+
+A case folder appears whole or not at all: a new case is built in a hidden sibling and renamed into
+place by `run_plan`; a case planned before from other input or options is copied to a hidden sibling,
+planned there (its unchanged stages reused) and swapped in. A batch killed at any moment leaves
+finished cases intact and only hidden folders (`LEFTOVER`), which the next batch removes.
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+import secrets
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+LEFTOVER = re.compile(r"^\..+\.(plan|batch|stale)-[0-9a-f]{8}$")
+"""Hidden folders a killed batch may leave: `run_plan`'s build folder, a re-plan's copy, a swapped-out case."""
+
+
+@dataclass(frozen=True)
+class Task:
+    """A case to plan: the input file, the case folder (absolute paths), the plan's options as plain
+    JSON values (`PlanOptions.as_dict`) and the input's SHA-256."""
+
+    input: str
+    case: str
+    options: dict
+    sha256: str
+
+
+def plan_case(task: Task) -> dict:
+    """Plan one case (in a worker); {"status": "done" | "failed", "seconds", "error"}. Never raises for
+    a bad input: a failing case is a row of the manifest, not the end of the batch."""
+    from threadpoolctl import threadpool_limits
+
+    from breastplan import BadInputError
+
+    start = time.perf_counter()
+    try:
+        with threadpool_limits(1):
+            _plan(task)
+        status, error = "done", ""
+    except BadInputError as exc:
+        status, error = "failed", str(exc)
+    except OSError as exc:
+        status, error = "failed", f"{exc.filename or task.input}: {exc.strerror or exc}."
+    except Exception as exc:  # a bug or a library's failure on this input: reported, the batch goes on
+        status, error = "failed", f"{task.input}: unexpected error ({type(exc).__name__}: {exc})."
+    return {"status": status, "seconds": round(time.perf_counter() - start, 3), "error": error}
+
+
+def _plan(task: Task) -> None:
+    from breastplan.options import PlanOptions
+    from breastplan.plan.job import PLAN_SCHEMA, run_plan
+
+    o = task.options
+    options = PlanOptions(tuple(map(tuple, o["changes"])), tuple(o["sides"]), o["method"])
+    case = Path(task.case)
+    if not case.exists():
+        run_plan(Path(task.input), case, options)
+        return
+    work = _sibling(case, "batch")
+    try:
+        if _record(case).get("schema") == PLAN_SCHEMA:   # reuse its stages; else plan afresh
+            shutil.copytree(case, work, symlinks=True)
+        run_plan(Path(task.input), work, options)
+        old = _sibling(case, "stale")
+        os.rename(case, old)
+        os.rename(work, case)
+        shutil.rmtree(old, ignore_errors=True)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _sibling(case: Path, kind: str) -> Path:
+    return case.parent / f".{case.name}.{kind}-{secrets.token_hex(4)}"
+
+
+def finished(case: Path, sha256: str, options: dict) -> bool:
+    """Whether `case` holds a whole plan of the input of this SHA-256 with these options."""
+    from breastplan.plan.job import PLAN_SCHEMA
+
+    record = _record(case)
+    try:
+        return (record.get("schema") == PLAN_SCHEMA and record["input"].get("sha256") == sha256
+                and record["options"] == options)
+    except (KeyError, TypeError, AttributeError):
+        return False
+
+
+def _record(case: Path) -> dict:
+    """The case's plan.json as a dict; {} if it has none or it is not a JSON object."""
+    from breastplan.case import Case
+
+    try:
+        record = json.loads((case / Case.PLAN_JSON).read_text())
+    except (OSError, ValueError):
+        return {}
+    return record if isinstance(record, dict) else {}
+
+
+def remove_leftovers(out: Path) -> list[Path]:
+    """Remove the hidden folders a killed batch left under `out`; the removed paths."""
+    removed = []
+    for here, dirs, _ in os.walk(out):
+        for d in list(dirs):
+            if LEFTOVER.match(d):
+                shutil.rmtree(Path(here) / d, ignore_errors=True)
+                removed.append(Path(here) / d)
+                dirs.remove(d)
+    return removed

@@ -1,0 +1,105 @@
+"""The `batch` command: every scan and recording of a folder planned, locally or on Dask (docs/cli.md)."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, BatchOptions, OptionError, PlanOptions
+
+from .app import JSON, command
+from .output import report, stderr, stdout, usage_error, writable
+
+FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method", "jobs": "--jobs",
+         "executor": "--executor", "scheduler": "--scheduler"}
+
+
+@command()
+def batch(
+    input: Path = typer.Argument(..., help="The folder of scans and recordings (searched recursively)."),
+    out: Path = typer.Option(..., "--out", help="The output folder: one case folder per input, and the manifest "
+                             "(manifest.csv, manifest.json)."),
+    jobs: int = typer.Option(1, "--jobs", help="Cases planned at once (one BLAS thread each); with Dask and no "
+                             "--scheduler, the local cluster's workers."),
+    side: str = typer.Option("both", "--side", help="The breasts to plan: left, right or both."),
+    deform: List[str] = typer.Option([], "--deform", help="KIND:DEGREE, repeatable, KIND one of "
+                                     f"{', '.join(DEGREE_KINDS)}. Default: "
+                                     + " ".join(f"{k}:{d:g}" for k, d in DEFAULT_PLAN) + "."),
+    method: str = typer.Option("exact", "--method", help="exact, learnt or MODEL.npz, as for plan."),
+    executor: str = typer.Option("local", "--executor", help="local (worker processes) or dask (a Dask "
+                                 "distributed cluster)."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="With --executor dask: the address of a "
+                                            "running scheduler (e.g. tcp://host:8786); default: a local cluster."),
+    as_json: bool = JSON,
+):
+    """Plan every scan and recording of a folder, one case folder each, with a manifest; resumable.
+    Exit 0 when any input was planned, 3 when none was."""
+    from breastplan import BadInputError
+    from breastplan.errors import require_folder
+
+    try:
+        options = BatchOptions(PlanOptions.parse(deform, side, method), jobs, executor, scheduler)
+    except OptionError as exc:
+        raise usage_error(str(exc), FLAGS[exc.option]) from None
+    if method not in ("exact", "learnt"):
+        from breastplan.errors import require_file
+
+        from .plan import check_method
+
+        check_method(require_file(Path(method), "model file"))
+    require_folder(input, "folder of scans and recordings")
+    writable(out, folder=True)
+
+    from breastplan.batch.run import run_batch
+
+    with _Progress() as progress:
+        result = run_batch(input, out, options, progress)
+    manifest = result.manifest
+    for row in manifest.rows:
+        if row.status == "skipped":
+            stderr.print(f"warning: {row.error}", markup=False, soft_wrap=True)
+    summary = manifest.summary()
+    if as_json:
+        report({"out": str(out), "manifest": str(out / "manifest.csv"), "summary": summary,
+                "failed": {r.input: r.error for r in manifest.rows if r.status == "failed"}}, True, "")
+    else:
+        _print_summary(out, manifest)
+    if not manifest.rows:
+        raise BadInputError(input, "holds no file to plan (no scan or recording)")
+    if not manifest.succeeded():
+        raise BadInputError(input, f"no input was planned ({summary['failed']} failed, {summary['skipped']} "
+                                   f"skipped; see {out / 'manifest.csv'})")
+
+
+def _print_summary(out: Path, manifest) -> None:
+    s = manifest.summary()
+    stdout.print(f"batch: {s['inputs']} inputs — {s['done']} planned, {s['reused']} reused, {s['failed']} failed, "
+                 f"{s['skipped']} skipped; manifest → {out / 'manifest.csv'}", markup=False, soft_wrap=True)
+    for row in manifest.rows:
+        if row.status == "failed":
+            stdout.print(f"  failed: {row.error}", markup=False, soft_wrap=True)
+
+
+class _Progress:
+    """A progress bar of the cases settled, on a terminal's stderr; nothing otherwise."""
+
+    def __enter__(self):
+        from rich.progress import Progress
+
+        self.bar = Progress(console=stderr, transient=True) if stderr.is_terminal else None
+        self.task = None
+        if self.bar:
+            self.bar.start()
+        return self.advance
+
+    def advance(self, row, total: int) -> None:
+        if not self.bar or row.status in ("skipped", "reused"):
+            return
+        if self.task is None:
+            self.task = self.bar.add_task("batch", total=total)
+        self.bar.update(self.task, advance=1, description=f"batch: {row.input} {row.status}")
+
+    def __exit__(self, *exc):
+        if self.bar:
+            self.bar.stop()
