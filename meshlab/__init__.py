@@ -1,0 +1,1 @@
+"""breastplan filters on a pymeshlab MeshSet, pymeshlab-style."""
