@@ -7,6 +7,7 @@ killed batch leaves no worker writing behind it.
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import logging
 import multiprocessing
@@ -24,6 +25,10 @@ from .task import Task, plan_case
 
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
                     "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
+DASK_WORKER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
+                      "distributed.worker.memory.monitor-interval": "1s", "distributed.admin.system-monitor.interval": "5s"}
+"""A local cluster's workers: no statistical profiler and slower housekeeping, whose event-loop wake-ups take
+the interpreter lock from the case being planned (they doubled a case's time on this 2-core machine)."""
 ATTEMPTS = 2
 """A case whose worker died this many times is failed; the others it took down are retried."""
 PR_SET_PDEATHSIG = 1
@@ -81,10 +86,10 @@ def run_dask(tasks: list[Task], jobs: int, scheduler: str | None) -> Results:
     """Plan `tasks` on a Dask cluster: the scheduler at `scheduler`, or a local cluster of `jobs`
     single-threaded worker processes. The workers write the case folders: with a remote scheduler the
     output folder must be on storage they share."""
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import Client, as_completed
     from distributed.client import FutureCancelledError
 
-    with _cluster(LocalCluster, scheduler, jobs) as cluster:
+    with _cluster(scheduler, jobs) as cluster:
         try:
             client = Client(cluster if scheduler is None else scheduler, timeout="20s")
         except (OSError, TimeoutError) as exc:
@@ -101,22 +106,20 @@ def run_dask(tasks: list[Task], jobs: int, scheduler: str | None) -> Results:
                                  "error": f"{task.input}: the Dask task failed ({type(exc).__name__}: {exc})."}
 
 
-class _cluster:
-    """A quiet LocalCluster of `jobs` single-threaded worker processes, unless a scheduler is given."""
+@contextlib.contextmanager
+def _cluster(scheduler: str | None, jobs: int):
+    """A quiet LocalCluster of `jobs` single-threaded worker processes (DASK_WORKER_CONFIG), unless a
+    scheduler is given (None then)."""
+    if scheduler is not None:
+        yield None
+        return
+    import dask
+    from distributed import LocalCluster
 
-    def __init__(self, factory, scheduler: str | None, jobs: int):
-        self.factory, self.scheduler, self.jobs, self.cluster = factory, scheduler, jobs, None
-
-    def __enter__(self):
-        if self.scheduler is None:
-            one_thread_environment()          # inherited by the worker processes
-            self.cluster = self.factory(n_workers=self.jobs, threads_per_worker=1, processes=True,
-                                        dashboard_address=None, silence_logs=logging.ERROR)
-        return self.cluster
-
-    def __exit__(self, *exc):
-        if self.cluster is not None:
-            self.cluster.close()
+    one_thread_environment()                      # inherited by the worker processes
+    with dask.config.set(DASK_WORKER_CONFIG), LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
+                                                           dashboard_address=None, silence_logs=logging.ERROR) as cluster:
+        yield cluster
 
 
 def _died(task: Task) -> dict:
