@@ -10,7 +10,9 @@ load of the (shared, noisy) machine, a whole `breastplan batch` process into a f
 - `--jobs 2`: throughput (cases per minute) at least 1.7 × the baseline's (target);
 - `--executor dask --jobs 2` (a LocalCluster of 2 single-threaded worker processes, started and closed
   by the batch): within 15 % of `--jobs 2`'s time (target: dask time / local time ≤ 1.15).
-Every figure is the median over the rounds; the ratios are those of the medians.
+Every figure is the median over the rounds; the ratios are those of the medians. Also the mean time of one
+case as the manifest records it, alone (`--jobs 1`) and beside another (`--jobs 2`): their ratio bounds the
+throughput two workers can reach on this machine (2 / that ratio).
 
 Run:  .venv/bin/python benchmarks/bench_batch.py [--repeats N] [--quick]   (default 2; --quick 1)
 """
@@ -56,10 +58,12 @@ def write_patients(folder: Path, seed: int = 0) -> None:
 
 
 def batch(folder: Path, out: Path, args: list[str]) -> dict:
+    """Run one batch; its manifest's summary and the mean seconds of a case (the manifest's)."""
     shutil.rmtree(out, ignore_errors=True)
     subprocess.run([str(BIN), "batch", str(folder), "--out", str(out), *args],
                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=False)
-    return json.loads((out / "manifest.json").read_text())["summary"]
+    manifest = json.loads((out / "manifest.json").read_text())
+    return {**manifest["summary"], "case_s": statistics.mean(c["seconds"] for c in manifest["cases"])}
 
 
 def main() -> None:
@@ -70,21 +74,25 @@ def main() -> None:
         folder.mkdir()
         write_patients(folder)
         seconds = {name: [] for name in RUNS}
+        case_s = {name: [] for name in RUNS}
         summaries = {}
         for _ in range(repeats):
             for name, args in RUNS.items():
                 result = {}
                 seconds[name].append(timed(lambda: result.update(batch(folder, work / "out", args))))
+                case_s[name].append(result.pop("case_s"))
                 summaries[name] = result
         median = {name: statistics.median(s) for name, s in seconds.items()}
+        case = {name: statistics.median(s) for name, s in case_s.items()}
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
     per_minute = {name: 60.0 * PATIENTS / s for name, s in median.items()}
     speedup = per_minute["--jobs 2"] / per_minute["--jobs 1"]
     dask_ratio = median["--executor dask --jobs 2"] / median["--jobs 2"]
+    ceiling = 2 * case["--jobs 1"] / case["--jobs 2"]   # if two cases at once took no longer each than one alone
     table = Table(title=f"bench_batch — {PATIENTS} realistic recordings, medians of {repeats} rounds")
-    for column in ("run", "median", "cases / min", "planned", "failed", "vs baseline", "target", "met"):
+    for column in ("run", "median", "cases / min", "a case (mean)", "planned", "failed", "vs baseline", "target", "met"):
         table.add_column(column)
     targets = {"--jobs 1": ("baseline", "", ""),
                "--jobs 2": (f"{speedup:.2f}× throughput", f"≥ {TARGETS['jobs2_speedup']}×",
@@ -93,11 +101,14 @@ def main() -> None:
                                             "yes" if dask_ratio <= TARGETS["dask_over_local"] else "no")}
     for name in RUNS:
         s = summaries[name]
-        table.add_row(name, fmt(median[name]), f"{per_minute[name]:.1f}", str(s["done"]), str(s["failed"]),
-                      *targets[name])
+        table.add_row(name, fmt(median[name]), f"{per_minute[name]:.1f}", fmt(case[name]), str(s["done"]),
+                      str(s["failed"]), *targets[name])
     Console().print(table)
+    print(f"A case planned beside another takes {case['--jobs 2'] / case['--jobs 1']:.2f}× as long as alone: two "
+          f"workers can give at most {ceiling:.2f}× the throughput of one on this machine.")
     print(json.dumps(rounded({"benchmark": "batch", "cases": PATIENTS, "repeats": repeats, "seconds": median,
-                              "cases_per_minute": per_minute, "jobs2_speedup": speedup, "dask_over_local": dask_ratio,
+                              "cases_per_minute": per_minute, "case_seconds": case, "jobs2_speedup": speedup,
+                              "jobs2_ceiling": ceiling, "dask_over_local": dask_ratio,
                               "baseline": "--jobs 1", "summaries": summaries, "targets": TARGETS})))
 
 
