@@ -9,7 +9,7 @@ import sys
 
 from breastplan import BadInputError
 
-from . import plan, batch, synth, deform, dataset, scan_synth, ingest, fit, evaluate, train, train_statistical  # noqa: F401  (register the commands)
+from . import plan, batch, synth, deform, dataset, scan_synth, ingest, fit, evaluate, train, train_statistical, filters  # noqa: F401,E501  (register the commands)
 from .app import app
 from .output import stderr
 

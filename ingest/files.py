@@ -58,22 +58,66 @@ def read_scan_file(path: str | Path, units: str = "auto") -> ScanCloud:
     path = Path(path)
     if units not in ("auto", "mm", "m"):
         raise BadInputError(None, f"units must be auto, mm or m, not '{units}'")
+    points, faces, normals, comments = read_scan_arrays(path)
+    return scan_cloud(points, faces, normals, units, comments=comments, path=path)
+
+
+def read_scan_arrays(path: str | Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, list[str]]:
+    """A scan file's own arrays, in its units: points (N, 3), triangles (M, 3) or None, normals (N, 3)
+    or None, and its header comments (PLY); BadInputError naming the file for any defect."""
+    path = Path(path)
     _check_file(path)
-    points, faces, normals, comments = _READERS[path.suffix.lower()](path)
+    return _READERS[path.suffix.lower()](path)
+
+
+def scan_cloud(points, faces=None, normals=None, units: str = "auto", *, name: str = "mesh",
+               comments=(), path: str | Path | None = None) -> ScanCloud:
+    """A scan's arrays (file units) → a `ScanCloud` in mm, as `read_scan_file` makes it from a file.
+
+    points (N, 3); faces (M, 3) triangles or None (a point cloud; its normals (N, 3) kept, if any);
+    a triangle mesh is sampled uniformly by area. `path` is named in the errors (None: none is named)
+    and its file name in the description, else `name`."""
+    path = None if path is None else Path(path)
+    if units not in ("auto", "mm", "m"):
+        raise BadInputError(None, f"units must be auto, mm or m, not '{units}'")
+    points = _arrays(path, points, 3, np.float64, "points")
+    faces = None if faces is None else _arrays(path, faces, 3, np.int64, "faces")
+    normals = None if normals is None else _arrays(path, normals, 3, np.float64, "normals")
     _check_points(path, points)
+    if faces is not None and len(faces) and (faces.min() < 0 or faces.max() >= len(points)):
+        raise BadInputError(path, f"has faces that refer to missing vertices (it has {_count(len(points), 'point')})")
+    if normals is not None and len(normals) != len(points):
+        raise BadInputError(path, f"has {len(normals)} normals for {_count(len(points), 'point')}")
     extent = extent_of(points)
     mm_per_unit, units_text = _mm_per_unit(path, extent, units)
     points = points * mm_per_unit
     if faces is not None:
+        n_faces = len(faces)
         points, normals = _sample_surface(path, points, faces)
-        what = f"triangle mesh, {_count(len(faces), 'face')}, sampled to {_count(len(points), 'point')}"
+        what = f"triangle mesh, {_count(n_faces, 'face')}, sampled to {_count(len(points), 'point')}"
     else:
         normals = _unit_normals(path, normals)
         with_normals = " with normals" if normals is not None else ""
         what = f"point cloud, {_count(len(points), 'point')}{with_normals}"
     hint = "camera-opencv" if any(CAMERA_FRAME in c for c in comments) else None
     return ScanCloud(points=_frozen(points), normals=None if normals is None else _frozen(normals),
-                     frame_hint=hint, description=f"{path.name}: {what}, {units_text}")
+                     frame_hint=hint, description=f"{path.name if path is not None else name}: {what}, {units_text}")
+
+
+def _arrays(path: Path | None, values, columns: int, dtype, what: str) -> np.ndarray:
+    """`values` as an (N, columns) array of `dtype`; BadInputError for another shape."""
+    try:
+        a = np.asarray(values)
+    except (TypeError, ValueError):
+        a = np.zeros((0, 0))
+    if a.size == 0:
+        a = a.reshape(0, columns)
+    if a.ndim != 2 or a.shape[1] != columns or (a.size and not np.issubdtype(a.dtype, np.number)):
+        raise BadInputError(path, f"has {what} of shape {a.shape}, not (N, {columns})")
+    if np.issubdtype(dtype, np.integer) and a.size and not np.issubdtype(a.dtype, np.integer):
+        if not np.isfinite(a).all() or not np.array_equal(a, np.round(a)):
+            raise BadInputError(path, f"has {what} that are not whole vertex indices")
+    return a.astype(dtype, copy=False)
 
 
 def _check_file(path: Path) -> None:
@@ -84,7 +128,7 @@ def _check_file(path: Path) -> None:
     require_file(path, "scan file")
 
 
-def _check_points(path: Path, points: np.ndarray) -> None:
+def _check_points(path: Path | None, points: np.ndarray) -> None:
     """Raise BadInputError for NaN/Inf coordinates or fewer than 3 points."""
     bad = int((~np.isfinite(points).all(axis=1)).sum())
     if bad:
@@ -93,7 +137,7 @@ def _check_points(path: Path, points: np.ndarray) -> None:
         raise BadInputError(path, f"has only {_count(len(points), 'point')}; a scan needs at least 3")
 
 
-def _mm_per_unit(path: Path, extent: float, units: str) -> tuple[float, str]:
+def _mm_per_unit(path: Path | None, extent: float, units: str) -> tuple[float, str]:
     """Millimetres per file unit and a phrase saying how the units were chosen."""
     e = np.format_float_positional(extent, precision=3, fractional=False, trim="-") if extent < 1e6 else f"{extent:.3g}"
     if extent == 0.0:
@@ -114,8 +158,9 @@ def _mm_per_unit(path: Path, extent: float, units: str) -> tuple[float, str]:
         return 1000.0, f"units m (detected from extent {e})"
     if MM_EXTENT[0] <= extent <= MM_EXTENT[1]:
         return 1.0, f"units mm (detected from extent {e})"
+    how = "pass --units mm or --units m" if path is not None else "give the units, mm or m"
     raise BadInputError(path, f"has an ambiguous extent of {e} (a body scan spans 0.05–3 in metres or "
-                              f"50–3000 in millimetres); pass --units mm or --units m")
+                              f"50–3000 in millimetres); {how}")
 
 
 def _sample_surface(path: Path, points_mm: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
