@@ -26,9 +26,13 @@ from .task import Task, plan_case
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
                     "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
 DASK_WORKER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
-                      "distributed.worker.memory.monitor-interval": "1s", "distributed.admin.system-monitor.interval": "5s"}
-"""A local cluster's workers: no statistical profiler and slower housekeeping, whose event-loop wake-ups take
-the interpreter lock from the case being planned (they doubled a case's time on this 2-core machine)."""
+                      "distributed.worker.memory.monitor-interval": "1s", "distributed.admin.system-monitor.interval": "5s",
+                      "distributed.scheduler.work-stealing": False, "distributed.worker.memory.spill": False,
+                      "distributed.worker.memory.target": False}
+"""A local cluster: no statistical profiler and slower housekeeping in the workers, whose event-loop wake-ups
+take the interpreter lock and the CPU from the case being planned (with the defaults a case took up to twice
+its time in a local worker process on a 2-core machine); no spilling to disk and no work stealing (each task
+returns a small dict, and the scheduler's queue already hands a free worker the next case)."""
 ATTEMPTS = 2
 """A case whose worker died this many times is failed; the others it took down are retried."""
 PR_SET_PDEATHSIG = 1
