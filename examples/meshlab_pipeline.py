@@ -119,7 +119,6 @@ def main(argv: list[str] | None = None) -> dict:
         truth = nipples[args.side]
     ms = pymeshlab.MeshSet()
     scale = load(ms, path, args.units)
-    scan_id = ms.current_mesh_id()
     scan = ms.current_mesh()
     out = {"scan": str(path), "points": scan.vertex_number(), "faces": scan.face_number(), "mm_per_unit": scale}
     if scan.is_point_cloud():

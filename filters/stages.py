@@ -47,7 +47,7 @@ Up = Literal[UP_AXES]
 Method = Literal[METHODS]
 
 MEMORY = 16
-"""Surfaces (and scans) remembered, the most recently used first out."""
+"""Surfaces (and scans) remembered; the least recently used is forgotten first."""
 MEASURES = ("volume_cc", "upper_pole_cc", "lower_pole_cc", "pole_ratio", "width_mm", "projection_mm")
 """The measures of `plan.measures.breast_measures` that need no torso."""
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from breastplan import BadInputError, read_ply, write_ply
-from breastplan.filters import (Filter, FilterError, Mesh, ParameterError, UnknownFilterError, filter, filters, get,
+from breastplan.filters import (Filter, Mesh, ParameterError, UnknownFilterError, filter, filters, get,
                                 registry)
 from breastplan.ingest.makehuman import BodyOptions, make_body
 from breastplan.ingest.realistic import CameraOptions, make_body_scene, write_scan_file
