@@ -28,11 +28,12 @@ THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"
 DASK_WORKER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
                       "distributed.worker.memory.monitor-interval": "1s", "distributed.admin.system-monitor.interval": "5s",
                       "distributed.scheduler.work-stealing": False, "distributed.worker.memory.spill": False,
-                      "distributed.worker.memory.target": False}
+                      "distributed.worker.memory.target": False, "distributed.worker.daemon": False}
 """A local cluster: no statistical profiler and slower housekeeping in the workers, whose event-loop wake-ups
 take the interpreter lock and the CPU from the case being planned (with the defaults a case took up to twice
 its time in a local worker process on a 2-core machine); no spilling to disk and no work stealing (each task
-returns a small dict, and the scheduler's queue already hands a free worker the next case)."""
+returns a small dict, and the scheduler's queue already hands a free worker the next case); workers that
+are not daemons, so that they may start the process their cases run in (`plan_in_child`)."""
 ATTEMPTS = 2
 """A case whose worker died this many times is failed; the others it took down are retried."""
 PR_SET_PDEATHSIG = 1
@@ -99,7 +100,7 @@ def run_dask(tasks: list[Task], jobs: int, scheduler: str | None) -> Results:
         except (OSError, TimeoutError) as exc:
             raise BadInputError(None, f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
         with client:
-            futures = {client.submit(plan_case, t, pure=False, key=f"plan-{t.sha256[:12]}-{os.path.basename(t.case)}"): t
+            futures = {client.submit(plan_in_child, t, pure=False, key=f"plan-{t.sha256[:12]}-{os.path.basename(t.case)}"): t
                        for t in tasks}
             for future in as_completed(futures):
                 task = futures[future]
@@ -126,6 +127,27 @@ def _cluster(scheduler: str | None, jobs: int):
         yield cluster
 
 
-def _died(task: Task) -> dict:
+_child: ProcessPoolExecutor | None = None
+"""A Dask worker's own process for its cases (`plan_in_child`), started on its first case."""
+
+
+def plan_in_child(task: Task) -> dict:
+    """`plan_case` in a child process of this (Dask worker) process, kept for its next cases: there a case
+    runs as in a local worker, away from the worker's event loop. A daemonic worker (a Nanny's, by default)
+    may not start processes, and plans in its own thread instead."""
+    global _child
+    if multiprocessing.current_process().daemon:
+        return plan_case(task)
+    if _child is None:
+        _child = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                     initializer=_local_worker, initargs=(os.getpid(),))
+    try:
+        return _child.submit(plan_case, task).result()
+    except BrokenProcessPool:
+        _child = None
+        return _died(task, 1)
+
+
+def _died(task: Task, times: int = ATTEMPTS) -> dict:
     return {"status": "failed", "seconds": 0.0,
-            "error": f"{task.input}: the worker process planning it died ({ATTEMPTS} times; out of memory or killed)."}
+            "error": f"{task.input}: the worker process planning it died ({times}×; out of memory or killed)."}
