@@ -1,9 +1,10 @@
 """Where a batch's cases run: `local` worker processes or the workers of a Dask cluster.
 
-Both run `plan_case` on each task, one case per worker at a time with one BLAS thread, and yield
-(task, result) as cases finish, in any order. A worker that dies (killed, out of memory) fails the case
-it was planning, not the batch. Local workers die with the batch (Linux: the parent-death signal), so a
-killed batch leaves no worker writing behind it.
+Both run `plan_case` on each task in a process of its own — a local worker, or a Dask worker's child
+process (`plan_in_child`) — one case at a time with one BLAS thread, and yield (task, result) as cases
+finish, in any order. A worker that dies (killed, out of memory) fails the case it was planning, not the
+batch. Those processes die with whoever started them (Linux: the parent-death signal), so a killed batch
+leaves no worker writing behind it.
 """
 from __future__ import annotations
 
