@@ -12,7 +12,9 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-SCAN_SUFFIXES = (".mcap", ".ply", ".obj", ".stl", ".pcd", ".xyz")
+from breastplan.ingest.files import SUPPORTED
+
+SCAN_SUFFIXES = (".mcap", *SUPPORTED)
 """A recording (.mcap) or a scan file of a format ingest reads."""
 
 

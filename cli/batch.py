@@ -10,9 +10,10 @@ from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, BatchOptions, OptionE
 
 from .app import JSON, command
 from .output import report, stderr, stdout, usage_error, writable
+from .plan import FLAGS as PLAN_FLAGS
+from .plan import check_method
 
-FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method", "jobs": "--jobs",
-         "executor": "--executor", "scheduler": "--scheduler"}
+FLAGS = {**PLAN_FLAGS, "jobs": "--jobs", "executor": "--executor", "scheduler": "--scheduler"}
 
 
 @command()
@@ -42,12 +43,7 @@ def batch(
         options = BatchOptions(PlanOptions.parse(deform, side, method), jobs, executor, scheduler)
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
-    if method not in ("exact", "learnt"):
-        from breastplan.errors import require_file
-
-        from .plan import check_method
-
-        check_method(require_file(Path(method), "model file"))
+    check_method(method)
     require_folder(input, "folder of scans and recordings")
     writable(out, folder=True)
 

@@ -38,11 +38,7 @@ def plan(
         options = PlanOptions.parse(deform, side, method)
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
-    if method not in ("exact", "learnt"):
-        model = Path(method)
-        if model.suffix.lower() != ".npz":
-            raise usage_error(f"'{method}' is not a method; choose exact, learnt or a model file (.npz)", "--method")
-        check_method(require_file(model, "model file"))
+    check_method(method)
     if input is not None and not input.is_dir():
         require_file(input, "recording or scan file")
     if out is None:
@@ -107,11 +103,17 @@ def _number(v) -> str:
     return "—" if v is None else f"{v:.1f}" if abs(v) >= 10 else f"{v:.2f}"
 
 
-def check_method(path: Path) -> None:
-    """Usage error unless the model file plans one of the plannable kinds."""
+def check_method(method: str) -> None:
+    """--method: exact, learnt, or a model file (.npz) that plans one of the plannable kinds; a usage
+    error otherwise, bad input (exit 3) for a model file that is missing or unreadable."""
+    if method in ("exact", "learnt"):
+        return
+    path = Path(method)
+    if path.suffix.lower() != ".npz":
+        raise usage_error(f"'{method}' is not a method; choose exact, learnt or a model file (.npz)", "--method")
     from breastplan.model_file import load_model
 
-    kinds = load_model(path).kinds
+    kinds = load_model(require_file(path, "model file")).kinds
     if not set(kinds) & set(DEGREE_KINDS):
         raise usage_error(f"{path} models {', '.join(map(str, kinds))}, which has no degrees to plan", "--method")
 

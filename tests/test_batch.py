@@ -188,6 +188,7 @@ def test_a_missing_folder_exits_3_naming_it(cli, tmp_path):
     (["--scheduler", "tcp://127.0.0.1:8786"], "needs --executor dask"),
     (["--deform", "ptosis"], "KIND:DEGREE"),
     (["--deform", "ptosis:9"], "1..8"),
+    (["--method", "fast"], "not a method"),
 ])
 def test_batch_usage_errors_exit_2_before_any_work(cli, tmp_path, args, message):
     res = run(cli, "batch", tmp_path, "--out", tmp_path / "cases", *args)
