@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 from breastplan import BadInputError
 
 from .chest_wall import ChestWall, fit_chest_wall
+from .nipple import find_apex, find_nipple
 
 MOUND_MM = 10.0
 """Coarse voxels at least this far in front of the chest wall form mounds."""
@@ -40,10 +41,6 @@ PAIR_MM = (100.0, 420.0)
 """… and lie this far apart across the body."""
 CROP_MM = 2.0
 """Breast points lie at least this far in front of the chest wall."""
-APEX_RADIUS_MM = 5.0
-"""Radius of the patch fitted around the apex to locate the nipple."""
-CAP_MM = 2.0
-"""The top cap (points this close to the highest) gives the nipple's first estimate."""
 UP_VIEW = np.array([0.0, -1.0, 0.0])
 """Superior in the viewing frame (image up)."""
 
@@ -234,13 +231,17 @@ def breast_frame(points: np.ndarray, wall: ChestWall, start_xy: np.ndarray,
     The base outline is rarely visible all round (the lateral side is seen at grazing angles,
     a ptotic lower pole hides its fold), so the origin is the foot of the nipple on the
     chest wall: exact for an undeformed primitive, below the base centre by the ptosis drop
-    otherwise (the fit refines the pose). Nipple and frame are refined together.
+    otherwise (the fit refines the pose). The apex and the frame are refined together, then the
+    nipple is found near the apex (`ingest.nipple.find_nipple`) and the frame set under it.
     """
     frame = frame_at(wall, start_xy)
     for _ in range(3):
-        tip = find_nipple(points, frame) if nipple is None else nipple
+        tip = frame.origin + frame.axes @ find_apex(frame.to_breast(points)) if nipple is None else nipple
         frame = frame_at(wall, foot_on_wall(wall, tip))
-    return frame, (find_nipple(points, frame) if nipple is None else nipple)
+    if nipple is None:
+        nipple = find_nipple(points, frame)
+        frame = frame_at(wall, foot_on_wall(wall, nipple))
+    return frame, nipple
 
 
 def foot_on_wall(wall: ChestWall, point: np.ndarray, iterations: int = 4) -> np.ndarray:
@@ -251,36 +252,3 @@ def foot_on_wall(wall: ChestWall, point: np.ndarray, iterations: int = 4) -> np.
         height = np.dot(point - wall.point(xy), n)
         xy = (point - height * n)[:2]
     return xy
-
-
-def find_nipple(points: np.ndarray, frame: BreastFrame) -> np.ndarray:
-    """The apex above the base plane: centre of the top cap, refined by quadratic patch fits."""
-    local = frame.to_breast(points)
-    cap = local[local[:, 2] > local[:, 2].max() - CAP_MM]
-    apex = np.array([*cap[:, :2].mean(0), cap[:, 2].max()])
-    for _ in range(4):
-        patch = local[np.linalg.norm(local[:, :2] - apex[:2], axis=1) < APEX_RADIUS_MM]
-        refined = _quadratic_peak(patch, apex[:2])
-        if refined is None:
-            break
-        moved = np.linalg.norm(refined[:2] - apex[:2])
-        apex = refined
-        if moved < 0.05:
-            break
-    return frame.origin + frame.axes @ apex
-
-
-def _quadratic_peak(patch: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
-    """Peak of z = quadratic(x, y) fitted to the patch, if it is a maximum inside the patch."""
-    if len(patch) < 12:
-        return None
-    x, y = (patch[:, :2] - centre).T
-    A = np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y])
-    c, *_ = np.linalg.lstsq(A, patch[:, 2], rcond=None)
-    H = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
-    if not np.all(np.linalg.eigvalsh(H) < 0):
-        return None
-    d = np.linalg.solve(H, -c[1:3])
-    if np.linalg.norm(d) > APEX_RADIUS_MM:
-        return None
-    return np.array([*(centre + d), c[0] + c[1:3] @ d + 0.5 * d @ H @ d])

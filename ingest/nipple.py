@@ -1,0 +1,143 @@
+"""The nipple on an isolated breast: the apex, then the centre of the raised nipple-areola disc.
+
+Points and results are in the viewing frame (mm); the search works in a breast frame
+(`ingest.breast.BreastFrame`: z anterior along the chest normal). The apex (the highest point
+above the base) is where a firm breast's nipple is, but a heavy or soft breast's apex lies
+several millimetres from it. The nipple and areola stand a few millimetres proud of the breast's
+smooth surface, so the nipple is refined to the centre of that disc: the residual of the points
+over a robust cubic fitted around the apex is smoothed, and the disc is its region above half of
+its peak. Where no such disc stands out (too low, too small or too large), the apex is kept.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+APEX_RADIUS_MM = 5.0
+"""Radius of the patch fitted around the apex (and the disc's centre) for its height."""
+CAP_MM = 2.0
+"""The top cap (points this close to the highest) gives the apex's first estimate."""
+SURFACE_RADIUS_MM = 28.0
+"""The smooth breast surface is fitted on points this far from the apex, in x, y."""
+SEARCH_MM = 10.0
+"""The disc's peak lies this close to the apex."""
+CELL_MM = 0.5
+"""Cells of the residual map."""
+SMOOTH_MM = 2.0
+"""Gaussian σ of the residual map's smoothing."""
+DISC_MM = (1.0, (2.0, 12.0))
+"""The disc rises at least this far, and its half-height region's equivalent radius lies in this range …"""
+ROUND = 1.6
+"""… and no point of that region lies further than this many radii from its centre (a disc, not an
+arc), and the skin around it …"""
+SURROUND = 0.25
+"""… (1.5–2.5 radii from its centre) lies below this share of its rise."""
+
+
+def find_apex(local: np.ndarray) -> np.ndarray:
+    """The apex of points in a breast frame (N, 3): centre of the top cap, refined by quadratic patches."""
+    cap = local[local[:, 2] > local[:, 2].max() - CAP_MM]
+    apex = np.array([*cap[:, :2].mean(0), cap[:, 2].max()])
+    for _ in range(4):
+        patch = local[np.linalg.norm(local[:, :2] - apex[:2], axis=1) < APEX_RADIUS_MM]
+        refined = _quadratic_peak(patch, apex[:2])
+        if refined is None:
+            break
+        moved = np.linalg.norm(refined[:2] - apex[:2])
+        apex = refined
+        if moved < 0.05:
+            break
+    return apex
+
+
+def find_nipple(points: np.ndarray, frame) -> np.ndarray:
+    """The nipple (viewing frame) of breast points (viewing frame) seen in `frame`: the centre of the
+    nipple-areola disc near the apex, or the apex where no disc stands out (module docstring)."""
+    local = frame.to_breast(points)
+    apex = find_apex(local)
+    centre = disc_centre(local, apex[:2])
+    if centre is not None:
+        height = _patch_height(local, centre)
+        if height is not None:
+            apex = np.array([*centre, height])
+    return frame.origin + frame.axes @ apex
+
+
+def disc_centre(local: np.ndarray, apex_xy: np.ndarray) -> np.ndarray | None:
+    """(x, y) centre of the raised disc near `apex_xy` in breast-frame points, or None."""
+    near = local[np.linalg.norm(local[:, :2] - apex_xy, axis=1) < SURFACE_RADIUS_MM]
+    if len(near) < 50:
+        return None
+    residual = near[:, 2] - _robust_cubic(near[:, :2] - apex_xy, near[:, 2])
+    n = int(np.ceil((SEARCH_MM + DISC_MM[1][1]) / CELL_MM))                 # the map reaches past any disc
+    ij = np.round((near[:, :2] - apex_xy) / CELL_MM).astype(int) + n
+    inside = np.all((ij >= 0) & (ij <= 2 * n), axis=1)
+    sums, counts = np.zeros((2, 2 * n + 1, 2 * n + 1))
+    np.add.at(sums, tuple(ij[inside].T), residual[inside])
+    np.add.at(counts, tuple(ij[inside].T), 1.0)
+    weight = ndimage.gaussian_filter(counts, SMOOTH_MM / CELL_MM, mode="constant")
+    grid = (np.indices(weight.shape) - n) * CELL_MM
+    seen = weight > 0.25 * np.median(weight[np.hypot(*grid) <= SEARCH_MM])   # sampled, at any resolution
+    smooth = np.where(seen, ndimage.gaussian_filter(sums, SMOOTH_MM / CELL_MM, mode="constant") / np.maximum(weight, 1e-9), 0.0)
+    searched = seen & (np.hypot(*grid) <= SEARCH_MM)
+    if not searched.any():
+        return None
+    peak = np.unravel_index(np.argmax(np.where(searched, smooth, -np.inf)), smooth.shape)
+    rise = smooth[peak]
+    labels, _ = ndimage.label(seen & (smooth >= 0.5 * rise))
+    disc = labels == labels[peak]
+    radius = np.sqrt(disc.sum() * CELL_MM ** 2 / np.pi)
+    border = disc[[0, -1], :].any() or disc[:, [0, -1]].any()
+    if rise < DISC_MM[0] or not DISC_MM[1][0] <= radius <= DISC_MM[1][1] or border:
+        return None
+    centre = grid[:, disc].mean(1)
+    if np.hypot(*(grid[:, disc] - centre[:, None])).max() > ROUND * radius:       # an arc, not a disc
+        return None
+    around = seen & _within(np.hypot(*(grid - centre[:, None, None])), 1.5 * radius, 2.5 * radius)
+    if not around.any() or np.mean(smooth[around]) > SURROUND * rise:
+        return None
+    return apex_xy + centre
+
+
+def _within(values: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    return (values >= lo) & (values <= hi)
+
+
+def _robust_cubic(xy: np.ndarray, z: np.ndarray, iterations: int = 6) -> np.ndarray:
+    """Values at `xy` of a cubic z(x, y) fitted to the points below the raised disc: points far
+    above the fit (the disc) are left out iteratively."""
+    u, v = (xy / SURFACE_RADIUS_MM).T
+    A = np.column_stack([u ** i * v ** (d - i) for d in range(4) for i in range(d, -1, -1)])
+    keep = np.ones(len(z), bool)
+    for _ in range(iterations):
+        coef, *_ = np.linalg.lstsq(A[keep], z[keep], rcond=None)
+        r = z - A @ coef
+        sigma = max(1.4826 * float(np.median(np.abs(r[keep]))), 0.2)
+        keep = (r < max(2.0 * sigma, 0.6)) & (r > -4.0 * sigma)
+    return A @ coef
+
+
+def _patch_height(local: np.ndarray, xy: np.ndarray) -> float | None:
+    """Height at `xy` of a quadratic fitted to the points within APEX_RADIUS_MM."""
+    patch = local[np.linalg.norm(local[:, :2] - xy, axis=1) < APEX_RADIUS_MM]
+    if len(patch) < 12:
+        return None
+    x, y = (patch[:, :2] - xy).T
+    c, *_ = np.linalg.lstsq(np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y]), patch[:, 2], rcond=None)
+    return float(c[0])
+
+
+def _quadratic_peak(patch: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
+    """Peak of z = quadratic(x, y) fitted to the patch, if it is a maximum inside the patch."""
+    if len(patch) < 12:
+        return None
+    x, y = (patch[:, :2] - centre).T
+    A = np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y])
+    c, *_ = np.linalg.lstsq(A, patch[:, 2], rcond=None)
+    H = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
+    if not np.all(np.linalg.eigvalsh(H) < 0):
+        return None
+    d = np.linalg.solve(H, -c[1:3])
+    if np.linalg.norm(d) > APEX_RADIUS_MM:
+        return None
+    return np.array([*(centre + d), c[0] + c[1:3] @ d + 0.5 * d @ H @ d])
