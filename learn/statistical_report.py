@@ -9,7 +9,7 @@ import numpy as np
 
 from .metrics import summary, ttest
 from .report import DIRECTIONS, _f, _plain, _write_text, hyper_text, ttest_cells
-from .statistical_study import SPIKE, THESIS_CONDITION, THESIS_HAUSDORFF, StatResult
+from .statistical_study import CONTINUOUS_ROW, SPIKE, THESIS_CONDITION, THESIS_HAUSDORFF, StatResult
 
 FIELD_ROW, UNCHANGED_ROW = "FFD fit", "no change"
 THESIS_ROW = "MLP (thesis)"
@@ -58,13 +58,20 @@ def write_report(out: Path, results: list[StatResult], meta: dict) -> dict:
         best.append({"condition": cond, "control_points": n ** 3, "fit": fit, "best": b.method,
                      "euclidean": _mean(b, "euclidean"), "hausdorff": _mean(b, "hausdorff"),
                      "hausdorff_max": float(np.max(b.distances["modelled_to_original_hausdorff"])),
-                     "spike_free_pct": b.spike_free_pct, "field": {m: _mean(pick[FIELD_ROW], m) for m in ("euclidean", "hausdorff")},
+                     "spike_free_pct": b.spike_free_pct,
+                     "field": {**{m: _mean(pick[FIELD_ROW], m) for m in ("euclidean", "hausdorff")},
+                               "spike_free_pct": pick[FIELD_ROW].spike_free_pct},
                      "unchanged": {m: _mean(pick[UNCHANGED_ROW], m) for m in ("euclidean", "hausdorff")},
                      "thesis_model": ({m: _mean(pick[THESIS_ROW], m) for m in ("euclidean", "hausdorff")}
                                       if THESIS_ROW in pick else None),
                      "thesis_hausdorff": THESIS_HAUSDORFF.get(n) if cond == THESIS_CONDITION else None})
         if THESIS_ROW in pick:
             tests[f"{cond} {n ** 3} CP {fit}: {b.method} vs {THESIS_ROW}"] = ttest(b.distances[key], pick[THESIS_ROW].distances[key])
+        continuous = [r for r in rows if r.method.endswith(CONTINUOUS_ROW)]
+        discrete = [r for r in rows if r.method.startswith("PCA") and r not in continuous]
+        if continuous and discrete:
+            c, d = best_of(continuous), best_of(discrete)
+            tests[f"{cond} {n ** 3} CP {fit}: {c.method} vs {d.method}"] = ttest(c.distances[key], d.distances[key])
     by_lattice = {r.lattice: r for r in results if r.method == THESIS_ROW and r.fit == results[0].fit}
     if len(by_lattice) == 2:
         (a, ra), (b, rb) = sorted(by_lattice.items())

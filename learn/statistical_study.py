@@ -11,7 +11,8 @@ Rows: "no change" (the original breast as the prediction: the ceiling), "FFD fit
 pair's own fitted field: the floor every model stands on), the
 thesis's MLP (125 and 216 control points, as many hidden neurons as control points, and a
 cross-validated sweep), and our FieldModel with each regressor (hyper-parameters by 4-fold
-cross-validation grouped by breast). Features and targets are scaled on the training split.
+cross-validation grouped by breast), from the discrete degree as the thesis, and from the
+continuous degree. Features and targets are scaled on the training split.
 """
 from __future__ import annotations
 
@@ -46,6 +47,11 @@ QUICK_GRIDS = {"ridge": {"n_modes": (6, 20)}, "kernel-ridge": {"n_modes": (6, 20
                "gp": {"n_modes": (6,)}, "mlp": {"n_modes": (6,)}}
 ALL_TYPES = ("ptosis b0>b1", "turn c0>c1", "top-shape s1->s0+")
 """The conditions one model learns together, a condition per type (the types' default conditions)."""
+CONTINUOUS = ("ridge", "kernel-ridge")
+"""Regressors also learnt with the continuous degree: the degree measured on each pair rather than
+its rounded grade, a finer input for the same change."""
+CONTINUOUS_ROW = ", continuous degree"
+"""The suffix of their rows' method names."""
 HIDDEN = (0.2, 0.5, 1.0)
 """The thesis MLP's sweep: hidden neurons as multiples of the control points."""
 QUICK_BREASTS = 4
@@ -71,10 +77,12 @@ class Pairs:
     def test(self) -> np.ndarray:
         return np.flatnonzero(self.dataset.split == "test")
 
-    def features(self, examples, thesis: bool = False, types=()) -> np.ndarray:
-        """Features of the examples (`pair_features`): the thesis's, or ours with the type one-hot over `types`."""
+    def features(self, examples, thesis: bool = False, types=(), continuous: bool = False) -> np.ndarray:
+        """Features of the examples (`pair_features`): the thesis's, or ours with the type one-hot over
+        `types`; with the discrete degree, or the continuous one (docs/model.md §5)."""
         ds = self.dataset
-        return pair_features([self.befores[int(i)] for i in ds.breast[examples]], ds.degree[examples],
+        degree = (ds.degree_continuous if continuous else ds.degree)[examples]
+        return pair_features([self.befores[int(i)] for i in ds.breast[examples]], degree,
                              [ds.condition.kind] * len(examples), types, thesis=thesis)
 
     def modelled(self, examples, fields) -> np.ndarray:
@@ -169,12 +177,14 @@ def run_condition(pairs: Pairs, quick: bool, thesis: bool, advance=lambda: None)
             results.append(evaluate(pairs, "MLP (thesis, swept)", {"hidden": params[next(iter(grid))][0]}, cv,
                                     est.predict(Xt)))
         advance()
-    X, Xt = pairs.features(train), pairs.features(test)
-    for regressor in REGRESSORS:
-        grid = (QUICK_GRIDS if quick else GRIDS)[regressor]
-        est, params, cv = grid_select(FieldModel(regressor), grid, X, Y, groups)
-        results.append(evaluate(pairs, f"PCA + {regressor}", params, cv, est.predict(Xt)))
-        advance()
+    for continuous, regressors in ((False, REGRESSORS), (True, CONTINUOUS)):
+        X, Xt = pairs.features(train, continuous=continuous), pairs.features(test, continuous=continuous)
+        for regressor in regressors:
+            grid = (QUICK_GRIDS if quick else GRIDS)[regressor]
+            est, params, cv = grid_select(FieldModel(regressor), grid, X, Y, groups)
+            name = f"PCA + {regressor}" + (CONTINUOUS_ROW if continuous else "")
+            results.append(evaluate(pairs, name, params, cv, est.predict(Xt)))
+            advance()
     return results
 
 
@@ -217,7 +227,7 @@ class StudyPlan:
 
     def steps(self, breasts: int, examples: int) -> int:
         """Progress steps: fits, then rows, then the model of all types."""
-        rows = 1 + len(REGRESSORS)
+        rows = 1 + len(REGRESSORS) + len(CONTINUOUS)
         return sum(breasts + examples + rows + (2 if c == THESIS_CONDITION else 0) for c, _ in self.runs()) + 1
 
 

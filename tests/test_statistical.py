@@ -213,7 +213,8 @@ def test_the_quick_study_writes_its_report_with_the_thesis_beside_ours(cli, tmp_
     assert res.returncode == 0, res.stderr
     report = json.loads((tmp_path / "study" / "report.json").read_text())
     methods = {r["method"] for r in report["rows"]}
-    assert {"FFD fit", "MLP (thesis)", "PCA + ridge", "PCA + kernel-ridge", "PCA + gp", "PCA + mlp"} <= methods
+    assert {"FFD fit", "MLP (thesis)", "PCA + ridge", "PCA + kernel-ridge", "PCA + gp", "PCA + mlp",
+            "PCA + ridge, continuous degree", "PCA + kernel-ridge, continuous degree"} <= methods
     field = [r for r in report["rows"] if r["method"] == "FFD fit"]
     assert all(r["euclidean_mean_pct"] < 0.05 for r in field)        # ptosis is a field of the 5³ lattice
     thesis = [r for r in report["rows"] if r.get("thesis_hausdorff_mean_pct")]
