@@ -46,17 +46,10 @@ class Mesh:
 
 
 def _matrix(values, dtype, what: str) -> np.ndarray:
-    """A read-only (N, 3) copy of `values` as `dtype`; BadInputError for another shape or whole numbers
-    that are not whole (faces)."""
-    a = np.array(values)
-    if a.size == 0:
-        a = a.reshape(0, 3)
-    if a.ndim != 2 or a.shape[1] != 3 or not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
-        raise BadInputError(None, f"has {what} of shape {a.shape} ({a.dtype}); a mesh's {what} are (N, 3) numbers")
-    if np.issubdtype(dtype, np.integer) and not np.issubdtype(a.dtype, np.integer):
-        if not (np.isfinite(a).all() and np.array_equal(a, np.round(a))):
-            raise BadInputError(None, f"has {what} that are not whole vertex indices")
-    out = a.astype(dtype)
+    """A read-only (N, 3) copy of `values` as `dtype` (`ingest.files.as_rows`)."""
+    from breastplan.ingest.files import as_rows
+
+    out = np.array(as_rows(None, values, 3, dtype, what), dtype)
     out.flags.writeable = False
     return out
 

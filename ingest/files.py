@@ -80,9 +80,9 @@ def scan_cloud(points, faces=None, normals=None, units: str = "auto", *, name: s
     path = None if path is None else Path(path)
     if units not in ("auto", "mm", "m"):
         raise BadInputError(None, f"units must be auto, mm or m, not '{units}'")
-    points = _arrays(path, points, 3, np.float64, "points")
-    faces = None if faces is None else _arrays(path, faces, 3, np.int64, "faces")
-    normals = None if normals is None else _arrays(path, normals, 3, np.float64, "normals")
+    points = as_rows(path, points, 3, np.float64, "points")
+    faces = None if faces is None else as_rows(path, faces, 3, np.int64, "faces")
+    normals = None if normals is None else as_rows(path, normals, 3, np.float64, "normals")
     _check_points(path, points)
     if faces is not None and len(faces) and (faces.min() < 0 or faces.max() >= len(points)):
         raise BadInputError(path, f"has faces that refer to missing vertices (it has {_count(len(points), 'point')})")
@@ -104,8 +104,9 @@ def scan_cloud(points, faces=None, normals=None, units: str = "auto", *, name: s
                      frame_hint=hint, description=f"{path.name if path is not None else name}: {what}, {units_text}")
 
 
-def _arrays(path: Path | None, values, columns: int, dtype, what: str) -> np.ndarray:
-    """`values` as an (N, columns) array of `dtype`; BadInputError for another shape."""
+def as_rows(path: Path | None, values, columns: int, dtype, what: str) -> np.ndarray:
+    """`values` as an (N, columns) array of `dtype`; BadInputError (naming `path`, if any) for another
+    shape, for values that are not numbers, or for `what` that are not whole when `dtype` is."""
     try:
         a = np.asarray(values)
     except (TypeError, ValueError):
