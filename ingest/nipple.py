@@ -119,21 +119,15 @@ def _robust_cubic(xy: np.ndarray, z: np.ndarray, iterations: int = 6) -> np.ndar
 
 def _patch_height(local: np.ndarray, xy: np.ndarray) -> float | None:
     """Height at `xy` of a quadratic fitted to the points within APEX_RADIUS_MM."""
-    patch = local[np.linalg.norm(local[:, :2] - xy, axis=1) < APEX_RADIUS_MM]
-    if len(patch) < 12:
-        return None
-    x, y = (patch[:, :2] - xy).T
-    c, *_ = np.linalg.lstsq(np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y]), patch[:, 2], rcond=None)
-    return float(c[0])
+    c = _quadratic(local[np.linalg.norm(local[:, :2] - xy, axis=1) < APEX_RADIUS_MM], xy)
+    return None if c is None else float(c[0])
 
 
 def _quadratic_peak(patch: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
     """Peak of z = quadratic(x, y) fitted to the patch, if it is a maximum inside the patch."""
-    if len(patch) < 12:
+    c = _quadratic(patch, centre)
+    if c is None:
         return None
-    x, y = (patch[:, :2] - centre).T
-    A = np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y])
-    c, *_ = np.linalg.lstsq(A, patch[:, 2], rcond=None)
     H = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
     if not np.all(np.linalg.eigvalsh(H) < 0):
         return None
@@ -141,3 +135,12 @@ def _quadratic_peak(patch: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
     if np.linalg.norm(d) > APEX_RADIUS_MM:
         return None
     return np.array([*(centre + d), c[0] + c[1:3] @ d + 0.5 * d @ H @ d])
+
+
+def _quadratic(patch: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
+    """Coefficients (1, x, y, x², xy, y²) of z fitted to the patch about `centre`; None under 12 points."""
+    if len(patch) < 12:
+        return None
+    x, y = (patch[:, :2] - centre).T
+    c, *_ = np.linalg.lstsq(np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y]), patch[:, 2], rcond=None)
+    return c
