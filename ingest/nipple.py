@@ -6,7 +6,8 @@ above the base) is where a firm breast's nipple is, but a heavy or soft breast's
 several millimetres from it. The nipple and areola stand a few millimetres proud of the breast's
 smooth surface, so the nipple is refined to the centre of that disc: the residual of the points
 over a robust cubic fitted around the apex is smoothed, and the disc is its region above half of
-its peak. Where no such disc stands out (too low, too small or too large), the apex is kept.
+its peak. Where no such disc stands out (too low, too small or too large, not round, or not
+clear of the skin around it), the apex is kept.
 """
 from __future__ import annotations
 
