@@ -53,7 +53,8 @@ def ingest(
         scan = run_ingest(input, options)
     paths = Case(out).save_scan(scan)
     report({"scan": str(paths[Case.SCAN_PLY]), "points": len(scan.points), "side": scan.side,
-            "nipple_camera_mm": scan.nipple_camera_mm.round(2), "frames": scan.source.frames,
+            "nipple_camera_mm": scan.nipple_camera_mm.round(2), "nipple_found": scan.nipple_found,
+            "frames": scan.source.frames,
             "source": scan.source.description,
             "timings_ms": {k: round(v, 1) for k, v in scan.timings_ms.items()}, "seconds": clock.seconds},
            as_json, f"ingest {scan.side} breast → {out}")

@@ -96,6 +96,7 @@ class Scan:
     roi_camera_mm: np.ndarray | None  # (6,) or None
     voxel_mm: float
     source: Source
+    nipple_found: str = "apex"       # "areola" (centre of the raised disc), "apex" or "given"
     timings_ms: dict = field(default_factory=dict)
     provenance: Provenance = field(default_factory=Provenance)
 
@@ -187,7 +188,7 @@ class Case:
             "source_kind": np.str_(src.kind), "intrinsics": np.asarray(src.K, float),
             "image_size": np.asarray(src.image_size, np.int64), "points": np.int64(len(scan.points)),
         }
-        meta = {"timings_ms": {k: round(v, 2) for k, v in scan.timings_ms.items()},
+        meta = {"timings_ms": {k: round(v, 2) for k, v in scan.timings_ms.items()}, "nipple_found": scan.nipple_found,
                 "chest_wall": "z = polynomial(x, y) in the viewing frame: [degree, x0, y0, sigma_mm, coefficients…]",
                 "camera_frame": torso_frame}
         plys = {self.SCAN_PLY: dict(points=scan.points, normals=scan.normals, comments=header),
@@ -214,6 +215,7 @@ class Case:
                     mound_centre_view_mm=art["crop_mound_centre_view_mm"],
                     mound_radius_mm=float(art["crop_mound_radius_mm"]), crop_height_mm=float(art["crop_height_mm"]),
                     roi_camera_mm=None if not roi.any() else roi, voxel_mm=float(art["voxel_mm"]), source=source,
+                    nipple_found=str(art.meta.get("nipple_found", "apex")),
                     timings_ms=dict(art.meta.get("timings_ms", {})), provenance=Provenance.from_meta(art.meta))
 
     # --- fit --------------------------------------------------------------------------

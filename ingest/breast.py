@@ -225,8 +225,8 @@ def frame_at(wall: ChestWall, xy: np.ndarray) -> BreastFrame:
 
 
 def breast_frame(points: np.ndarray, wall: ChestWall, start_xy: np.ndarray,
-                 nipple: np.ndarray | None = None) -> tuple[BreastFrame, np.ndarray]:
-    """The breast frame and the nipple (viewing frame).
+                 nipple: np.ndarray | None = None) -> tuple[BreastFrame, np.ndarray, str]:
+    """The breast frame, the nipple (viewing frame) and how it was found (`ingest.nipple.FOUND`).
 
     The base outline is rarely visible all round (the lateral side is seen at grazing angles,
     a ptotic lower pole hides its fold), so the origin is the foot of the nipple on the
@@ -238,10 +238,10 @@ def breast_frame(points: np.ndarray, wall: ChestWall, start_xy: np.ndarray,
     for _ in range(3):
         tip = frame.origin + frame.axes @ find_apex(frame.to_breast(points)) if nipple is None else nipple
         frame = frame_at(wall, foot_on_wall(wall, tip))
-    if nipple is None:
-        nipple = find_nipple(points, frame)
-        frame = frame_at(wall, foot_on_wall(wall, nipple))
-    return frame, nipple
+    if nipple is not None:
+        return frame, nipple, "given"
+    nipple, found = find_nipple(points, frame)
+    return frame_at(wall, foot_on_wall(wall, nipple)), nipple, found
 
 
 def foot_on_wall(wall: ChestWall, point: np.ndarray, iterations: int = 4) -> np.ndarray:

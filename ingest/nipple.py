@@ -51,17 +51,21 @@ def find_apex(local: np.ndarray) -> np.ndarray:
     return apex
 
 
-def find_nipple(points: np.ndarray, frame) -> np.ndarray:
-    """The nipple (viewing frame) of breast points (viewing frame) seen in `frame`: the centre of the
-    nipple-areola disc near the apex, or the apex where no disc stands out (module docstring)."""
+FOUND = ("areola", "apex", "given")
+"""How a nipple was found: the centre of the raised disc, the apex, or given by the user."""
+
+
+def find_nipple(points: np.ndarray, frame) -> tuple[np.ndarray, str]:
+    """The nipple (viewing frame) of breast points (viewing frame) seen in `frame`, and how it was
+    found (FOUND): the centre of the nipple-areola disc near the apex, or the apex where no disc
+    stands out (module docstring)."""
     local = frame.to_breast(points)
     apex = find_apex(local)
     centre = disc_centre(local, apex[:2])
-    if centre is not None:
-        height = _patch_height(local, centre)
-        if height is not None:
-            apex = np.array([*centre, height])
-    return frame.origin + frame.axes @ apex
+    height = None if centre is None else _patch_height(local, centre)
+    if height is None:
+        return frame.origin + frame.axes @ apex, "apex"
+    return frame.origin + frame.axes @ np.array([*centre, height]), "areola"
 
 
 def disc_centre(local: np.ndarray, apex_xy: np.ndarray) -> np.ndarray | None:

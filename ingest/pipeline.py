@@ -41,6 +41,7 @@ class Ingested:
     camera_to_breast: np.ndarray     # (4, 4) input (camera) frame → breast frame, mm
     side: str
     nipple_camera: np.ndarray        # (3,) mm, input frame
+    nipple_found: str                # how: "areola" (centre of the raised disc), "apex" or "given"
     chest_wall: ChestWall            # in the viewing frame
     view_from_camera: np.ndarray     # (4, 4) input frame → viewing frame
     crop: dict                       # mound centre, radius, roi, thresholds
@@ -177,7 +178,7 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
     with clock("crop + breast frame"):
         region = B.breast_region(torso, mound, wall, COARSE_MM)
         crop = torso[region & in_roi(torso)] if in_roi is not None else torso[region]
-        frame, nipple_view = B.breast_frame(crop, wall, mound.centre, nipple_view)
+        frame, nipple_view, nipple_found = B.breast_frame(crop, wall, mound.centre, nipple_view)
         crop = crop[frame.to_breast(crop)[:, 2] > 0.0]
     _enough(len(crop), "cropping")
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(crop))
@@ -195,7 +196,8 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
         points=np.asarray(cloud.points), normals=np.asarray(cloud.normals),
         camera_to_breast=frame.matrix @ view_from_camera,
         side=mound.side if nipple is not None or roi is not None else side,
-        nipple_camera=transform_points(to_camera, nipple_view), chest_wall=wall, view_from_camera=view_from_camera,
+        nipple_camera=transform_points(to_camera, nipple_view), nipple_found=nipple_found, chest_wall=wall,
+        view_from_camera=view_from_camera,
         crop={"mound_centre_view_mm": mound.centre, "mound_radius_mm": mound.radius, "mound_peak_mm": mound.peak_mm,
               "roi_camera_mm": None if roi is None else np.asarray(roi, float), "crop_height_mm": B.CROP_MM},
         torso_camera=transform_points(to_camera, torso), timings_ms=clock.ms)

@@ -32,6 +32,7 @@ def write_plan(plan: Plan, folder: Path) -> dict:
     sides = {}
     for side, sp in plan.sides.items():
         sides[side] = {"nipple_input_mm": [round(float(v), 2) for v in sp.scan.nipple_camera_mm],
+                       "nipple_found": sp.scan.nipple_found,
                        "fit": fit_record(sp), "reused": list(sp.reused),
                        "changes": [_save_change(sp, c, folder) for c in sp.changes]}
     torso_files = {}

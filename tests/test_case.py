@@ -30,7 +30,7 @@ def a_scan(n=60, provenance=Provenance()):
                 mound_centre_view_mm=np.array([-90.0, 5.0]), mound_radius_mm=80.0, crop_height_mm=2.0,
                 roi_camera_mm=None, voxel_mm=2.0,
                 source=Source("recording", "rec.mcap: 3 frames", 3, np.diag([450.0, 450.0, 1.0]), np.array([640, 400])),
-                timings_ms={"fuse": 1.5}, provenance=provenance)
+                nipple_found="areola", timings_ms={"fuse": 1.5}, provenance=provenance)
 
 
 def a_fit(model=BreastModel(Primitive(10, 11, 9, 10, 8, 0.9, 1.1), Deformation(ptosis=(1.0, 0.2))), **changes):
@@ -57,6 +57,7 @@ def test_scan_round_trip(tmp_path):
     for name in ("points", "normals", "torso_camera", "camera_to_breast", "nipple_camera_mm", "chest_wall"):
         assert np.array_equal(getattr(back, name), getattr(scan, name)), name
     assert back.side == "right" and back.roi_camera_mm is None and back.source.frames == 3
+    assert back.nipple_found == "areola"
     assert back.source.description == scan.source.description and np.array_equal(back.source.K, scan.source.K)
     assert back.provenance == scan.provenance
     T = scan.camera_to_breast                        # the nipple in the breast frame, by hand

@@ -31,7 +31,8 @@ def with_disc(points: np.ndarray, centre, height: float, radius: float) -> np.nd
 def test_the_nipple_is_the_centre_of_the_raised_disc(offset, height, radius, spacing, seed):
     rng = np.random.default_rng(seed)
     points = with_disc(dome(spacing, rng, noise=0.3), np.array(offset), height, radius)
-    nipple = find_nipple(points, IDENTITY)
+    nipple, found = find_nipple(points, IDENTITY)
+    assert found == "areola"
     assert np.linalg.norm(nipple[:2] - offset) < 0.6
     # on the skin over the disc's centre
     top = 60.0 - np.sum(np.square(offset)) / 80.0 + height
@@ -45,7 +46,8 @@ def test_without_a_raised_disc_the_nipple_is_the_apex(spacing, curvature, seed):
     points = dome(spacing, rng, noise=0.3, curvature=curvature)
     apex = find_apex(points)
     assert disc_centre(points, apex[:2]) is None
-    assert np.allclose(find_nipple(points, IDENTITY), apex)
+    nipple, found = find_nipple(points, IDENTITY)
+    assert found == "apex" and np.allclose(nipple, apex)
     assert abs(apex[2] - 60.0) < 1.0
 
 

@@ -88,6 +88,7 @@ def test_automatic_isolation_finds_the_nipple(name, side):
     result = ingested(name, side)
     truth = scene.nipples_camera()
     assert result.side == side
+    assert result.nipple_found == "areola"                           # MakeHuman's nipple and areola are raised
     error = np.linalg.norm(result.nipple_camera - truth[side])
     assert error <= NIPPLE_MM, f"{name}, {side}: nipple {error:.1f} mm from the truth"
 
@@ -123,6 +124,7 @@ def test_a_given_nipple_reports_its_side(side):
     result = ingest_frames(frames, IngestOptions(side=side, nipple_camera_mm=tuple(nipple)))
     assert result.side == side
     assert result.nipple_camera == pytest.approx(nipple, abs=1e-6)   # the given nipple overrides the apex
+    assert result.nipple_found == "given"
 
 
 # --- 3. no breast in view ------------------------------------------------------------------------
