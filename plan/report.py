@@ -33,6 +33,9 @@ SKIN = "rgb({},{},{})".format(*SKIN_RGB)
 TITLE = "breastplan — surgical plan"
 POSTER_PX = (760, 640)
 """The poster's width and height, px: those of the plot it stands in for."""
+NIPPLE_FOUND = {"areola": "centre of the raised areola", "apex": "apex (no raised areola found)",
+                "given": "given (--nipple)"}
+"""How the nipple was found, in the report's words."""
 
 
 def _b64(array: np.ndarray, dtype: str) -> str:
@@ -180,11 +183,12 @@ def tables(record: dict) -> str:
             rows.append(row)
         parts.append("<h2>Measures (after: the combination as planned)</h2>" + _table(head, rows, "measures"))
     rows = [[s, r["fit"]["volume_cc"], r["fit"]["rms_mm"], r["fit"]["normalised_residual"],
-             "met" if r["fit"]["stopping_rule_met"] else "not met", r["fit"]["points"]]
+             "met" if r["fit"]["stopping_rule_met"] else "not met", r["fit"]["points"],
+             NIPPLE_FOUND[r.get("nipple_found", "apex")]]
             for s, r in record["sides"].items()]
     parts.append("<h2>Fit quality</h2>" + _table(
-        ["side", "volume cc", "rms mm", "normalised residual", f"stopping rule {record['stopping_rule']}", "points"],
-        rows, "fit"))
+        ["side", "volume cc", "rms mm", "normalised residual", f"stopping rule {record['stopping_rule']}", "points",
+         "nipple found"], rows, "fit"))
     rows = [[s, c["name"], ", ".join(f"{d['kind']} {d['degree']:g} ({_how(d)})" for d in c["details"])]
             for s, r in record["sides"].items() for c in r["changes"]]
     parts.append("<h2>Planned changes</h2>" + _table(["side", "change", "how (parameters in model units)"], rows))

@@ -47,11 +47,13 @@ def test_plan_writes_every_artefact_of_both_sides(planned):
         for name in ("scan.ply", "scan.npz", "camera.ply", "fit.ply", "fit.npz"):
             assert (case / side / name).is_file()
         assert [c["name"] for c in record["sides"][side]["changes"]] == list(NAMES)
+        assert record["sides"][side]["nipple_found"] == "areola"          # the sample's areolas are raised
         for name in NAMES:
             for suffix in (".ply", "-scan.ply", ".npz"):
                 assert (case / side / "plan" / f"{name}{suffix}").is_file()
             assert (case / "plan" / f"{name}-torso.ply").is_file()
     assert (case / "summary.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "centre of the raised areola" in (case / "report.html").read_text()
     assert (case / "report.html").stat().st_size <= 8 * 2**20                 # the report's size target
     assert not [p for p in case.parent.iterdir() if p.name.startswith(".")]   # no staging folder left
 
