@@ -226,7 +226,8 @@ def frame_at(wall: ChestWall, xy: np.ndarray) -> BreastFrame:
 
 def breast_frame(points: np.ndarray, wall: ChestWall, start_xy: np.ndarray,
                  nipple: np.ndarray | None = None) -> tuple[BreastFrame, np.ndarray, str]:
-    """The breast frame, the nipple (viewing frame) and how it was found (`ingest.nipple.FOUND`).
+    """The breast frame, the nipple (viewing frame) and how it was found ("areola" or "apex" as
+    `ingest.nipple.find_nipple` says, "given" when `nipple` is).
 
     The base outline is rarely visible all round (the lateral side is seen at grazing angles,
     a ptotic lower pole hides its fold), so the origin is the foot of the nipple on the

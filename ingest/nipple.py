@@ -51,13 +51,9 @@ def find_apex(local: np.ndarray) -> np.ndarray:
     return apex
 
 
-FOUND = ("areola", "apex", "given")
-"""How a nipple was found: the centre of the raised disc, the apex, or given by the user."""
-
-
 def find_nipple(points: np.ndarray, frame) -> tuple[np.ndarray, str]:
     """The nipple (viewing frame) of breast points (viewing frame) seen in `frame`, and how it was
-    found (FOUND): the centre of the nipple-areola disc near the apex, or the apex where no disc
+    found: "areola", the centre of the nipple-areola disc near the apex, or "apex" where no disc
     stands out (module docstring)."""
     local = frame.to_breast(points)
     apex = find_apex(local)
