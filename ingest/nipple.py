@@ -94,14 +94,11 @@ def disc_centre(local: np.ndarray, apex_xy: np.ndarray) -> np.ndarray | None:
     centre = grid[:, disc].mean(1)
     if np.hypot(*(grid[:, disc] - centre[:, None])).max() > ROUND * radius:       # an arc, not a disc
         return None
-    around = seen & _within(np.hypot(*(grid - centre[:, None, None])), 1.5 * radius, 2.5 * radius)
+    apart = np.hypot(*(grid - centre[:, None, None]))
+    around = seen & (apart >= 1.5 * radius) & (apart <= 2.5 * radius)
     if not around.any() or np.mean(smooth[around]) > SURROUND * rise:
         return None
     return apex_xy + centre
-
-
-def _within(values: np.ndarray, lo: float, hi: float) -> np.ndarray:
-    return (values >= lo) & (values <= hi)
 
 
 def _robust_cubic(xy: np.ndarray, z: np.ndarray, iterations: int = 6) -> np.ndarray:
