@@ -289,24 +289,31 @@ def test_a_mesh_filter_needs_an_output_and_a_measures_filter_takes_none(cli, sca
 
 # --- 3. plugins, installed for real ----------------------------------------------------------------------
 
+def pyproject(name: str, version: str, entry_points: dict[str, str]) -> str:
+    """The pyproject.toml of a plugin distribution: its modules are those its entry points name."""
+    modules = list(dict.fromkeys(target.split(":")[0] for target in entry_points.values()))
+    points = "\n".join(f'{key} = "{target}"' for key, target in entry_points.items())
+    return f"""
+[build-system]
+requires = ["setuptools>=61"]
+build-backend = "setuptools.build_meta"
+
+[project]
+name = "{name}"
+version = "{version}"
+
+[project.entry-points."breastplan.filters"]
+{points}
+
+[tool.setuptools]
+py-modules = {json.dumps(modules)}
+"""
+
+
 PLUGIN = {
-    "pyproject.toml": """
-        [build-system]
-        requires = ["setuptools>=61"]
-        build-backend = "setuptools.build_meta"
-
-        [project]
-        name = "breastplan-scale-plugin"
-        version = "0.1.0"
-
-        [project.entry-points."breastplan.filters"]
-        scale_mesh = "bp_scale_plugin:scale_mesh"
-        shifted = "bp_scale_plugin:shift"
-        extra = "bp_scale_extra"
-
-        [tool.setuptools]
-        py-modules = ["bp_scale_plugin", "bp_scale_extra"]
-        """,
+    "pyproject.toml": pyproject("breastplan-scale-plugin", "0.1.0", {"scale_mesh": "bp_scale_plugin:scale_mesh",
+                                                                   "shifted": "bp_scale_plugin:shift",
+                                                                   "extra": "bp_scale_extra"}),
     "bp_scale_plugin.py": '''
         from breastplan.filters import Mesh, filter
 
@@ -332,21 +339,7 @@ PLUGIN = {
         ''',
 }
 BROKEN = {
-    "pyproject.toml": """
-        [build-system]
-        requires = ["setuptools>=61"]
-        build-backend = "setuptools.build_meta"
-
-        [project]
-        name = "breastplan-broken-plugin"
-        version = "0.2.0"
-
-        [project.entry-points."breastplan.filters"]
-        broken = "bp_broken_plugin:smooth"
-
-        [tool.setuptools]
-        py-modules = ["bp_broken_plugin"]
-        """,
+    "pyproject.toml": pyproject("breastplan-broken-plugin", "0.2.0", {"broken": "bp_broken_plugin:smooth"}),
     "bp_broken_plugin.py": '''
         raise RuntimeError("this plugin needs a library that is not installed")
         ''',
