@@ -11,6 +11,8 @@ clear of the skin around it), the apex is kept.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy import ndimage
 
@@ -33,6 +35,9 @@ ROUND = 1.6
 arc), and the skin around it …"""
 SURROUND = 0.25
 """… (1.5–2.5 radii from its centre) lies below this share of its rise."""
+TOP = (0.8, 3.5)
+"""The disc's top, for the skin's height over its centre: a round paraboloid fitted to the residuals
+within this share of its radius, or this many mm if more (clear of its falling edge)."""
 
 
 def find_apex(local: np.ndarray) -> np.ndarray:
@@ -40,9 +45,12 @@ def find_apex(local: np.ndarray) -> np.ndarray:
     cap = local[local[:, 2] > local[:, 2].max() - CAP_MM]
     apex = np.array([*cap[:, :2].mean(0), cap[:, 2].max()])
     for _ in range(4):
-        patch = local[np.linalg.norm(local[:, :2] - apex[:2], axis=1) < APEX_RADIUS_MM]
-        refined = _quadratic_peak(patch, apex[:2])
-        if refined is None:
+        c = _quadratic(local[np.linalg.norm(local[:, :2] - apex[:2], axis=1) < APEX_RADIUS_MM], apex[:2])
+        if c is None:
+            break
+        refined = _quadratic_peak(c, apex[:2])
+        if refined is None:                       # too flat for a peak: the fitted height, not the noisiest point's
+            apex[2] = c[0]
             break
         moved = np.linalg.norm(refined[:2] - apex[:2])
         apex = refined
@@ -57,19 +65,29 @@ def find_nipple(points: np.ndarray, frame) -> tuple[np.ndarray, str]:
     stands out (module docstring)."""
     local = frame.to_breast(points)
     apex = find_apex(local)
-    centre = disc_centre(local, apex[:2])
-    height = None if centre is None else _patch_height(local, centre)
-    if height is None:
+    disc = find_disc(local, apex[:2])
+    if disc is None:
         return frame.origin + frame.axes @ apex, "apex"
-    return frame.origin + frame.axes @ np.array([*centre, height]), "areola"
+    return frame.origin + frame.axes @ np.array([*disc.centre, disc.top]), "areola"
 
 
-def disc_centre(local: np.ndarray, apex_xy: np.ndarray) -> np.ndarray | None:
-    """(x, y) centre of the raised disc near `apex_xy` in breast-frame points, or None."""
+class Disc(NamedTuple):
+    """The raised nipple-areola disc in a breast frame (mm)."""
+    centre: np.ndarray
+    """(x, y) of its centroid."""
+    radius: float
+    """Equivalent radius of its half-height region."""
+    top: float
+    """Height of the skin over its centre."""
+
+
+def find_disc(local: np.ndarray, apex_xy: np.ndarray) -> Disc | None:
+    """The raised disc near `apex_xy` in breast-frame points (N, 3), or None (module docstring)."""
     near = local[np.linalg.norm(local[:, :2] - apex_xy, axis=1) < SURFACE_RADIUS_MM]
     if len(near) < 50:
         return None
-    residual = near[:, 2] - _robust_cubic(near[:, :2] - apex_xy, near[:, 2])
+    coef = _robust_cubic(near[:, :2] - apex_xy, near[:, 2])
+    residual = near[:, 2] - _cubic_terms(near[:, :2] - apex_xy) @ coef
     n = int(np.ceil((SEARCH_MM + DISC_MM[1][1]) / CELL_MM))                 # the map reaches past any disc
     ij = np.round((near[:, :2] - apex_xy) / CELL_MM).astype(int) + n
     inside = np.all((ij >= 0) & (ij <= 2 * n), axis=1)
@@ -98,34 +116,38 @@ def disc_centre(local: np.ndarray, apex_xy: np.ndarray) -> np.ndarray | None:
     around = seen & (apart >= 1.5 * radius) & (apart <= 2.5 * radius)
     if not around.any() or np.mean(smooth[around]) > SURROUND * rise:
         return None
-    return apex_xy + centre
+    centre = apex_xy + centre
+    d = near[:, :2] - centre
+    inner = np.hypot(*d.T) < max(TOP[0] * radius, TOP[1])
+    if inner.sum() < 6:
+        return None
+    A = np.column_stack([np.ones(inner.sum()), d[inner], np.sum(d[inner] ** 2, axis=1)])
+    paraboloid, *_ = np.linalg.lstsq(A, residual[inner], rcond=None)
+    return Disc(centre, float(radius), float(_cubic_terms(centre[None] - apex_xy)[0] @ coef + paraboloid[0]))
 
 
 def _robust_cubic(xy: np.ndarray, z: np.ndarray, iterations: int = 6) -> np.ndarray:
-    """Values at `xy` of a cubic z(x, y) fitted to the points below the raised disc: points far
-    above the fit (the disc) are left out iteratively."""
-    u, v = (xy / SURFACE_RADIUS_MM).T
-    A = np.column_stack([u ** i * v ** (d - i) for d in range(4) for i in range(d, -1, -1)])
+    """Coefficients (of `_cubic_terms`) of a cubic z(x, y) fitted to the points below the raised
+    disc: points far above the fit (the disc) are left out iteratively."""
+    A = _cubic_terms(xy)
     keep = np.ones(len(z), bool)
     for _ in range(iterations):
         coef, *_ = np.linalg.lstsq(A[keep], z[keep], rcond=None)
         r = z - A @ coef
         sigma = max(1.4826 * float(np.median(np.abs(r[keep]))), 0.2)
         keep = (r < max(2.0 * sigma, 0.6)) & (r > -4.0 * sigma)
-    return A @ coef
+    return coef
 
 
-def _patch_height(local: np.ndarray, xy: np.ndarray) -> float | None:
-    """Height at `xy` of a quadratic fitted to the points within APEX_RADIUS_MM."""
-    c = _quadratic(local[np.linalg.norm(local[:, :2] - xy, axis=1) < APEX_RADIUS_MM], xy)
-    return None if c is None else float(c[0])
+def _cubic_terms(xy: np.ndarray) -> np.ndarray:
+    """The ten monomials of degree ≤ 3 in (x, y) / SURFACE_RADIUS_MM, (N, 10)."""
+    u, v = (xy / SURFACE_RADIUS_MM).T
+    return np.column_stack([u ** i * v ** (d - i) for d in range(4) for i in range(d, -1, -1)])
 
 
-def _quadratic_peak(patch: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
-    """Peak of z = quadratic(x, y) fitted to the patch, if it is a maximum inside the patch."""
-    c = _quadratic(patch, centre)
-    if c is None:
-        return None
+def _quadratic_peak(c: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
+    """Peak of the quadratic with coefficients `c` (of `_quadratic`) about `centre`, if it is a
+    maximum within APEX_RADIUS_MM."""
     H = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
     if not np.all(np.linalg.eigvalsh(H) < 0):
         return None

@@ -4,7 +4,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from breastplan.ingest.breast import BreastFrame
-from breastplan.ingest.nipple import disc_centre, find_apex, find_nipple
+from breastplan.ingest.nipple import find_disc, find_apex, find_nipple
 
 IDENTITY = BreastFrame(np.zeros(3), np.eye(3))
 
@@ -33,10 +33,12 @@ def test_the_nipple_is_the_centre_of_the_raised_disc(offset, height, radius, spa
     points = with_disc(dome(spacing, rng, noise=0.3), np.array(offset), height, radius)
     nipple, found = find_nipple(points, IDENTITY)
     assert found == "areola"
-    assert np.linalg.norm(nipple[:2] - offset) < 0.6
-    # on the skin over the disc's centre
+    # within 1 mm of the disc's centre, on the skin over it (the disc's soft edge leaves its
+    # centre within 0.01 height of the full rise): a third of the 3 mm target, over 3 σ of the
+    # centroid of points sampled up to 1.7 mm apart with 0.3 mm noise
+    assert np.linalg.norm(nipple[:2] - offset) < 1.0
     top = 60.0 - np.sum(np.square(offset)) / 80.0 + height
-    assert abs(nipple[2] - top) < 0.6
+    assert abs(nipple[2] - top) < 1.0
 
 
 @settings(max_examples=40, deadline=None)
@@ -45,7 +47,7 @@ def test_without_a_raised_disc_the_nipple_is_the_apex(spacing, curvature, seed):
     rng = np.random.default_rng(seed)
     points = dome(spacing, rng, noise=0.3, curvature=curvature)
     apex = find_apex(points)
-    assert disc_centre(points, apex[:2]) is None
+    assert find_disc(points, apex[:2]) is None
     nipple, found = find_nipple(points, IDENTITY)
     assert found == "apex" and np.allclose(nipple, apex)
     assert abs(apex[2] - 60.0) < 1.0
@@ -54,10 +56,10 @@ def test_without_a_raised_disc_the_nipple_is_the_apex(spacing, curvature, seed):
 def test_a_disc_too_wide_for_a_nipple_is_not_taken():
     rng = np.random.default_rng(0)
     points = with_disc(dome(1.0, rng, noise=0.3), np.array([3.0, 0.0]), 4.0, 18.0)
-    assert disc_centre(points, find_apex(points)[:2]) is None
+    assert find_disc(points, find_apex(points)[:2]) is None
 
 
 def test_too_few_points_keep_the_apex():
     rng = np.random.default_rng(1)
     points = with_disc(dome(8.0, rng, noise=0.0), np.zeros(2), 3.0, 6.0)
-    assert disc_centre(points, np.zeros(2)) is None
+    assert find_disc(points, np.zeros(2)) is None
