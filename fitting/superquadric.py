@@ -44,6 +44,8 @@ LOWER_MARGIN, LOW_SHARE = 0.7, 0.1
 """A top-shape fit starts from the points top-shape barely moves: those below y = −0.7·a4 (cloud
 centre, breast frame), in the lower half whatever ptosis moved down, and those below 10 % of the
 height, which z·(β − 1) moves by under 0.02·a5 for |s0| ≤ 2.5 (docs/model.md §3–4)."""
+STUCK = 1.0
+"""A fit with deformations whose cost ends above this share of the plain primitive's is stuck."""
 CHEST_PRIOR_WEIGHT = 30.0
 """Weight of the prior residuals (tilt of the base, rad; height of the base, mu) per √point."""
 
@@ -218,8 +220,8 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
     """Fit primitive + pose (+ the global `deformations`, e.g. ("top-shape", "ptosis", "turn")) to
     (N, 3) points (mm, breast frame).
 
-    The deformation parameters start from zero, or with top-shape from `_top_shape_start`, unless
-    `x0` gives the whole parameter vector.
+    The deformation parameters start from zero unless `x0` gives the whole parameter vector; with
+    top-shape, see `_fit_with_top_shape`.
     """
     kinds = tuple(k for k in KIND_PARAMS if k in set(deformations))  # docs/model.md §3 order
     unknown = set(deformations) - set(KIND_PARAMS)
@@ -229,24 +231,44 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
     everything = to_model_units(_checked(points_mm))
     p = seeded_subset(everything, FIT_POINTS)
     solve = _Solver(chest_prior, loss, float(to_model_units(f_scale_mm)))
-    nfev = 0
-    if x0 is None and "top-shape" in kinds:
-        x0, nfev = _top_shape_start(p, kinds, solve)
-    elif x0 is None:
-        x0 = initial_guess(p, kinds)
     fitted = seeded_subset(p, DEFORMED_FIT_POINTS) if kinds else p
-    bounded = not _plausible(x0, kinds)       # a breast the model cannot hold starts out of range
-    sol = solve(fitted, kinds, x0, plausible=bounded)
-    if not _plausible(sol.x, kinds):          # … or ends there: again, within bounds
-        nfev += sol.nfev
-        sol = solve(fitted, kinds, sol.x, plausible=True)
+    if x0 is None and "top-shape" in kinds:
+        sol = _fit_with_top_shape(p, fitted, kinds, solve)
+    else:
+        sol = _solve_plausibly(fitted, kinds, initial_guess(p, kinds) if x0 is None else x0, 0, solve)
     a, e1, e2, rot, t = _unpack(sol.x)
     pose = np.eye(4)
     pose[:3, :3] = _rotation(rot)
     pose[:3, 3] = to_mm(t)
     return SuperquadricFit(Primitive(*map(float, a), float(e1), float(e2)), pose, _deformation(sol.x, kinds),
-                           to_mm(_radial(sol.x, everything, kinds)), int(nfev + sol.nfev), time.perf_counter() - start,
+                           to_mm(_radial(sol.x, everything, kinds)), int(sol.nfev), time.perf_counter() - start,
                            sol.x)
+
+
+def _solve_plausibly(fitted: np.ndarray, kinds: tuple[str, ...], x0: np.ndarray, nfev: int, solve: "_Solver"):
+    """The solver's result from x0, with the deformations kept in their PLAUSIBLE ranges: free from a
+    start within them, bounded from one outside (a breast the model cannot hold) or if the free
+    solve ends outside; its `nfev` counts every evaluation since the start's own `nfev`."""
+    sol = solve(fitted, kinds, x0, plausible=not _plausible(x0, kinds))
+    if not _plausible(sol.x, kinds):
+        nfev += sol.nfev
+        sol = solve(fitted, kinds, sol.x, plausible=True)
+    sol.nfev += nfev
+    return sol
+
+
+def _fit_with_top_shape(p: np.ndarray, fitted: np.ndarray, kinds: tuple[str, ...], solve: "_Solver"):
+    """The solver's end from `_top_shape_start`; or, if that ends no better than the plain primitive
+    (STUCK × its cost) — a local minimum, since zero deformations give the primitive — the better of
+    it and the end from the plain primitive with every deformation at zero."""
+    primitive = solve(fitted, (), initial_guess(fitted))
+    first = _solve_plausibly(fitted, kinds, *_top_shape_start(p, kinds, solve), solve)
+    first.nfev += primitive.nfev
+    if first.cost <= STUCK * primitive.cost:
+        return first
+    x0 = np.concatenate([primitive.x, np.zeros(sum(len(KIND_PARAMS[k]) for k in kinds))])
+    second = _solve_plausibly(fitted, kinds, x0, first.nfev, solve)
+    return second if second.cost < first.cost else first
 
 
 def _top_shape_start(p: np.ndarray, kinds: tuple[str, ...], solve: "_Solver") -> tuple[np.ndarray, int]:

@@ -71,6 +71,28 @@ def test_fit_of_ingested_synthetic_scans_is_within_1_mm_of_the_true_breast_and_3
         assert _edges_shared_twice(fit.faces)                             # closed, watertight
 
 
+def test_fit_of_a_realistic_breast_ends_below_the_plain_primitive_whatever_the_order_of_its_points():
+    """Truths: zero deformations give the plain primitive, so a fit with deformations that ends farther
+    from the points than the plain primitive has stopped in a local minimum; and the order of the
+    points says nothing about the breast. The breast: a heavy, soft MakeHuman breast seen from the
+    front (the right one of a body whose top-shape start stopped at 10 mm from its points)."""
+    from breastplan.fitting.superquadric import fit_superquadric
+    from breastplan.ingest.makehuman import BodyOptions
+    from breastplan.ingest.pipeline import ingest_frames
+    from breastplan.ingest.realistic import CameraOptions, make_body_scene
+    from breastplan.ingest.recording import DepthFrames
+    from breastplan.options import FitOptions, IngestOptions
+
+    body = BodyOptions(cup=0.9, firmness=0.0, weight=0.9, muscle=0.3, modifiers={"asymmetry": -0.6, "torso_width": 0.5})
+    scene = make_body_scene(body, CameraOptions(650.0, 0.0, 0.0, "800x600", wall_mm=400.0))
+    points = ingest_frames(DepthFrames(scene.frames(8, 0), scene.camera.K, "synthetic"), IngestOptions("right")).points
+    plain = np.mean(np.abs(fit_superquadric(points).residuals_mm))
+    deformed = fit_superquadric(points, deformations=FitOptions().deformations)
+    assert np.mean(np.abs(deformed.residuals_mm)) < plain
+    volumes = [fit_breast(p).volume_cc for p in (points, points[::-1].copy())]
+    assert volumes[1] == pytest.approx(volumes[0], rel=0.03)
+
+
 @pytest.fixture(scope="module")
 def case(tmp_path_factory, cli):
     folder = tmp_path_factory.mktemp("case")
