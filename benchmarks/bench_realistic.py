@@ -32,6 +32,8 @@ volume and ptosis figures only when its side is isolated):
    not ordered; baseline: on the Chen torsos, the share of scenes whose fitted left/right b0 order matches the
    true order, where the true b0 differ by ≥ 0.2); (b) the fitted volumes differ by ≤ 5 % of their mean
    (baseline: the true difference, in % of the same mean);
+5c. (no target) repeatability: per body and side fitted from several views, the spread of its fitted
+   volumes, (max − min) / mean, median and worst;
 6. fit seconds per breast (the whole `fit_breast` call, one call per breast): median over the realistic
    breasts ≤ 1 s; baseline: the median over the Chen breasts;
 7. ingest time of 8 frames at 800×600 (`ingest_frames`, frames already in memory): median ≤ 1 s, over
@@ -368,6 +370,19 @@ def realistic_pairs(scenes: list[SceneResult], varies: str) -> list[dict]:
     return cases
 
 
+def view_spreads(scenes: list[SceneResult]) -> list[dict]:
+    """Per body (pair × member) and side fitted from at least two views: the spread of the fitted
+    volumes over the views, (max − min) / mean in %."""
+    groups: dict = {}
+    for s in scenes:
+        for side in SIDES:
+            if usable(s.sides[side]):
+                groups.setdefault((s.meta["pair"], s.meta["member"], side), []).append(s.sides[side].volume_cc)
+    return [{"pair": pair, "member": member, "side": side, "volume_cc": v,
+             "spread_pct": 100.0 * (max(v) - min(v)) / statistics.mean(v)}
+            for (pair, member, side), v in sorted(groups.items()) if len(v) >= 2]
+
+
 def chen_pairs(chen: list[SceneResult]) -> list[dict]:
     """Cup-change baseline: each Chen seed as drawn vs scaled, per side."""
     index = {(s.meta["seed"], s.meta["scaled"]): s for s in chen}
@@ -534,7 +549,8 @@ def print_timing(rows: list[dict], console: Console) -> None:
 
 
 def figure(name, value, target, baseline, unit, at_most=True, **extra) -> dict:
-    met = None if value is None else bool(value <= target if at_most else value >= target)
+    """One figure; a `target` of None reports it without one."""
+    met = None if value is None or target is None else bool(value <= target if at_most else value >= target)
     return {"figure": name, "value": value, "target": target, "target_is": "max" if at_most else "min",
             "baseline": baseline, "unit": unit, "met": met, **extra}
 
@@ -545,7 +561,8 @@ def print_figures(figures: list[dict], console: Console) -> None:
     for f in figures:
         unit = f["unit"]
         show = lambda v: "–" if v is None else f"{v:.3g} {unit}"  # noqa: E731
-        table.add_row(f["figure"], show(f["value"]), f"{'≤' if f['target_is'] == 'max' else '≥'} {f['target']:g} {unit}",
+        target = "–" if f["target"] is None else f"{'≤' if f['target_is'] == 'max' else '≥'} {f['target']:g} {unit}"
+        table.add_row(f["figure"], show(f["value"]), target,
                       show(f["baseline"]), "–" if f["met"] is None else ("yes" if f["met"] else "no"), f.get("over", ""))
     console.print(table)
 
@@ -577,6 +594,7 @@ def main() -> None:
     chen_cup_errors = [abs(c["relative_error_pct"]) for c in chen_cup if c["fitted"]]
     firm_fitted = [c for c in firm if c["fitted"]]
     fits, chen_fits = fit_times(real), fit_times(chen)
+    spreads = view_spreads(real)
     T = TARGETS
     figures = [
         figure("both_isolated", iso["both_isolated_pct"], T["both_isolated_pct"], iso_chen["both_isolated_pct"], "%",
@@ -600,6 +618,10 @@ def main() -> None:
                T["firmness_volume_pct"], max_or_none(c["true_difference_pct"] for c in firm_fitted), "%",
                baseline_is="the true difference (half-body volumes) in % of the same mean",
                over=f"{len(firm_fitted)}/{len(firm)} cases"),
+        figure("volume_spread_over_views_worst", max_or_none(c["spread_pct"] for c in spreads), None, None, "%",
+               median=median_or_none(c["spread_pct"] for c in spreads),
+               over=f"{len(spreads)} body × side cases, fitted from {min((len(c['volume_cc']) for c in spreads), default=0)}"
+               f"–{max((len(c['volume_cc']) for c in spreads), default=0)} views; no target (repeatability)"),
         figure("fit_seconds_median", median_or_none(fits), T["fit_s"], median_or_none(chen_fits), "s",
                over=f"{len(fits)} realistic fits, {len(chen_fits)} Chen fits, one call each"),
         figure("ingest_800x600_seconds_median", median_or_none(r["median_s"] for r in timing), T["ingest_800x600_s"],
@@ -620,9 +642,9 @@ def main() -> None:
         "benchmark": "bench_realistic", "quick": bool(args.quick), "repeats": repeats, "frames": FRAMES,
         "isolated_mm": ISOLATED_MM, "targets": TARGETS, "figures": {f["figure"]: f for f in figures},
         "isolation": iso, "isolation_chen": iso_chen, "cup_pairs": cup, "firmness_pairs": firm, "chen_cup_pairs": chen_cup,
-        "chen_ptosis_order": chen_order, "ingest_timing": timing,
+        "chen_ptosis_order": chen_order, "view_spreads": spreads, "ingest_timing": timing,
         "scenes": [s.as_dict() for s in real], "chen_scenes": [s.as_dict() for s in chen],
-        "met": all(f["met"] for f in figures), "loadavg_start": load_start, "loadavg_end": os.getloadavg(),
+        "met": all(f["met"] for f in figures if f["target"] is not None), "loadavg_start": load_start, "loadavg_end": os.getloadavg(),
         "wall_s": wall})))
 
 
