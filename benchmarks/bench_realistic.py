@@ -26,11 +26,13 @@ volume and ptosis figures only when its side is isolated):
 4. cup change: per cup pair × view × side, fitted volume change vs the true change (difference of
    `body.half_volumes_cc()` of that side); worst relative error ≤ 10 %. Baseline: the same on the
    Chen pairs (truth: `Primitive.volume_cc`);
-5. firmness pairs (same cup, firmness 0 vs 1), per view × side: (a) the fitted ptosis b0 (docs/model.md
-   §3, `BreastFit.superquadric.deformation.params("ptosis")`) is larger for firmness 0 by at least
-   B0_TIE (target: every case; closer b0 are a tie — both at the plausible bound, say — and count as
-   not ordered; baseline: on the Chen torsos, the share of scenes whose fitted left/right b0 order matches the
-   true order, where the true b0 differ by ≥ 0.2); (b) the fitted volumes differ by ≤ 5 % of their mean
+5. firmness pairs (same cup, firmness 0 vs 1), per view × side: (a) the fitted ptosis parameters
+   (b0, b1; docs/model.md §3, `BreastFit.superquadric.deformation.params("ptosis")`), taken together as
+   the sag they give the fitted primitive's apex (`BreastFit.ptosis_sag_mm`), are larger for firmness 0 by over
+   SAG_TIE_MM (target: every case; closer sags are a tie and count as not ordered; b0 alone is reported
+   too: it ties at its plausible bound, 3, in about half the cases); baseline: on the Chen torsos, the
+   share of scenes whose fitted left/right sag order matches the true order, where the true sags differ
+   by ≥ CHEN_SAG_GAP_MM; (b) the fitted volumes differ by ≤ 5 % of their mean
    (baseline: the true difference, in % of the same mean);
 5c. (no target) repeatability: per body and side fitted from several views, the spread of its fitted
    volumes, (max − min) / mean, median and worst;
@@ -65,7 +67,7 @@ from rich.table import Table
 from threadpoolctl import threadpool_limits
 
 from breastplan import BadInputError, transform_points
-from breastplan.fitting.breast_fit import fit_breast
+from breastplan.fitting.breast_fit import fit_breast, ptosis_sag_mm
 from breastplan.ingest import synthetic
 from breastplan.ingest.makehuman import BodyOptions
 from breastplan.ingest.pipeline import ingest_frames
@@ -80,10 +82,10 @@ ISOLATED_MM = 30.0
 CHEN_SEEDS, CHEN_TILTS_DEG = (0, 1, 2), (0.0, 10.0, 5.0)
 CHEN_SCALE = 1.12
 """The Chen pairs' second member: all five semi-axes × 1.12 (volume × 1.40)."""
-CHEN_B0_GAP = 0.2
-B0_TIE = 0.01
-"""Fitted b0 of a firmness pair closer than this are a tie (most often both at the bound 3)."""
-"""Chen scenes whose true left/right ptosis b0 differ by less than this are left out of 5a's baseline."""
+CHEN_SAG_GAP_MM = 1.0
+"""Chen scenes whose true left/right ptosis sags differ by less than this are left out of 5a's baseline."""
+SAG_TIE_MM, B0_TIE = 0.1, 0.01
+"""Fitted sags (b0 values) of a firmness pair closer than this are a tie (b0: most often both at the bound 3)."""
 TIMING_RESOLUTION, TIMING_CASES = "800x600", 4
 TARGETS = {"both_isolated_pct": 100.0, "nipple_median_mm": 3.0, "nipple_worst_mm": 8.0, "asymmetry_worst_mm": 4.0,
            "cup_change_worst_pct": 10.0, "firmness_order_pct": 100.0, "firmness_volume_pct": 5.0,
@@ -146,6 +148,7 @@ class Side:
     volume_cc: float | None = None
     b0: float | None = None
     b1: float | None = None
+    sag_mm: float | None = None        # how far the fitted ptosis lowers the primitive's apex (BreastFit.ptosis_sag_mm)
     residual: float | None = None      # FFD mean normalised residual
     iterations: tuple | None = None    # (superquadric nfev, FFD iterations)
     stage_s: tuple | None = None       # (superquadric, FFD) seconds as the fit reports them
@@ -232,6 +235,7 @@ def run_side(frames: DepthFrames, side: str, truth_camera: np.ndarray) -> Side:
     out.fit_s, out.fit_status = time.perf_counter() - t0, "fitted"
     out.volume_cc, out.residual = float(fit.volume_cc), float(fit.ffd.residual)
     out.b0, out.b1 = (float(v) for v in fit.superquadric.deformation.params("ptosis"))
+    out.sag_mm = fit.ptosis_sag_mm
     out.iterations = (int(fit.superquadric.iterations), int(fit.ffd.iterations))
     out.stage_s = (float(fit.superquadric.seconds), float(fit.ffd.seconds))
     out.converged = bool(fit.ffd.converged)
@@ -275,7 +279,9 @@ def run_chen(spec: dict) -> tuple[SceneResult, DepthFrames]:
     truth_camera = {s: transform_points(scene.camera_from_body, truth_body[s][None])[0] for s in SIDES}
     sides = {s: run_side(frames, s, truth_camera[s]) for s in SIDES}
     truth = {"volume_cc": {s: scene.breasts[s].primitive.volume_cc for s in SIDES},
-             "b0": {s: float(scene.breasts[s].deformation.params("ptosis")[0]) for s in SIDES}}
+             "b0": {s: float(scene.breasts[s].deformation.params("ptosis")[0]) for s in SIDES},
+             "sag_mm": {s: ptosis_sag_mm(scene.breasts[s].primitive, scene.breasts[s].deformation.params("ptosis"))
+                        for s in SIDES}}
     result = SceneResult("chen", f"chen s{spec['seed']}{' ×' + format(CHEN_SCALE, 'g') if spec['scaled'] else ''}",
                          {**spec, "distance_mm": float(scene.meta["distance_mm"]), "resolution": "640x400"},
                          sides, asymmetry(sides, np.linalg.inv(scene.camera_from_body), truth_body), truth)
@@ -338,6 +344,11 @@ def usable(side: Side) -> bool:
     return side.isolated and side.fit_status == "fitted"
 
 
+def order(soft: float, firm: float, tie: float) -> str:
+    """'right' when the softer breast's value is larger by over `tie`, 'tie' within it, else 'wrong'."""
+    return "right" if soft > firm + tie else "tie" if abs(soft - firm) <= tie else "wrong"
+
+
 def realistic_pairs(scenes: list[SceneResult], varies: str) -> list[dict]:
     """One case per pair × view × side of the pairs varying `varies` (both members present)."""
     index = {(s.meta["pair"], s.meta["view"], s.meta["member"]): s for s in scenes}
@@ -354,16 +365,16 @@ def realistic_pairs(scenes: list[SceneResult], varies: str) -> list[dict]:
                 case = {"pair": pair.name, "view": view, "side": side, "values": list(pair.values),
                         "true_change_cc": hi.truth["half_volume_cc"][side] - lo.truth["half_volume_cc"][side],
                         "fitted": usable(a) and usable(b), "volume_cc": [a.volume_cc, b.volume_cc],
-                        "b0": [a.b0, b.b0], "b1": [a.b1, b.b1]}
+                        "b0": [a.b0, b.b0], "b1": [a.b1, b.b1], "sag_mm": [a.sag_mm, b.sag_mm]}
                 if case["fitted"]:
                     case["fitted_change_cc"] = b.volume_cc - a.volume_cc
                     mean = 0.5 * (a.volume_cc + b.volume_cc)
                     if varies == "cup":
                         case["relative_error_pct"] = 100.0 * (case["fitted_change_cc"] / case["true_change_cc"] - 1.0)
                     else:
-                        case["order"] = ("right" if a.b0 > b.b0 + B0_TIE else      # firmness 0 sags more: larger b0
-                                         "tie" if abs(a.b0 - b.b0) <= B0_TIE else "wrong")
+                        case["order"] = order(a.sag_mm, b.sag_mm, SAG_TIE_MM)    # firmness 0 sags more
                         case["order_ok"] = case["order"] == "right"
+                        case["b0_order"] = order(a.b0, b.b0, B0_TIE)
                         case["volume_difference_pct"] = 100.0 * abs(case["fitted_change_cc"]) / mean
                         case["true_difference_pct"] = 100.0 * abs(case["true_change_cc"]) / mean
                 cases.append(case)
@@ -403,14 +414,14 @@ def chen_pairs(chen: list[SceneResult]) -> list[dict]:
 
 
 def chen_ptosis_order(chen: list[SceneResult]) -> dict:
-    """Baseline of 5a: Chen scenes whose fitted left/right b0 order matches the true order."""
+    """Baseline of 5a: Chen scenes whose fitted left/right ptosis sag order matches the true order."""
     cases = []
     for s in chen:
-        t = s.truth["b0"]
-        if abs(t["left"] - t["right"]) < CHEN_B0_GAP or not all(usable(s.sides[x]) for x in SIDES):
+        t = s.truth["sag_mm"]
+        if abs(t["left"] - t["right"]) < CHEN_SAG_GAP_MM or not all(usable(s.sides[x]) for x in SIDES):
             continue
-        fitted = {x: s.sides[x].b0 for x in SIDES}
-        cases.append({"scene": s.label, "true_b0": t, "fitted_b0": fitted,
+        fitted = {x: s.sides[x].sag_mm for x in SIDES}
+        cases.append({"scene": s.label, "true_sag_mm": t, "fitted_sag_mm": fitted,
                       "order_ok": bool((t["left"] > t["right"]) == (fitted["left"] > fitted["right"]))})
     return {"cases": cases, "order_ok_pct": 100.0 * sum(c["order_ok"] for c in cases) / len(cases) if cases else None}
 
@@ -519,18 +530,20 @@ def print_pairs(cup: list[dict], firm: list[dict], chen_cup: list[dict], console
                       f"{c['relative_error_pct']:+.1f} %" if c["fitted"] else "–")
     console.print(table)
     table = new_table("bench_realistic 5 — firmness pairs (firmness 0 → 1): fitted ptosis and volumes",
-                      ("pair", "view", "side", "b0 (0 → 1)", "b1 (0 → 1)", "b0 order", "volume (0 → 1)",
-                       "fitted |Δ|", "true |Δ|"),
-                      caption=f"b0 order: 'right' when firmness 0 has the larger fitted b0 by over {B0_TIE}, 'tie' "
+                      ("pair", "view", "side", "b0 (0 → 1)", "b1 (0 → 1)", "sag (0 → 1)", "sag order", "b0 order",
+                       "volume (0 → 1)", "fitted |Δ|", "true |Δ|"),
+                      caption=f"sag: how far the fitted ptosis lowers the primitive's apex (mm); order: 'right' when "
+                              f"firmness 0 has the larger sag by over {SAG_TIE_MM} mm (b0: by over {B0_TIE}), 'tie' "
                               "within it. |Δ|: volume difference in % "
                               "of the mean fitted volume; true: the half-body volume difference in % of the same mean.")
     for c in firm:
         if not c["fitted"]:
-            table.add_row(c["pair"], str(c["view"]), c["side"], "–", "–", "–", "–", "–",
+            table.add_row(c["pair"], str(c["view"]), c["side"], "–", "–", "–", "–", "–", "–", "–",
                           f"{abs(c['true_change_cc']):.0f} cc")
             continue
         table.add_row(c["pair"], str(c["view"]), c["side"], f"{c['b0'][0]:+.2f} → {c['b0'][1]:+.2f}",
-                      f"{c['b1'][0]:+.2f} → {c['b1'][1]:+.2f}", c["order"],
+                      f"{c['b1'][0]:+.2f} → {c['b1'][1]:+.2f}", f"{c['sag_mm'][0]:.1f} → {c['sag_mm'][1]:.1f}",
+                      c["order"], c["b0_order"],
                       f"{c['volume_cc'][0]:.0f} → {c['volume_cc'][1]:.0f} cc", f"{c['volume_difference_pct']:.1f} %",
                       f"{c['true_difference_pct']:.1f} %")
     console.print(table)
@@ -613,7 +626,11 @@ def main() -> None:
         figure("firmness_ptosis_order", 100.0 * sum(c["order_ok"] for c in firm_fitted) / len(firm_fitted)
                if firm_fitted else None, T["firmness_order_pct"], chen_order["order_ok_pct"], "%", at_most=False,
                ties=sum(c["order"] == "tie" for c in firm_fitted), wrong=sum(c["order"] == "wrong" for c in firm_fitted),
-               over=f"{len(firm_fitted)}/{len(firm)} cases (Chen: {len(chen_order['cases'])} scenes, left/right b0 order)"),
+               b0_alone={k: sum(c["b0_order"] == k for c in firm_fitted) for k in ("right", "tie", "wrong")},
+               over=f"{len(firm_fitted)}/{len(firm)} cases, ptosis sag at the apex (b0 alone: "
+               f"{sum(c['b0_order'] == 'right' for c in firm_fitted)} right, "
+               f"{sum(c['b0_order'] == 'tie' for c in firm_fitted)} ties); Chen: {len(chen_order['cases'])} scenes, "
+               f"left/right sag order"),
         figure("firmness_volume_difference_worst", max_or_none(c["volume_difference_pct"] for c in firm_fitted),
                T["firmness_volume_pct"], max_or_none(c["true_difference_pct"] for c in firm_fitted), "%",
                baseline_is="the true difference (half-body volumes) in % of the same mean",

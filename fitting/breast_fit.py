@@ -12,8 +12,9 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial import cKDTree
 
-from breastplan import BadInputError
+from breastplan import BadInputError, Primitive, to_mm
 from breastplan.case import Fit, Provenance
+from breastplan.deform.global_deformations import ptosis
 from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
 from breastplan.meshes import mesh_volume
 from breastplan.options import FitOptions
@@ -72,6 +73,11 @@ class BreastFit:
         out.update({n: float(v) for n, v in zip(names, self.superquadric.deformation.as_vector()) if v != 0.0})
         return out
 
+    @property
+    def ptosis_sag_mm(self) -> float:
+        """`ptosis_sag_mm` of the fitted primitive and ptosis."""
+        return ptosis_sag_mm(self.superquadric.primitive, self.superquadric.deformation.params("ptosis"))
+
     def at_bounds(self) -> list[str]:
         """Fitted deformation parameters at an end of their plausible range (deform.names.PLAUSIBLE):
         the shape asked for more than the thesis's breasts ever do, so the model holds it only roughly."""
@@ -115,6 +121,12 @@ def fit_breast(points_mm: np.ndarray, options: FitOptions = FitOptions()) -> Bre
         raise BadInputError(None, f"gives a fitted surface that encloses no volume ({fit.volume_cc:.0f} cc): "
                                   "its points do not hold a breast")
     return fit
+
+
+def ptosis_sag_mm(primitive: Primitive, params) -> float:
+    """How far ptosis (b0, b1 together; model units) lowers the apex (0, 0, a5) of `primitive`, mm."""
+    apex = np.array([[0.0, 0.0, primitive.a5]])
+    return float(to_mm(apex[0, 1] - ptosis(apex, *params)[0, 1]))
 
 
 def held_weights(vertices: np.ndarray) -> np.ndarray:

@@ -3,6 +3,7 @@
 Truths: the thesis stopping rule on database breasts, the closed-form volume of shear-deformed
 primitives (ptosis, turn and turn-top keep it), the synthetic scanner's true breasts.
 """
+import functools
 import json
 
 import numpy as np
@@ -71,26 +72,44 @@ def test_fit_of_ingested_synthetic_scans_is_within_1_mm_of_the_true_breast_and_3
         assert _edges_shared_twice(fit.faces)                             # closed, watertight
 
 
+@functools.cache
+def realistic_breast(side: str, **body) -> np.ndarray:
+    """Ingested points of one breast of a MakeHuman body (`BodyOptions`; modifiers as (name, value)
+    pairs) seen from the front (a-pose, 650 mm, 800×600, wall at 400 mm, 8 frames)."""
+    from breastplan.ingest.makehuman import BodyOptions
+    from breastplan.ingest.pipeline import ingest_frames
+    from breastplan.ingest.realistic import CameraOptions, make_body_scene
+    from breastplan.ingest.recording import DepthFrames
+    from breastplan.options import IngestOptions
+
+    scene = make_body_scene(BodyOptions(**{**body, "modifiers": dict(body.get("modifiers", ()))}), CameraOptions(650.0, 0.0, 0.0, "800x600", wall_mm=400.0))
+    return ingest_frames(DepthFrames(scene.frames(8, 0), scene.camera.K, "synthetic"), IngestOptions(side)).points
+
+
 def test_fit_of_a_realistic_breast_ends_below_the_plain_primitive_whatever_the_order_of_its_points():
     """Truths: zero deformations give the plain primitive, so a fit with deformations that ends farther
     from the points than the plain primitive has stopped in a local minimum; and the order of the
     points says nothing about the breast. The breast: a heavy, soft MakeHuman breast seen from the
     front (the right one of a body whose top-shape start stopped at 10 mm from its points)."""
     from breastplan.fitting.superquadric import fit_superquadric
-    from breastplan.ingest.makehuman import BodyOptions
-    from breastplan.ingest.pipeline import ingest_frames
-    from breastplan.ingest.realistic import CameraOptions, make_body_scene
-    from breastplan.ingest.recording import DepthFrames
-    from breastplan.options import FitOptions, IngestOptions
+    from breastplan.options import FitOptions
 
-    body = BodyOptions(cup=0.9, firmness=0.0, weight=0.9, muscle=0.3, modifiers={"asymmetry": -0.6, "torso_width": 0.5})
-    scene = make_body_scene(body, CameraOptions(650.0, 0.0, 0.0, "800x600", wall_mm=400.0))
-    points = ingest_frames(DepthFrames(scene.frames(8, 0), scene.camera.K, "synthetic"), IngestOptions("right")).points
+    points = realistic_breast("right", cup=0.9, firmness=0.0, weight=0.9, muscle=0.3,
+                              modifiers=(("asymmetry", -0.6), ("torso_width", 0.5)))
     plain = np.mean(np.abs(fit_superquadric(points).residuals_mm))
     deformed = fit_superquadric(points, deformations=FitOptions().deformations)
     assert np.mean(np.abs(deformed.residuals_mm)) < plain
     volumes = [fit_breast(p).volume_cc for p in (points, points[::-1].copy())]
     assert volumes[1] == pytest.approx(volumes[0], rel=0.03)
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_the_softer_of_two_realistic_breasts_is_fitted_with_the_larger_ptosis(side):
+    """Truth: MakeHuman's firmness 0 sags the breast, firmness 1 lifts it; all else equal, the ptosis
+    the fit gives the softer breast (b0 and b1 together, as the sag of its apex) is the larger."""
+    body = dict(cup=0.7, weight=0.2, muscle=0.7, modifiers=(("breast_trans", -0.5),))
+    soft, firm = (fit_breast(realistic_breast(side, firmness=f, **body)) for f in (0.0, 1.0))
+    assert soft.ptosis_sag_mm > firm.ptosis_sag_mm + 1.0
 
 
 @pytest.fixture(scope="module")
