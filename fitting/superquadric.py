@@ -268,7 +268,9 @@ def _fit_with_top_shape(p: np.ndarray, fitted: np.ndarray, kinds: tuple[str, ...
         return first
     x0 = np.concatenate([primitive.x, np.zeros(sum(len(KIND_PARAMS[k]) for k in kinds))])
     second = _solve_plausibly(fitted, kinds, x0, first.nfev, solve)
-    return second if second.cost < first.cost else first
+    best = second if second.cost < first.cost else first
+    best.nfev = second.nfev                       # the evaluations of both solves
+    return best
 
 
 def _top_shape_start(p: np.ndarray, kinds: tuple[str, ...], solve: "_Solver") -> tuple[np.ndarray, int]:

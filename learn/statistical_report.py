@@ -68,7 +68,7 @@ def write_report(out: Path, results: list[StatResult], meta: dict) -> dict:
         if THESIS_ROW in pick:
             tests[f"{cond} {n ** 3} CP {fit}: {b.method} vs {THESIS_ROW}"] = ttest(b.distances[key], pick[THESIS_ROW].distances[key])
         continuous = [r for r in rows if r.method.endswith(CONTINUOUS_ROW)]
-        discrete = [r for r in rows if r.method.startswith("PCA") and r not in continuous]
+        discrete = [r for r in rows if r.method.startswith("PCA") and not r.method.endswith(CONTINUOUS_ROW)]
         if continuous and discrete:
             c, d = best_of(continuous), best_of(discrete)
             tests[f"{cond} {n ** 3} CP {fit}: {c.method} vs {d.method}"] = ttest(c.distances[key], d.distances[key])
