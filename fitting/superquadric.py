@@ -260,16 +260,18 @@ def _solve_plausibly(fitted: np.ndarray, kinds: tuple[str, ...], x0: np.ndarray,
 def _fit_with_top_shape(p: np.ndarray, fitted: np.ndarray, kinds: tuple[str, ...], solve: "_Solver"):
     """The solver's end from `_top_shape_start`; or, if that ends no better than the plain primitive
     (STUCK × its cost) — a local minimum, since zero deformations give the primitive — the better of
-    it and the end from the plain primitive with every deformation at zero."""
+    it and the end from the plain primitive with every deformation at zero, solved within the
+    PLAUSIBLE ranges from the start (a free solve could leave them, and the bounded one from where it
+    left end above the primitive)."""
     primitive = solve(fitted, (), initial_guess(fitted))
     first = _solve_plausibly(fitted, kinds, *_top_shape_start(p, kinds, solve), solve)
     first.nfev += primitive.nfev
     if first.cost <= STUCK * primitive.cost:
         return first
     x0 = np.concatenate([primitive.x, np.zeros(sum(len(KIND_PARAMS[k]) for k in kinds))])
-    second = _solve_plausibly(fitted, kinds, x0, first.nfev, solve)
+    second = solve(fitted, kinds, x0, plausible=True)    # bounded from a plausible start: ends at or below it
     best = second if second.cost < first.cost else first
-    best.nfev = second.nfev                       # the evaluations of both solves
+    best.nfev = first.nfev + second.nfev          # the evaluations of both solves
     return best
 
 

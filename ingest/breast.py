@@ -3,8 +3,8 @@
 All inputs are in the viewing frame (camera convention: x to the image's right = the
 patient's left, y down, z away from the viewer; mm). A mound is a basin of the height of
 coarse voxels above the chest wall; the breasts are the mounds placed and shaped as breasts
-are (docs/isolation.md); a breast is the fine points in front of the (locally refitted)
-chest wall around its mound. The breast frame has its origin at the foot of
+are (docs/isolation.md); a breast is the fine points in front of the chest wall under
+its mound (refitted, the mound and its skirt left out). The breast frame has its origin at the foot of
 the nipple on the chest wall (see `breast_frame`), z along the chest normal (anterior), y
 superior.
 """
@@ -39,6 +39,11 @@ MAX_LEVEL_MM = 110.0
 """The two breasts' centres differ in height by at most this much."""
 PAIR_MM = (100.0, 420.0)
 """… and lie this far apart across the body."""
+WALL_DEGREE, WALL_REACH_MM = 3, 120.0
+"""Degree of the chest wall under a breast, and how far beyond its mound's radius it is fitted."""
+SKIRT_MM = 20.0
+"""The skirt of a mound, left out of the wall under it: the skin within this (x, y) distance
+of the mound's voxels, still lifted by the breast though under MOUND_MM high."""
 CROP_MM = 2.0
 """Breast points lie at least this far in front of the chest wall."""
 UP_VIEW = np.array([0.0, -1.0, 0.0])
@@ -182,10 +187,14 @@ def choose_mound(mounds: list[Mound], nipple: np.ndarray | None) -> Mound:
     return mounds[0]
 
 
-def local_chest_wall(voxels: np.ndarray, mound: Mound, wall: ChestWall) -> ChestWall:
-    """The chest wall refitted (quadratic) on the torso around one mound, the mound excluded."""
-    near = np.linalg.norm(voxels[:, :2] - mound.centre, axis=1) < mound.radius + 70.0
-    return fit_chest_wall(voxels, 2, mask=near & (wall.height(voxels) < MOUND_MM))
+def chest_wall_under(voxels: np.ndarray, mound: Mound, wall: ChestWall) -> ChestWall:
+    """The chest wall under one mound: a cubic height field refitted on the chest within
+    WALL_REACH_MM of the mound's footprint, the mound and its skirt (within SKIRT_MM of it) left
+    out. A quadratic fitted on a narrow ring bent with whatever the mound's size left in the
+    ring, and a bigger breast stood on a raised wall (docs/isolation.md §5)."""
+    off, _ = cKDTree(mound.voxels[:, :2]).query(voxels[:, :2])
+    near = np.linalg.norm(voxels[:, :2] - mound.centre, axis=1) < mound.radius + WALL_REACH_MM
+    return fit_chest_wall(voxels, WALL_DEGREE, mask=near & (wall.height(voxels) < MOUND_MM) & (off > SKIRT_MM))
 
 
 def breast_region(points: np.ndarray, mound: Mound, wall: ChestWall, size: float) -> np.ndarray:

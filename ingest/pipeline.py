@@ -174,7 +174,7 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
     with clock("mounds (height basins) + breasts"):
         mounds = B.find_mounds(coarse, wall, trunk.midline_x, COARSE_MM)
         mound = _breast_mound(mounds, trunk, side, nipple_view, in_roi)
-        wall = B.local_chest_wall(coarse, mound, wall)
+        wall = B.chest_wall_under(coarse, mound, wall)
     with clock("crop + breast frame"):
         region = B.breast_region(torso, mound, wall, COARSE_MM)
         crop = torso[region & in_roi(torso)] if in_roi is not None else torso[region]

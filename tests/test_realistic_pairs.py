@@ -39,6 +39,9 @@ BASE_MM = 3.0
 """Points this close to the base plane (z = 0) are the breast's base on the chest wall."""
 STILL_MM = 1.0
 """Skin that MakeHuman's firmness change moves less than this stays in place."""
+DROP_MM = 1.0
+"""The lower breast drops by more than this (half the clouds' voxel) from firmness 0.5 to 0: its
+nipple drops by 9–55 mm more; the smallest breast's lower tenth is mostly base skin and drops least."""
 
 
 @pytest.fixture(scope="module")
@@ -115,7 +118,9 @@ def test_the_base_stays_on_the_chest_wall_while_the_lower_breast_drops(pairs, tr
     """Up is +y in the breast frame (docs/model.md §1). The after's base points (z small) on skin that
     MakeHuman's firmness leaves in place coincide with the before's cloud (the frame is shared; a large
     breast's firmness target drags its whole base, so some pairs have no such skin), and the lower part
-    of the breast drops, more as the firmness falls."""
+    of the breast drops, more as the firmness falls. Coincide: the median gap under the clouds'
+    voxel size (two noisy samplings of one skin, 2 mm apart; an after ingested in a frame of its own
+    lay 5–61 mm off)."""
     checked, drops = 0, {}
     for (body, firmness, _, before, after), (frame, firm, sagging) in zip(pairs, truth):
         base = after[after[:, 2] < BASE_MM]
@@ -124,13 +129,13 @@ def test_the_base_stays_on_the_chest_wall_while_the_lower_breast_drops(pairs, tr
         still = np.linalg.norm(laid_sagging[vertex] - laid_firm[vertex], axis=1) < STILL_MM
         if still.sum() >= 15:
             gap = float(np.median(cKDTree(before).query(base[still])[0]))
-            assert gap < 1.5, f"body {body}, firmness {firmness}: the after's still base lies {gap:.1f} mm from the before"
+            assert gap < OPTIONS.voxel_mm, f"body {body}, firmness {firmness}: the after's still base lies {gap:.1f} mm from the before"
             checked += 1
         drops[body, firmness] = _lower(before) - _lower(after)
     assert checked >= 5
     for body in range(len(BODIES)):
         assert drops[body, 0.5] > -0.5, f"body {body}: the lower breast rose at firmness 0.5 ({drops[body, 0.5]:.1f} mm)"
-        assert drops[body, 0.0] > max(3.0, drops[body, 0.5]), f"body {body}: drops {drops[body, 0.5]:.1f}, {drops[body, 0.0]:.1f} mm"
+        assert drops[body, 0.0] > drops[body, 0.5] + DROP_MM, f"body {body}: drops {drops[body, 0.5]:.1f}, {drops[body, 0.0]:.1f} mm"
 
 
 def _lower(points):
