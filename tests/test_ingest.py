@@ -93,6 +93,33 @@ def test_chest_wall_recovers_a_quadric_under_mounds_and_outliers():
     assert wall.height(np.array([[90.0, 0.0, 650 + 0.0012 * 8100 - 55]]))[0] == pytest.approx(55, abs=0.6)
 
 
+def _chest(xy):
+    """A curved chest in a viewing frame (z away from the viewer, mm), not a quadric."""
+    x, y = xy[..., 0], xy[..., 1]
+    return 600.0 + np.square(x) / 600.0 + np.square(y) / 1800.0 + 1e-6 * x * np.square(y)
+
+
+@pytest.mark.parametrize("centre", [(100.0, 40.0), (-90.0, -30.0)])
+def test_the_wall_under_a_small_and_a_large_breast_is_the_chest_beneath_both(centre):
+    """Truth: the chest is the same skin under a small and a large breast whose skirt fades into
+    it (height H (1 − r²/R²)², no edge); the wall under the mound is that chest to 0.5 mm, and the
+    same under both to 0.3 mm (a quadratic refitted on a ring around the mound rose 0.9–2.1 mm in
+    front of it, more under the larger breast)."""
+    from breastplan.ingest import breast as B
+
+    grid = np.mgrid[-300:301:10.0, -250:251:10.0].reshape(2, -1).T
+    under = np.mgrid[-40:41:10.0, -40:41:10.0].reshape(2, -1).T + centre
+    walls = []
+    for radius, height in ((70.0, 30.0), (110.0, 70.0)):
+        r2 = np.sum(np.square(grid - centre), axis=1) / radius ** 2
+        voxels = np.column_stack([grid, _chest(grid) - height * np.clip(1 - r2, 0, None) ** 2])
+        first = fit_chest_wall(voxels, 2)
+        mound = B.find_mounds(voxels, first, 0.0, 10.0)[0]
+        walls.append(B.chest_wall_under(voxels, mound, first).z(under))
+        assert np.abs(walls[-1] - _chest(under)).max() < 0.5
+    assert np.abs(walls[1] - walls[0]).max() < 0.3
+
+
 # --- synthetic scanner ------------------------------------------------------------------
 def test_scanner_renders_the_true_nipple_at_its_pixel(scanned):
     _, scene, truth, frames = scanned
