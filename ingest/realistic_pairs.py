@@ -12,8 +12,8 @@ type `ptosis`, its degree in [1, 8] and its split.
 
 **One frame for both scans.** A clinic registers the two scans of a patient on her chest wall,
 which ptosis does not move; so must we. Ingesting the after on its own does not: the breast frame's
-origin is the foot of the *nipple* on the chest wall and its axes follow a chest wall refitted
-around the breast's mound (`ingest.breast.breast_frame`), and sagging moves both. Measured on
+origin is the foot of the *nipple* on the chest wall and its axes follow the chest wall fitted
+under the breast's mound (`ingest.breast.breast_frame`), and sagging moves both. Measured on
 640×400 scans of the right breast: the separately ingested after's frame lay 5 mm (cup 0.5,
 firmness 0.5) to 61 mm (cup 0.9, firmness 0) lower and turned 1.5° to 12°, and on the most ptotic
 breast the after's automatic crop lost its upper pole. Hence:
