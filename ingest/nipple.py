@@ -75,8 +75,6 @@ class Disc(NamedTuple):
     """The raised nipple-areola disc in a breast frame (mm)."""
     centre: np.ndarray
     """(x, y) of its centroid."""
-    radius: float
-    """Equivalent radius of its half-height region."""
     top: float
     """Height of the skin over its centre."""
 
@@ -123,7 +121,7 @@ def find_disc(local: np.ndarray, apex_xy: np.ndarray) -> Disc | None:
         return None
     A = np.column_stack([np.ones(inner.sum()), d[inner], np.sum(d[inner] ** 2, axis=1)])
     paraboloid, *_ = np.linalg.lstsq(A, residual[inner], rcond=None)
-    return Disc(centre, float(radius), float(_cubic_terms(centre[None] - apex_xy)[0] @ coef + paraboloid[0]))
+    return Disc(centre, float(_cubic_terms(centre[None] - apex_xy)[0] @ coef + paraboloid[0]))
 
 
 def _robust_cubic(xy: np.ndarray, z: np.ndarray, iterations: int = 6) -> np.ndarray:
