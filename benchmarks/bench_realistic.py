@@ -608,6 +608,7 @@ def main() -> None:
     firm_fitted = [c for c in firm if c["fitted"]]
     fits, chen_fits = fit_times(real), fit_times(chen)
     spreads = view_spreads(real)
+    b0_alone = {k: sum(c["b0_order"] == k for c in firm_fitted) for k in ("right", "tie", "wrong")}
     T = TARGETS
     figures = [
         figure("both_isolated", iso["both_isolated_pct"], T["both_isolated_pct"], iso_chen["both_isolated_pct"], "%",
@@ -626,11 +627,9 @@ def main() -> None:
         figure("firmness_ptosis_order", 100.0 * sum(c["order_ok"] for c in firm_fitted) / len(firm_fitted)
                if firm_fitted else None, T["firmness_order_pct"], chen_order["order_ok_pct"], "%", at_most=False,
                ties=sum(c["order"] == "tie" for c in firm_fitted), wrong=sum(c["order"] == "wrong" for c in firm_fitted),
-               b0_alone={k: sum(c["b0_order"] == k for c in firm_fitted) for k in ("right", "tie", "wrong")},
-               over=f"{len(firm_fitted)}/{len(firm)} cases, ptosis sag at the apex (b0 alone: "
-               f"{sum(c['b0_order'] == 'right' for c in firm_fitted)} right, "
-               f"{sum(c['b0_order'] == 'tie' for c in firm_fitted)} ties); Chen: {len(chen_order['cases'])} scenes, "
-               f"left/right sag order"),
+               b0_alone=b0_alone,
+               over=f"{len(firm_fitted)}/{len(firm)} cases, ptosis sag at the apex (b0 alone: {b0_alone['right']} right, "
+               f"{b0_alone['tie']} ties); Chen: {len(chen_order['cases'])} scenes, left/right sag order"),
         figure("firmness_volume_difference_worst", max_or_none(c["volume_difference_pct"] for c in firm_fitted),
                T["firmness_volume_pct"], max_or_none(c["true_difference_pct"] for c in firm_fitted), "%",
                baseline_is="the true difference (half-body volumes) in % of the same mean",
