@@ -8,7 +8,7 @@ from 3 of the 8 views of VIEWS (pose a-pose / arms-down / hands-on-hips; camera 
 24 scenes, 8 noisy depth frames each (`ingest.realistic.make_body_scene(...).frames(8, view)`; both
 bodies of a pair share the view and its noise seed). Each scene goes through `ingest_frames` for the
 left and the right side (automatic isolation, no nipple given); a side that returns is fitted with
-`fit_breast(points, FitOptions())`. Baseline scenes, in the same run and interleaved with the
+`fit_breast(points, FitOptions(), chest_beneath(ingested))` (volumes down to the chest wall). Baseline scenes, in the same run and interleaved with the
 realistic ones (so that both see the same load): 6 Chen torsos (`ingest.synthetic.make_scene`),
 seeds 0, 1, 2 as drawn and with all five semi-axes × CHEN_SCALE (a known volume change), 8 frames
 (640×400), through the same calls.
@@ -25,7 +25,8 @@ volume and ptosis figures only when its side is isolated):
    vertical (Y), minus the true offsets: worst |error| ≤ 4 mm;
 4. cup change: per cup pair × view × side, fitted volume change vs the true change (difference of
    `body.half_volumes_cc()` of that side); worst relative error ≤ 10 %. Baseline: the same on the
-   Chen pairs (truth: `Primitive.volume_cc`);
+   Chen pairs (truth: `synthetic.Breast.volume_on_chest_cc`, the primitive and its base extruded to the
+   curved chest);
 5. firmness pairs (same cup, firmness 0 vs 1), per view × side: (a) the fitted ptosis parameters
    (b0, b1; docs/model.md §3, `BreastFit.superquadric.deformation.params("ptosis")`), taken together as
    the sag they give the fitted primitive's apex (`BreastFit.ptosis_sag_mm`), are larger for firmness 0 by over
@@ -67,7 +68,7 @@ from rich.table import Table
 from threadpoolctl import threadpool_limits
 
 from breastplan import BadInputError, transform_points
-from breastplan.fitting.breast_fit import fit_breast, ptosis_sag_mm
+from breastplan.fitting.breast_fit import chest_beneath, fit_breast, ptosis_sag_mm
 from breastplan.ingest import synthetic
 from breastplan.ingest.makehuman import BodyOptions
 from breastplan.ingest.pipeline import ingest_frames
@@ -228,7 +229,7 @@ def run_side(frames: DepthFrames, side: str, truth_camera: np.ndarray) -> Side:
     out.points = int(len(ingested.points))
     t0 = time.perf_counter()
     try:
-        fit = fit_breast(ingested.points, FitOptions())
+        fit = fit_breast(ingested.points, FitOptions(), chest_beneath(ingested))
     except BadInputError as exc:
         out.fit_s, out.fit_status, out.fit_error = time.perf_counter() - t0, "rejected", str(exc)
         return out
@@ -278,7 +279,7 @@ def run_chen(spec: dict) -> tuple[SceneResult, DepthFrames]:
     truth_body = chen_nipples_body(scene)
     truth_camera = {s: transform_points(scene.camera_from_body, truth_body[s][None])[0] for s in SIDES}
     sides = {s: run_side(frames, s, truth_camera[s]) for s in SIDES}
-    truth = {"volume_cc": {s: scene.breasts[s].primitive.volume_cc for s in SIDES},
+    truth = {"volume_cc": {s: scene.breasts[s].volume_on_chest_cc(s) for s in SIDES},
              "b0": {s: float(scene.breasts[s].deformation.params("ptosis")[0]) for s in SIDES},
              "sag_mm": {s: ptosis_sag_mm(scene.breasts[s].primitive, scene.breasts[s].deformation.params("ptosis"))
                         for s in SIDES}}
@@ -515,7 +516,7 @@ def print_pairs(cup: list[dict], firm: list[dict], chen_cup: list[dict], console
     table = new_table("bench_realistic 4 — cup change: fitted volume change vs the true change",
                       ("pair", "view", "side", "volume lo → hi", "fitted change", "true change", "relative error"),
                       caption=f"True change: difference of the half-body volumes (body.half_volumes_cc) of that side; "
-                              f"Chen: semi-axes × {CHEN_SCALE:g}, truth Primitive.volume_cc. '–': a side not isolated "
+                              f"Chen: semi-axes × {CHEN_SCALE:g}, truth the primitive's volume down to the curved chest. '–': a side not isolated "
                               f"or its fit rejected in either member.")
     for c in cup:
         vol = f"{c['volume_cc'][0]:.0f} → {c['volume_cc'][1]:.0f} cc" if c["fitted"] else "–"

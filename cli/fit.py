@@ -18,10 +18,14 @@ from .output import report, stderr, usage_error, writable
 if TYPE_CHECKING:
     import numpy as np
 
+    from breastplan.case import Scan
+
 
 @command()
 def fit(
-    input: Path = typer.Argument(..., help="A case folder from `ingest` (scan.ply, scan.npz) or a breast-frame PLY (mm)."),
+    input: Path = typer.Argument(..., help="A case folder from `ingest` (scan.ply, scan.npz; the "
+                                "breast's volume reaches down to its chest wall) or a breast-frame PLY (mm; its base "
+                                "is the plane z = 0)."),
     out: Optional[Path] = typer.Option(None, "--out", help="Folder for fit.npz and fit.ply (default: the case folder, "
                                        "or the PLY's folder)."),
     lattice: int = typer.Option(5, "--lattice", help="Control points per lattice axis, 3..7 (5 = 125 CP)."),
@@ -43,17 +47,17 @@ def fit(
     except OptionError as exc:
         raise usage_error(str(exc), {"lattice": "--lattice", "max_iterations": "--max-iterations"}[exc.option]) from None
 
-    points, source, folder = _breast_points(input)     # bad input is refused before the stage loads
+    points, scan, source, folder = _breast_points(input)     # bad input is refused before the stage loads
     writable(out or folder, folder=True)
 
     from threadpoolctl import threadpool_limits
 
     from breastplan.case import Case, Provenance
-    from breastplan.fitting.breast_fit import fit_breast
+    from breastplan.fitting.breast_fit import chest_beneath, fit_breast
     from breastplan.fitting.ffd import STOP_RESIDUAL
 
     with about(source), threadpool_limits(1, "blas"):   # small dense solves: threads only add overhead
-        result = fit_breast(points, options)
+        result = fit_breast(points, options, scan and chest_beneath(scan))
     fit = result.artefact(Provenance.of({source.name: source}, options.as_dict()))
     paths = Case(out or folder).save_fit(fit)
     if not fit.stopping_rule_met:
@@ -70,7 +74,9 @@ def fit(
                      f"the breast model holds this breast only roughly.", markup=False, soft_wrap=True)
     stats = fit.residuals_mm
     report({"fit": str(paths[Case.FIT_NPZ]), "mesh": str(paths[Case.FIT_PLY]), "points": len(points),
-            "volume_cc": round(fit.volume_cc_mesh, 2), "volume_cc_primitive": round(fit.volume_cc_primitive, 2),
+            "volume_cc": round(fit.volume_cc, 2), "volume_cc_mesh": round(fit.volume_cc_mesh, 2),
+            "volume_cc_below_base": round(fit.volume_cc_below_base, 2),
+            "volume_cc_primitive": round(fit.volume_cc_primitive, 2),
             "rms_mm": round(stats["rms"], 4), "residuals_mm": {k: round(v, 4) for k, v in stats.items()},
             "normalised_residual": round(fit.normalised_residual, 6), "stopping_rule": STOP_RESIDUAL,
             "stopping_rule_met": fit.stopping_rule_met, "converged": fit.converged, "at_bounds": at_bounds,
@@ -79,20 +85,22 @@ def fit(
             "seconds": clock.seconds}, as_json, f"fit → {paths[Case.FIT_PLY]}")
 
 
-def _breast_points(input: Path) -> tuple[np.ndarray, Path, Path]:
-    """(points mm, the file they came from, the default output folder) of a case folder or a PLY."""
+def _breast_points(input: Path) -> tuple[np.ndarray, Scan | None, Path, Path]:
+    """(points mm, the case's scan (None for a PLY), the file they came from, the default output
+    folder) of a case folder or a PLY. A case's breast sits on its chest wall; a PLY's on z = 0."""
     from breastplan import read_ply
     from breastplan.case import Case
     from breastplan.units import breast_units_problem
 
     if input.is_dir():
         require_folder(input, "case folder")
-        points, source, folder = Case(input).load_scan().points, input / Case.SCAN_PLY, input
+        scan = Case(input).load_scan()
+        points, source, folder = scan.points, input / Case.SCAN_PLY, input
     elif input.suffix.lower() == ".ply" or not input.exists():
-        points, source, folder = read_ply(input).points, input, input.parent
+        scan, points, source, folder = None, read_ply(input).points, input, input.parent
     else:
         raise BadInputError(input, "is neither a PLY file nor a case folder from `breastplan ingest`")
     problem = breast_units_problem(points)
     if problem:
         raise BadInputError(source, problem)
-    return points, source, folder
+    return points, scan, source, folder

@@ -27,7 +27,7 @@ from .options import SIDES
 from .ply import read_ply, write_ply
 from .primitive import Primitive
 
-SCAN_SCHEMA, FIT_SCHEMA, CHANGE_SCHEMA = "breastplan.scan/1", "breastplan.fit/1", "breastplan.deformation/1"
+SCAN_SCHEMA, FIT_SCHEMA, CHANGE_SCHEMA = "breastplan.scan/1", "breastplan.fit/2", "breastplan.deformation/1"
 CAMERA_FRAME = "frame camera-opencv"
 """Tag, in a PLY comment, of points in an OpenCV camera frame (x right, y down, z forward; mm)."""
 RESIDUAL_STATS = ("mean", "rms", "p95", "max")
@@ -122,7 +122,8 @@ class Fit:
     residuals_mm: dict               # data ↔ surface distance: mean, rms, p95, max
     normalised_residual: float       # mean ‖d − m‖ / ‖d‖ (docs/model.md §6)
     volume_cc_primitive: float
-    volume_cc_mesh: float
+    volume_cc_mesh: float            # the closed surface (flat base)
+    volume_cc_below_base: float      # between its base and the curved chest wall beneath
     iterations: tuple[int, int]      # superquadric evaluations, FFD iterations
     seconds: tuple[float, float]
     points: int                      # data points fitted
@@ -130,6 +131,11 @@ class Fit:
     converged: bool                  # met the stopping rule or stopped improving (not cut by the budget)
     stopping_rule_met: bool          # normalised residual < the thesis's stopping rule
     provenance: Provenance = field(default_factory=Provenance)
+
+    @property
+    def volume_cc(self) -> float:
+        """The breast's volume on the chest wall: the closed surface's and the gap below its base."""
+        return self.volume_cc_mesh + self.volume_cc_below_base
 
 
 _SCAN_SPEC = {"transform_camera_to_breast": ("f", (4, 4)), "side": ("U", ()), "nipple_camera_mm": ("f", (3,)),
@@ -143,6 +149,7 @@ _FIT_SPEC = {"primitive": ("f", (7,)), "pose": ("f", (4, 4)), "deformation": ("f
              "control_rest_mm": ("f", ("cp", 3)), "control_fitted_mm": ("f", ("cp", 3)),
              "residuals_mm": ("f", (4,)), "normalised_residual": ("f", ()),
              "volume_cc_primitive": ("f", ()), "volume_cc_mesh": ("f", ()),
+             "volume_cc_below_base": ("f", ()),
              "iterations": ("iu", (2,)), "seconds": ("f", (2,)), "residual_map_mm": ("f", ("n",))}
 
 
@@ -229,6 +236,7 @@ class Case:
             "residuals_mm": np.array(stats), "normalised_residual": np.float64(fit.normalised_residual),
             "volume_cc_primitive": np.float64(fit.volume_cc_primitive),
             "volume_cc_mesh": np.float64(fit.volume_cc_mesh),
+            "volume_cc_below_base": np.float64(fit.volume_cc_below_base),
             "iterations": np.array(fit.iterations, dtype=np.int64), "seconds": np.array(fit.seconds, dtype=float),
             "residual_map_mm": np.asarray(fit.residual_map_mm, np.float32),
         }
@@ -237,7 +245,7 @@ class Case:
                 "points": fit.points, "converged": fit.converged, "stopping_rule_met": fit.stopping_rule_met}
         comments = ["breastplan fit: fitted breast surface, mm, breast frame", fit.primitive.comment(),
                     pose_comment(fit.pose),
-                    f"volume_cc {fit.volume_cc_mesh:.2f} rms_mm {fit.residuals_mm['rms']:.3f}"]
+                    f"volume_cc {fit.volume_cc:.2f} rms_mm {fit.residuals_mm['rms']:.3f}"]
         plys = {self.FIT_PLY: dict(points=fit.vertices, faces=fit.faces, comments=comments)}
         return self._write_set(plys, self.FIT_NPZ, FIT_SCHEMA, arrays, meta, fit.provenance)
 
@@ -262,6 +270,7 @@ class Case:
                    residuals_mm=dict(zip(RESIDUAL_STATS, map(float, art["residuals_mm"]))),
                    normalised_residual=float(art["normalised_residual"]),
                    volume_cc_primitive=float(art["volume_cc_primitive"]), volume_cc_mesh=float(art["volume_cc_mesh"]),
+                   volume_cc_below_base=float(art["volume_cc_below_base"]),
                    iterations=tuple(int(i) for i in art["iterations"]), seconds=tuple(map(float, art["seconds"])),
                    points=int(meta.get("points", 0)), residual_map_mm=art["residual_map_mm"],
                    converged=bool(meta.get("converged", True)),

@@ -10,3 +10,25 @@ def mesh_volume(vertices, faces) -> float:
     _, volume = igl.centroid(np.ascontiguousarray(vertices, dtype=np.float64),
                              np.ascontiguousarray(faces, dtype=np.int64))
     return float(volume)
+
+
+BASE_QUADRATURE = 8
+"""`volume_below_base` cuts each base-cap triangle into 8² triangles and samples their centroids."""
+
+
+def volume_below_base(vertices, faces, floor) -> float:
+    """Volume between the base cap of a closed mesh (the faces around its last vertex, the base
+    centre) and the surface `floor` ((..., 2) x, y → (...,) z) beneath it (units of vertices³);
+    negative where the floor rises above the cap. A breast's cap is flat; this is the tissue it
+    leaves out where the chest falls away from its plane."""
+    V, F = np.asarray(vertices, float), np.asarray(faces, np.int64)
+    cap = V[F[(F == len(V) - 1).any(axis=1)]]                                   # (T, 3, 3)
+    k = BASE_QUADRATURE
+    i, j = (g.ravel() for g in np.meshgrid(np.arange(k), np.arange(k), indexing="ij"))
+    up, down = i + j < k, i + j < k - 1                                         # k(k+1)/2 + k(k−1)/2 = k²
+    ij = np.r_[np.c_[3 * i[up] + 1, 3 * j[up] + 1], np.c_[3 * i[down] + 2, 3 * j[down] + 2]] / (3 * k)
+    centroids = np.einsum("sc,tcd->tsd", np.c_[1.0 - ij.sum(1), ij], cap)      # (T, k², 3)
+    e1, e2 = cap[:, 1, :2] - cap[:, 0, :2], cap[:, 2, :2] - cap[:, 0, :2]
+    area = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) / k**2             # signed, per sub-triangle
+    gap = centroids[..., 2] - floor(centroids[..., :2])
+    return float(np.sum(area[:, None] * gap) * np.sign(area.sum()))

@@ -149,7 +149,7 @@ def get_breast_measures(mesh: Mesh, *, side: SideOrAuto = "auto", units: Units =
     measures = breast_measures(landmarks, nipple, vertices, fit.faces)
     details = [d for change in ([record.change] if record.change is not None else []) for d in change.details]
     return {"side": plan.side, **{k: measures[k] for k in MEASURES}, "nipple_mm": np.asarray(nipple, float),
-            "fit_volume_cc": float(fit.volume_cc_mesh), "rms_mm": float(fit.residuals_mm["rms"]),
+            "fit_volume_cc": float(fit.volume_cc), "rms_mm": float(fit.residuals_mm["rms"]),
             "normalised_residual": float(fit.normalised_residual), "stopping_rule_met": bool(fit.stopping_rule_met),
             "converged": bool(fit.converged), "points": int(fit.points),
             "changes": [{"kind": d["kind"], "degree": float(d["degree"]), "degree_reached": float(d["degree_reached"]),
@@ -272,11 +272,11 @@ def _fitted(mesh: Mesh, side: str, units: str, up: str, options: FitOptions) -> 
     if fitted is None:
         from threadpoolctl import threadpool_limits
 
-        from breastplan.fitting.breast_fit import fit_breast
+        from breastplan.fitting.breast_fit import chest_beneath, fit_breast
         from breastplan.plan.job import SidePlan
 
         with threadpool_limits(1, "blas"):
-            fit = fit_breast(record.scan.points, options).artefact()
+            fit = fit_breast(record.scan.points, options, chest_beneath(record.scan)).artefact()
         fitted = replace(record, fitted=SidePlan(record.scan.side, None, record.scan, fit, ()))
         _MEMORY.put(key, fitted)
     return fitted

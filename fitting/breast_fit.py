@@ -6,8 +6,9 @@ surface: mm, breast frame, base cap on the chest wall).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, partial
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -16,7 +17,7 @@ from breastplan import BadInputError, Primitive, to_mm
 from breastplan.case import Fit, Provenance
 from breastplan.deform.global_deformations import ptosis
 from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
-from breastplan.meshes import mesh_volume
+from breastplan.meshes import mesh_volume, volume_below_base
 from breastplan.options import FitOptions
 
 from .ffd import STOP_RESIDUAL, FFDFit, fit_ffd
@@ -43,6 +44,7 @@ class BreastFit:
     superquadric: SuperquadricFit
     ffd: FFDFit
     faces: np.ndarray              # (F, 3) of the closed mesh; vertices are ffd.vertices
+    below_base_cc: float = 0.0     # between the base cap and the curved chest wall beneath it
 
     @property
     def vertices(self) -> np.ndarray:
@@ -58,9 +60,15 @@ class BreastFit:
         return distance_stats(self.ffd.residuals_mm)
 
     @cached_property
-    def volume_cc(self) -> float:
-        """Volume enclosed by the fitted closed surface (cc)."""
+    def mesh_volume_cc(self) -> float:
+        """Volume enclosed by the fitted closed surface (cc): the model above its flat base."""
         return mesh_volume(self.vertices, self.faces) / 1000.0
+
+    @property
+    def volume_cc(self) -> float:
+        """The breast's volume on the chest wall (cc): the closed surface's and the gap between its
+        base and the chest wall beneath (`below_base_cc`)."""
+        return self.mesh_volume_cc + self.below_base_cc
 
     @property
     def seconds(self) -> float:
@@ -92,15 +100,21 @@ class BreastFit:
                    lattice_box_mm=np.stack([lattice.lo, lattice.hi]), control_rest_mm=lattice.rest,
                    control_fitted_mm=lattice.points, residuals_mm=self.residual_stats(),
                    normalised_residual=float(self.ffd.residual), volume_cc_primitive=sq.primitive.volume_cc,
-                   volume_cc_mesh=self.volume_cc, iterations=(sq.iterations, self.ffd.iterations),
+                   volume_cc_mesh=self.mesh_volume_cc, volume_cc_below_base=self.below_base_cc, iterations=(sq.iterations, self.ffd.iterations),
                    seconds=(sq.seconds, self.ffd.seconds), points=len(self.ffd.residuals_mm),
                    residual_map_mm=self.ffd.residuals_mm,
                    converged=bool(self.ffd.converged), stopping_rule_met=self.stopping_rule_met,
                    provenance=provenance)
 
 
-def fit_breast(points_mm: np.ndarray, options: FitOptions = FitOptions()) -> BreastFit:
-    """Fit the breast model to (N, 3) points (mm, breast frame, base on z = 0).
+ChestBeneath = Callable[[np.ndarray], np.ndarray]
+"""The chest wall under a breast: breast-frame (..., 2) x, y → (...,) z of the wall, mm."""
+
+
+def fit_breast(points_mm: np.ndarray, options: FitOptions = FitOptions(),
+               chest: ChestBeneath | None = None) -> BreastFit:
+    """Fit the breast model to (N, 3) points (mm, breast frame, base on z = 0), on the chest wall
+    `chest` (`chest_beneath`; None: the plane z = 0, as on a database breast).
 
     A fit that runs out of iterations before the stopping rule is returned as it is (its
     `ffd.converged` and `stopping_rule_met` say so; `ffd.residuals_mm` maps where it misses);
@@ -116,11 +130,22 @@ def fit_breast(points_mm: np.ndarray, options: FitOptions = FitOptions()) -> Bre
         raise BadInputError(None, f"gives a fit that found no breast surface: mean normalised residual "
                                   f"{ffd.residual:.4f} after {ffd.iterations} FFD iterations "
                                   f"(stopping rule {STOP_RESIDUAL})")
-    fit = BreastFit(sq, ffd, faces)
-    if not fit.volume_cc > 0.0:
-        raise BadInputError(None, f"gives a fitted surface that encloses no volume ({fit.volume_cc:.0f} cc): "
+    below = 0.0 if chest is None else volume_below_base(ffd.vertices, faces, chest) / 1000.0
+    fit = BreastFit(sq, ffd, faces, below)
+    if not fit.mesh_volume_cc > 0.0:
+        raise BadInputError(None, f"gives a fitted surface that encloses no volume ({fit.mesh_volume_cc:.0f} cc): "
                                   "its points do not hold a breast")
     return fit
+
+
+def chest_beneath(scan) -> ChestBeneath:
+    """The chest wall under an ingested breast (a case's `Scan`, or `ingest_frames`' result), in
+    its breast frame."""
+    from breastplan.ingest.chest_wall import ChestWall
+
+    wall = scan.chest_wall if isinstance(scan.chest_wall, ChestWall) else ChestWall.from_array(scan.chest_wall)
+    breast_from_view = np.asarray(scan.camera_to_breast, float) @ np.linalg.inv(scan.view_from_camera)
+    return partial(wall.beneath, breast_from_view)
 
 
 def ptosis_sag_mm(primitive: Primitive, params) -> float:

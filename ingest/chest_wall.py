@@ -58,9 +58,31 @@ class ChestWall:
         xy = np.asarray(xy, float)[..., :2]
         return np.concatenate([xy, self.z(xy)[..., None]], -1)
 
+    def beneath(self, frame_from_view: np.ndarray, xy, iterations: int = 6) -> np.ndarray:
+        """z of the chest wall under (x, y) of another frame (`frame_from_view`: (4, 4), viewing
+        frame → that frame, e.g. the breast frame), along that frame's z axis, mm: Newton steps on
+        the height along the line (x, y, t)."""
+        xy = np.asarray(xy, float)[..., :2]
+        R, o = np.linalg.inv(frame_from_view)[:3, :3], np.linalg.inv(frame_from_view)[:3, 3]
+        base = xy @ R[:, :2].T + o
+
+        def height(t):
+            return self.height(base + t[..., None] * R[:, 2])
+        t = np.zeros(xy.shape[:-1])
+        for _ in range(iterations):
+            h = height(t)
+            t = t - h / (height(t + 1.0) - h)
+        return t
+
     def as_array(self) -> np.ndarray:
         """[degree, x0, y0, scale, c_0 … c_K−1] for artefacts."""
         return np.concatenate([[self.degree, *self.centre, self.scale_mm], self.coefficients])
+
+    @classmethod
+    def from_array(cls, values) -> "ChestWall":
+        """The wall `as_array` wrote."""
+        v = np.asarray(values, float)
+        return cls(v[4:], int(v[0]), v[1:3], float(v[3]))
 
 
 def fit_chest_wall(points: np.ndarray, degree: int = 2, mask: np.ndarray | None = None,

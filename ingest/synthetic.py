@@ -11,6 +11,7 @@ square of the distance, grazing surfaces and random holes give no depth (0), as 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -21,8 +22,10 @@ from breastplan import PARAM_NAMES, Primitive, load_npz, save_npz, transform_poi
 from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.global_deformations import Deformation
 from breastplan.deform.names import KIND_PARAMS
+from breastplan.meshes import volume_below_base
 from breastplan.options import SIDES
 
+from .chest_wall import ChestWall
 from .rendering import GRAZING_DEG, cast_depth, noisy_frames
 
 TRUTH_SCHEMA = "breastplan.scan-truth/1"
@@ -69,6 +72,14 @@ class Breast:
         """The tip of the nipple, mm, breast frame (the deformations keep the apex normal along z)."""
         return self.apex_mm + [0.0, 0.0, self.nipple_height_mm]
 
+    def volume_on_chest_cc(self, side: str) -> float:
+        """Volume down to the curved chest (cc): the primitive's, and that of its base extruded into
+        the body to the chest (`breastplan.meshes.volume_below_base`)."""
+        V, F = BreastModel(self.primitive, self.deformation).mesh(*SURFACE_GRID)
+        reversed_z = np.diag([1.0, 1.0, -1.0, 1.0])         # the body frame, z away from the viewer
+        floor = partial(CHEST.beneath, np.linalg.inv(body_from_breast(side)) @ reversed_z)
+        return self.primitive.volume_cc + volume_below_base(V, F, floor) / 1000.0
+
 
 @dataclass(frozen=True)
 class Scene:
@@ -95,6 +106,10 @@ class Scene:
 def chest_z(x, y):
     """Z of the chest wall (body frame, mm): a quadric, 0 at the sternum."""
     return -np.square(x) / (2 * CHEST_RX) - np.square(y) / (2 * CHEST_RY)
+
+
+CHEST = ChestWall(np.array([0.0, 0.0, 0.0, 1e4 / (2 * CHEST_RX), 0.0, 1e4 / (2 * CHEST_RY)]), 2, np.zeros(2), 0.0)
+"""`chest_z` as a height field of the body frame with z reversed (as a viewing frame's)."""
 
 
 def body_from_breast(side: str) -> np.ndarray:

@@ -59,7 +59,8 @@ def write_plan(plan: Plan, folder: Path) -> dict:
 
 def fit_record(sp: SidePlan) -> dict:
     f = sp.fit
-    return {"volume_cc": round(f.volume_cc_mesh, 2), "rms_mm": round(f.residuals_mm["rms"], 4),
+    return {"volume_cc": round(f.volume_cc, 2), "volume_cc_below_base": round(f.volume_cc_below_base, 2),
+            "rms_mm": round(f.residuals_mm["rms"], 4),
             "normalised_residual": round(f.normalised_residual, 6), "stopping_rule_met": f.stopping_rule_met,
             "converged": f.converged, "points": f.points, "iterations": list(f.iterations)}
 

@@ -187,7 +187,7 @@ def tables(record: dict) -> str:
              NIPPLE_FOUND[r.get("nipple_found", "apex")]]
             for s, r in record["sides"].items()]
     parts.append("<h2>Fit quality</h2>" + _table(
-        ["side", "volume cc", "rms mm", "normalised residual", f"stopping rule {record['stopping_rule']}", "points",
+        ["side", "volume cc on the chest wall", "rms mm", "normalised residual", f"stopping rule {record['stopping_rule']}", "points",
          "nipple found"], rows, "fit"))
     rows = [[s, c["name"], ", ".join(f"{d['kind']} {d['degree']:g} ({_how(d)})" for d in c["details"])]
             for s, r in record["sides"].items() for c in r["changes"]]

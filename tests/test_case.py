@@ -41,7 +41,7 @@ def a_fit(model=BreastModel(Primitive(10, 11, 9, 10, 8, 0.9, 1.1), Deformation(p
                   lattice_box_mm=np.array([[-90.0] * 3, [90.0] * 3]), control_rest_mm=lattice,
                   control_fitted_mm=lattice + 1.0, residuals_mm={"mean": 0.1, "rms": 0.2, "p95": 0.3, "max": 0.9},
                   normalised_residual=0.001, volume_cc_primitive=model.primitive.volume_cc,
-                  volume_cc_mesh=model.volume_cc(20), iterations=(40, 3), seconds=(0.2, 0.05), points=3000,
+                  volume_cc_mesh=model.volume_cc(20), volume_cc_below_base=12.5, iterations=(40, 3), seconds=(0.2, 0.05), points=3000,
                   residual_map_mm=np.linspace(0.0, 0.9, 3000),
                   converged=True, stopping_rule_met=True, provenance=Provenance({"scan.ply": "ab" * 32}, {"lattice": 3}))
     fields.update(changes)
@@ -76,6 +76,7 @@ def test_fit_round_trip_and_the_primitive_and_pose_in_the_ply_header(tmp_path):
     assert back.primitive == fit.primitive and np.array_equal(back.pose, pose)
     assert np.array_equal(back.vertices, fit.vertices) and np.array_equal(back.faces, fit.faces)
     assert back.residuals_mm == fit.residuals_mm and back.iterations == (40, 3)
+    assert back.volume_cc_below_base == 12.5 and back.volume_cc == fit.volume_cc_mesh + 12.5
     assert back.converged is False and back.stopping_rule_met is False and back.provenance == fit.provenance
     assert np.allclose(back.residual_map_mm, fit.residual_map_mm, atol=1e-6)   # stored as float32
     assert Primitive.from_comments(read_ply(tmp_path / "fit.ply").comments) == fit.primitive

@@ -211,7 +211,7 @@ def test_measures_find_the_nipple_and_a_breast_of_the_volume_the_cup_adds(cli, s
     added = body.half_volumes_cc()["left"] - flat
     assert added > 50.0                                                    # the cup adds a breast indeed
     assert added / VOLUME_FACTOR <= measures["volume_cc"] <= added * VOLUME_FACTOR
-    assert measures["fit_volume_cc"] == pytest.approx(measures["volume_cc"], rel=1e-6)   # the fitted surface's own
+    assert measures["fit_volume_cc"] > measures["volume_cc"]   # the fit reaches down to her convex chest, the mesh its base
     assert measures["upper_pole_cc"] + measures["lower_pole_cc"] == pytest.approx(measures["volume_cc"], rel=1e-6)
     assert measures["rms_mm"] < 2.0 and 50.0 < measures["width_mm"] < 200.0 and 10.0 < measures["projection_mm"] < 100.0
     assert measures["changes"] == []

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from breastplan import read_ply, write_ply
+from breastplan import read_ply, to_mm, write_ply
 from breastplan.ingest import synthetic
 from breastplan.ingest.chest_wall import fit_chest_wall
 from breastplan.ingest.depth import fuse
@@ -239,3 +239,49 @@ def test_an_up_axis_along_the_viewing_direction_is_bad_input():
     slab = np.column_stack([rng.uniform(-150, 150, 2000), rng.uniform(-250, 250, 2000), rng.normal(0, 5, 2000)])
     with pytest.raises(BadInputError, match="^its up axis"):       # stages name no file; commands do
         viewing_frame(slab, "+z")
+
+
+def _rotation(yaw, pitch, roll):
+    from scipy.spatial.transform import Rotation
+
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("yxz", [yaw, pitch, roll], degrees=True).as_matrix()
+    return T
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(-0.4, 0.4), st.floats(-0.4, 0.4), st.floats(-20, 20), st.floats(-25, 25), st.floats(-180, 180))
+def test_the_wall_beneath_a_frame_is_where_its_z_axis_meets_a_plane(p, q, yaw, pitch, roll):
+    """Truth: for a plane z = 500 + p x + q y of the viewing frame, the line through (x, y, 0) of a
+    turned and shifted frame along that frame's z axis meets it at a closed-form t."""
+    from breastplan.ingest.chest_wall import ChestWall
+
+    wall = ChestWall(np.array([500.0, 100 * p, 100 * q]), 1, np.zeros(2), 0.0)
+    view_from_frame = _rotation(yaw, pitch, roll) @ np.diag([1.0, -1.0, -1.0, 1.0])   # z towards the viewer
+    view_from_frame[:3, 3] = [40.0, -30.0, 480.0]
+    xy = np.mgrid[-80:81:40.0, -80:81:40.0].reshape(2, -1).T
+    R, o = view_from_frame[:3, :3], view_from_frame[:3, 3]
+    start, axis = xy @ R[:, :2].T + o, R[:, 2]
+    n = np.array([p, q, -1.0])                                           # plane: n · v + 500 = 0
+    t = -(start @ n + 500.0) / (axis @ n)
+    assert np.allclose(wall.beneath(np.linalg.inv(view_from_frame), xy), t, atol=1e-6)
+
+
+def test_a_chest_wall_survives_its_array():
+    from breastplan.ingest.chest_wall import ChestWall
+
+    wall = ChestWall(np.arange(10.0), 3, np.array([5.0, -7.0]), 1.5)
+    again = ChestWall.from_array(wall.as_array())
+    xy = np.array([[10.0, 20.0], [-30.0, 5.0]])
+    assert again.degree == 3 and again.scale_mm == 1.5 and np.allclose(again.z(xy), wall.z(xy))
+
+
+def test_a_chen_breast_reaches_down_to_the_curved_chest_by_its_extruded_base():
+    """Truth: the chest falls away from the base plane by about r²/(2 R) (R the chest's radii,
+    420 mm across and 900 mm along the body), so the extruded base of a breast whose base is near
+    a disc of radius a holds about π a⁴ (1/R_x + 1/R_y) / 8, and the whole breast more than its primitive."""
+    breast = synthetic.make_scene(0).breasts["left"]
+    a = float(to_mm(np.mean([getattr(breast.primitive, f"a{i}") for i in range(1, 5)])))
+    lens = np.pi * a ** 4 * (1 / synthetic.CHEST_RX + 1 / synthetic.CHEST_RY) / 8 / 1000.0
+    extra = breast.volume_on_chest_cc("left") - breast.primitive.volume_cc
+    assert 0.7 * lens < extra < 1.3 * lens

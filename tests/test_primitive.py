@@ -106,3 +106,38 @@ def test_euler_beta_matches_scipy(e):
 
     for a, b in ((e / 2 + 1, e), (e / 2, e / 2)):
         assert euler_beta(a, b) == pytest.approx(beta(a, b), rel=1e-12)
+
+
+def _disc_breast(a=60.0):
+    """A closed hemisphere-like breast (mm) on a round base of radius a: the primitive with equal
+    semi-axes and eps2 = 1, scaled to mm."""
+    V, F = Primitive(10, 10, 10, 10, 8, 1.0, 1.0).mesh(40, 96)
+    return V * (a / 10.0), F
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(-30, 30), st.floats(-0.5, 0.5), st.floats(-0.5, 0.5))
+def test_below_a_flat_base_a_plane_holds_its_mean_depth_times_the_base_area(c, p, q):
+    """Truth: between the base z = 0 and the plane z = c + p x + q y lie −(c A + p Sx + q Sy) mm³,
+    A and (Sx, Sy) the base polygon's area and first moments (shoelace formulas)."""
+    from breastplan.meshes import volume_below_base
+
+    V, F = _disc_breast()
+    ring = V[:96, :2]
+    x, y = ring.T
+    x1, y1 = np.roll(x, -1), np.roll(y, -1)
+    cross = x * y1 - x1 * y
+    A = cross.sum() / 2
+    Sx, Sy = ((x + x1) * cross).sum() / 6, ((y + y1) * cross).sum() / 6
+    below = volume_below_base(V, F, lambda xy: c + p * xy[..., 0] + q * xy[..., 1])
+    assert below == pytest.approx(-(c * abs(A) + np.sign(A) * (p * Sx + q * Sy)), rel=1e-9, abs=1e-6)
+
+
+def test_below_a_round_base_a_falling_paraboloid_holds_pi_a4_over_4r():
+    """Truth: under a disc of radius a, the chest z = −r²/(2R) lies π a⁴/(4R) below the base plane."""
+    from breastplan.meshes import volume_below_base
+
+    a, R = 60.0, 300.0
+    V, F = _disc_breast(a)
+    below = volume_below_base(V, F, lambda xy: -np.sum(np.square(xy), -1) / (2 * R))
+    assert below == pytest.approx(np.pi * a ** 4 / (4 * R), rel=0.005)
