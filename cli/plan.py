@@ -94,7 +94,9 @@ def _print_plan(result: dict, record: dict) -> None:
     for s in sides:
         fit = record["sides"][s]["fit"]
         reused = record["sides"][s]["reused"]
-        stdout.print(f"{s} fit: {fit['volume_cc']:.1f} cc, rms {fit['rms_mm']:.2f} mm, normalised residual "
+        below = fit["volume_cc_below_base"]
+        stdout.print(f"{s} fit: {fit['volume_cc']:.1f} cc ({fit['volume_cc'] - below:.1f} + {below:.1f} below the base), "
+                     f"rms {fit['rms_mm']:.2f} mm, normalised residual "
                      f"{fit['normalised_residual']:.4f}" + (f"; reused: {', '.join(reused)}" if reused else ""))
     stdout.print(f"report → {result['report']}  ({result['seconds']:.1f} s)")
 
