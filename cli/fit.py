@@ -57,7 +57,7 @@ def fit(
     from breastplan.fitting.ffd import STOP_RESIDUAL
 
     with about(source), threadpool_limits(1, "blas"):   # small dense solves: threads only add overhead
-        result = fit_breast(points, options, scan and chest_beneath(scan))
+        result = fit_breast(points, options, None if scan is None else chest_beneath(scan))
     fit = result.artefact(Provenance.of({source.name: source}, options.as_dict()))
     paths = Case(out or folder).save_fit(fit)
     if not fit.stopping_rule_met:

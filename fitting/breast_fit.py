@@ -2,7 +2,8 @@
 
 `fit_breast` runs the two stages of docs/model.md §2–§3 and §6; `BreastFit.artefact` gives the
 case's `Fit` (`breastplan.case`), which the case writes as fit.npz and fit.ply (the fitted closed
-surface: mm, breast frame, base cap on the chest wall).
+surface: mm, breast frame, its flat base cap in the chest wall's tangent plane z = 0; the
+breast's volume adds the gap between that cap and the chest wall beneath, `BreastFit.below_base_cc`).
 """
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ from .superquadric import SuperquadricFit, distance_stats, fit_superquadric
 MESH_GRID = (40, 96)
 """(n_u, n_v) of the model mesh: 3 746 vertices, about 2 mm apart on a 450 cc breast."""
 BASE_WEIGHT = 0.1
-"""Weight holding the base cap on the chest wall, as a share of the data's weight."""
+"""Weight holding the base cap on z = 0 (the chest wall's tangent plane), as a share of the data's weight."""
 SMOOTHNESS = (1e-9, 1e-6)
 """λ of the FFD for a fully seen breast and for a partly seen one: the smaller lets the lattice
 follow a database breast closely, the larger carries the seen shape of a frontal scan smoothly over
@@ -100,7 +101,8 @@ class BreastFit:
                    lattice_box_mm=np.stack([lattice.lo, lattice.hi]), control_rest_mm=lattice.rest,
                    control_fitted_mm=lattice.points, residuals_mm=self.residual_stats(),
                    normalised_residual=float(self.ffd.residual), volume_cc_primitive=sq.primitive.volume_cc,
-                   volume_cc_mesh=self.mesh_volume_cc, volume_cc_below_base=self.below_base_cc, iterations=(sq.iterations, self.ffd.iterations),
+                   volume_cc_mesh=self.mesh_volume_cc, volume_cc_below_base=self.below_base_cc,
+                   iterations=(sq.iterations, self.ffd.iterations),
                    seconds=(sq.seconds, self.ffd.seconds), points=len(self.ffd.residuals_mm),
                    residual_map_mm=self.ffd.residuals_mm,
                    converged=bool(self.ffd.converged), stopping_rule_met=self.stopping_rule_met,

@@ -63,7 +63,8 @@ class ChestWall:
         frame → that frame, e.g. the breast frame), along that frame's z axis, mm: Newton steps on
         the height along the line (x, y, t)."""
         xy = np.asarray(xy, float)[..., :2]
-        R, o = np.linalg.inv(frame_from_view)[:3, :3], np.linalg.inv(frame_from_view)[:3, 3]
+        view_from_frame = np.linalg.inv(frame_from_view)
+        R, o = view_from_frame[:3, :3], view_from_frame[:3, 3]
         base = xy @ R[:, :2].T + o
 
         def height(t):

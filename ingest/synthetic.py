@@ -103,13 +103,14 @@ class Scene:
         return surface.compute_distance(o3d.core.Tensor(np.asarray(points_camera, np.float32))).numpy()
 
 
+CHEST = ChestWall(np.array([0.0, 0.0, 0.0, 1e4 / (2 * CHEST_RX), 0.0, 1e4 / (2 * CHEST_RY)]), 2, np.zeros(2), 0.0)
+"""The chest wall, x²/(2 CHEST_RX) + y²/(2 CHEST_RY), as a height field of the body frame with z
+reversed (as a viewing frame's: z away from the viewer)."""
+
+
 def chest_z(x, y):
     """Z of the chest wall (body frame, mm): a quadric, 0 at the sternum."""
-    return -np.square(x) / (2 * CHEST_RX) - np.square(y) / (2 * CHEST_RY)
-
-
-CHEST = ChestWall(np.array([0.0, 0.0, 0.0, 1e4 / (2 * CHEST_RX), 0.0, 1e4 / (2 * CHEST_RY)]), 2, np.zeros(2), 0.0)
-"""`chest_z` as a height field of the body frame with z reversed (as a viewing frame's)."""
+    return -CHEST.z(np.stack(np.broadcast_arrays(x, y), -1))
 
 
 def body_from_breast(side: str) -> np.ndarray:
