@@ -23,6 +23,7 @@ from . import __version__
 from .artefacts import load_npz, save_npz
 from .atomic import atomic_set, recover
 from .errors import ArtefactError
+from .frames import is_rigid
 from .options import SIDES
 from .ply import read_ply, write_ply
 from .primitive import Primitive
@@ -210,6 +211,13 @@ class Case:
         side = str(art["side"])
         if side not in SIDES:
             raise ArtefactError(npz, f"names side {side}, not left or right")
+        for key in ("transform_camera_to_breast", "view_from_camera"):
+            if not is_rigid(art[key]):
+                raise ArtefactError(npz, f"has a '{key}' that is not a rigid transform")
+        wall = art["chest_wall"]
+        degree = wall[0] if len(wall) else 0.0
+        if not (degree in range(1, 6) and len(wall) == 4 + (degree + 1) * (degree + 2) // 2):
+            raise ArtefactError(npz, "has a 'chest_wall' whose coefficients do not match its degree")
         breast, torso = read_ply(self.path(self.SCAN_PLY)), read_ply(self.path(self.CAMERA_PLY))
         if breast.normals is None or len(breast.points) != int(art["points"]):
             raise ArtefactError(self.path(self.SCAN_PLY), "does not hold the points and normals scan.npz records")

@@ -11,3 +11,13 @@ def transform_points(T, points) -> np.ndarray:
     if np.array_equal(T, np.eye(4)):
         return points.copy()
     return points @ T[:3, :3].T + T[:3, 3]
+
+
+def is_rigid(T, tol: float = 1e-5) -> bool:
+    """Whether T is a 4×4 rigid transform: an orthonormal 3×3 block, a finite translation, a last
+    row 0 0 0 1."""
+    T = np.asarray(T, dtype=float)
+    if T.shape != (4, 4) or not np.isfinite(T).all():
+        return False
+    R = T[:3, :3]
+    return bool(np.allclose(R @ R.T, np.eye(3), atol=tol) and np.allclose(T[3], [0.0, 0.0, 0.0, 1.0]))

@@ -1,5 +1,6 @@
 """The case folder: typed round trips, all-or-nothing artefact sets, provenance, file modes; the
 breast model in one place; options; errors named at the boundary."""
+import dataclasses
 import hashlib
 import os
 import stat
@@ -26,7 +27,7 @@ def a_scan(n=60, provenance=Provenance()):
     normals = rng.normal(size=(n, 3))
     return Scan(points=rng.normal(size=(n, 3)) * 30, normals=normals / np.linalg.norm(normals, axis=1, keepdims=True),
                 torso_camera=rng.normal(size=(5 * n, 3)) * 200, camera_to_breast=T, view_from_camera=np.eye(4),
-                side="right", nipple_camera_mm=np.array([-100.0, 0.0, 650.0]), chest_wall=np.arange(10.0),
+                side="right", nipple_camera_mm=np.array([-100.0, 0.0, 650.0]), chest_wall=np.r_[2.0, 0.0, 0.0, 1.0, np.arange(6.0)],
                 mound_centre_view_mm=np.array([-90.0, 5.0]), mound_radius_mm=80.0, crop_height_mm=2.0,
                 roi_camera_mm=None, voxel_mm=2.0,
                 source=Source("recording", "rec.mcap: 3 frames", 3, np.diag([450.0, 450.0, 1.0]), np.array([640, 400])),
@@ -227,3 +228,19 @@ def test_errors_raised_without_a_path_get_the_command_s_file():
         with about("scan.ply"):
             raise ArtefactError("fit.npz", "is corrupt")
     assert str(caught.value) == "fit.npz: is corrupt."
+
+
+@pytest.mark.parametrize("field, value, problem", [
+    ("camera_to_breast", np.zeros((4, 4)), "'transform_camera_to_breast' that is not a rigid transform"),
+    ("view_from_camera", np.diag([2.0, 1.0, 1.0, 1.0]), "'view_from_camera' that is not a rigid transform"),
+    ("chest_wall", np.r_[3.0, 0.0, 0.0, 1.0, np.arange(6.0)], "'chest_wall' whose coefficients do not match its degree"),
+    ("chest_wall", np.r_[2.5, 0.0, 0.0, 1.0, np.arange(6.0)], "'chest_wall' whose coefficients do not match its degree"),
+])
+def test_a_scan_whose_frames_or_chest_wall_cannot_be_used_is_refused_by_name(tmp_path, field, value, problem):
+    """Truth: the fit inverts the scan's transforms and evaluates its chest wall; a scan.npz whose
+    transforms are not rigid or whose wall's coefficients do not match its degree is damaged."""
+    case = Case(tmp_path / "case")
+    case.save_scan(dataclasses.replace(a_scan(), **{field: value}))
+    with pytest.raises(ArtefactError, match=problem) as err:
+        case.load_scan()
+    assert err.value.path == case.path(Case.SCAN_NPZ)
