@@ -157,7 +157,7 @@ def ptosis_sag_mm(primitive: Primitive, params) -> float:
 
 
 def held_weights(vertices: np.ndarray) -> np.ndarray:
-    """(V, 3) weights holding the base cap (rim ring and centre) at its height on the chest wall."""
+    """(V, 3) weights holding the base cap (rim ring and centre) at its height, z = 0."""
     held = np.zeros_like(vertices)
     base = np.r_[np.arange(MESH_GRID[1]), len(vertices) - 1]
     held[base, 2] = BASE_WEIGHT / len(base)
