@@ -34,7 +34,8 @@ volume and ptosis figures only when its side is isolated):
    too: it ties at its plausible bound, 3, in about half the cases); baseline: on the Chen torsos, the
    share of scenes whose fitted left/right sag order matches the true order, where the true sags differ
    by ≥ CHEN_SAG_GAP_MM; (b) the fitted volumes differ by ≤ 5 % of their mean
-   (baseline: the true difference, in % of the same mean);
+   (baseline: the true difference, in % of the same mean); reported beside it, with no target: the
+   fitted volume change against the true one, |fitted − true| in % of the same mean;
 5c. (no target) repeatability: per body and side fitted from several views, the spread of its fitted
    volumes, (max − min) / mean, median and worst;
 6. fit seconds per breast (the whole `fit_breast` call, one call per breast): median over the realistic
@@ -378,6 +379,7 @@ def realistic_pairs(scenes: list[SceneResult], varies: str) -> list[dict]:
                         case["b0_order"] = order(a.b0, b.b0, B0_TIE)
                         case["volume_difference_pct"] = 100.0 * abs(case["fitted_change_cc"]) / mean
                         case["true_difference_pct"] = 100.0 * abs(case["true_change_cc"]) / mean
+                        case["change_error_pct"] = 100.0 * abs(case["fitted_change_cc"] - case["true_change_cc"]) / mean
                 cases.append(case)
     return cases
 
@@ -635,6 +637,10 @@ def main() -> None:
                T["firmness_volume_pct"], max_or_none(c["true_difference_pct"] for c in firm_fitted), "%",
                baseline_is="the true difference (half-body volumes) in % of the same mean",
                over=f"{len(firm_fitted)}/{len(firm)} cases"),
+        figure("firmness_volume_change_error_worst", max_or_none(c["change_error_pct"] for c in firm_fitted), None,
+               None, "%", median=median_or_none(c["change_error_pct"] for c in firm_fitted),
+               over=f"{len(firm_fitted)}/{len(firm)} cases: |fitted − true volume change| in % of the mean fitted "
+               f"volume; no target"),
         figure("volume_spread_over_views_worst", max_or_none(c["spread_pct"] for c in spreads), None, None, "%",
                median=median_or_none(c["spread_pct"] for c in spreads),
                over=f"{len(spreads)} body × side cases, fitted from {min((len(c['volume_cc']) for c in spreads), default=0)}"

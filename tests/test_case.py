@@ -27,7 +27,8 @@ def a_scan(n=60, provenance=Provenance()):
     normals = rng.normal(size=(n, 3))
     return Scan(points=rng.normal(size=(n, 3)) * 30, normals=normals / np.linalg.norm(normals, axis=1, keepdims=True),
                 torso_camera=rng.normal(size=(5 * n, 3)) * 200, camera_to_breast=T, view_from_camera=np.eye(4),
-                side="right", nipple_camera_mm=np.array([-100.0, 0.0, 650.0]), chest_wall=np.r_[2.0, 0.0, 0.0, 1.0, np.arange(6.0)],
+                side="right", nipple_camera_mm=np.array([-100.0, 0.0, 650.0]),
+                chest_wall=np.r_[2.0, 0.0, 0.0, 1.0, np.arange(6.0)],
                 mound_centre_view_mm=np.array([-90.0, 5.0]), mound_radius_mm=80.0, crop_height_mm=2.0,
                 roi_camera_mm=None, voxel_mm=2.0,
                 source=Source("recording", "rec.mcap: 3 frames", 3, np.diag([450.0, 450.0, 1.0]), np.array([640, 400])),
@@ -42,7 +43,8 @@ def a_fit(model=BreastModel(Primitive(10, 11, 9, 10, 8, 0.9, 1.1), Deformation(p
                   lattice_box_mm=np.array([[-90.0] * 3, [90.0] * 3]), control_rest_mm=lattice,
                   control_fitted_mm=lattice + 1.0, residuals_mm={"mean": 0.1, "rms": 0.2, "p95": 0.3, "max": 0.9},
                   normalised_residual=0.001, volume_cc_primitive=model.primitive.volume_cc,
-                  volume_cc_mesh=model.volume_cc(20), volume_cc_below_base=12.5, iterations=(40, 3), seconds=(0.2, 0.05), points=3000,
+                  volume_cc_mesh=model.volume_cc(20), volume_cc_below_base=12.5, iterations=(40, 3),
+                  seconds=(0.2, 0.05), points=3000,
                   residual_map_mm=np.linspace(0.0, 0.9, 3000),
                   converged=True, stopping_rule_met=True, provenance=Provenance({"scan.ply": "ab" * 32}, {"lattice": 3}))
     fields.update(changes)

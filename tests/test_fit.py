@@ -74,8 +74,8 @@ def test_fit_of_ingested_synthetic_scans_is_within_1_mm_of_the_true_breast_and_3
 
 @functools.cache
 def realistic_breast(side: str, **body):
-    """One breast of a MakeHuman body as `ingest_frames` gives it (`Ingested`) (`BodyOptions`; modifiers as (name, value)
-    pairs) seen from the front (a-pose, 650 mm, 800×600, wall at 400 mm, 8 frames)."""
+    """One breast of a MakeHuman body (`BodyOptions`; modifiers as (name, value) pairs), as
+    `ingest_frames` gives it (points and chest wall), seen from the front (a-pose, 650 mm, 800×600, wall at 400 mm, 8 frames)."""
     from breastplan.ingest.makehuman import BodyOptions
     from breastplan.ingest.pipeline import ingest_frames
     from breastplan.ingest.realistic import CameraOptions, make_body_scene
