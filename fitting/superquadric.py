@@ -26,9 +26,9 @@ EPS_BOUNDS = (0.3, 2.0)
 FIT_POINTS = 3000
 """Larger clouds are fitted on a seeded random subset of this size (the residuals of all
 points are reported): 3000 surface points pin 7 shape and 6 pose parameters to ≈ 0.1 %."""
-MAX_TURN_RAD = 0.5
-"""Bound on each rotation-vector component (≈ 29°): the breast frame already fixes the axes, and
-a free turn about z would let the fit trade ptosis for turn on a near-round breast."""
+MAX_TURN_RAD = 0.35
+"""Bound on each rotation-vector component (≈ 20°): the breast frame already fixes the axes, and
+a free turn about z lets the fit trade ptosis for turn (docs/model.md §6)."""
 SEMI_AXIS_RANGE = (0.2, 1.5)
 """Semi-axes bounded to this range × the largest initial one: a side the scanner did not see
 (the medial side, cropped between the breasts) would otherwise let its semi-axis run away."""

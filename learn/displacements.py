@@ -25,7 +25,8 @@ from breastplan.deform.lattice import Lattice
 from breastplan.fitting.ffd import STOP_RESIDUAL, fit_ffd
 from breastplan.options import FitOptions
 
-CACHE_SCHEMA = "breastplan.ffd-cache/1"
+CACHE_SCHEMA = "breastplan.ffd-cache/2"
+"""Part of every cache key: a new version whenever the fit changes, so that no stale fit is reused."""
 MARGIN = 0.25
 """Padding of the box around the before surface, as a share of its extent: room for the lattice
 to carry the breast's surface where the change takes it."""
