@@ -8,9 +8,9 @@ from 3 of the 8 views of VIEWS (pose a-pose / arms-down / hands-on-hips; camera 
 24 scenes, 8 noisy depth frames each (`ingest.realistic.make_body_scene(...).frames(8, view)`; both
 bodies of a pair share the view and its noise seed). Each scene goes through `ingest_frames` for the
 left and the right side (automatic isolation, no nipple given); a side that returns is fitted with
-`fit_breast(points, FitOptions(), chest_beneath(ingested))` (volumes down to the chest wall). Baseline scenes, in the same run and interleaved with the
-realistic ones (so that both see the same load): 6 Chen torsos (`ingest.synthetic.make_scene`),
-seeds 0, 1, 2 as drawn and with all five semi-axes × CHEN_SCALE (a known volume change), 8 frames
+`fit_breast(points, FitOptions(), chest_beneath(ingested))` (volumes down to the chest wall).
+Baseline scenes, in the same run and interleaved with the realistic ones (so that both see the
+same load): 6 Chen torsos (`ingest.synthetic.make_scene`), seeds 0, 1, 2 as drawn and with all five semi-axes × CHEN_SCALE (a known volume change), 8 frames
 (640×400), through the same calls.
 
 Figures (a side is *isolated* when ingest returns and its nipple lies within ISOLATED_MM of the truth;
@@ -518,8 +518,8 @@ def print_pairs(cup: list[dict], firm: list[dict], chen_cup: list[dict], console
     table = new_table("bench_realistic 4 — cup change: fitted volume change vs the true change",
                       ("pair", "view", "side", "volume lo → hi", "fitted change", "true change", "relative error"),
                       caption=f"True change: difference of the half-body volumes (body.half_volumes_cc) of that side; "
-                              f"Chen: semi-axes × {CHEN_SCALE:g}, truth the primitive's volume down to the curved chest. '–': a side not isolated "
-                              f"or its fit rejected in either member.")
+                              f"Chen: semi-axes × {CHEN_SCALE:g}, truth the primitive's volume down to the curved "
+                              f"chest. '–': a side not isolated or its fit rejected in either member.")
     for c in cup:
         vol = f"{c['volume_cc'][0]:.0f} → {c['volume_cc'][1]:.0f} cc" if c["fitted"] else "–"
         table.add_row(f"{c['pair']} ({c['values'][0]:g} → {c['values'][1]:g})", str(c["view"]), c["side"], vol,

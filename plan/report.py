@@ -182,13 +182,13 @@ def tables(record: dict) -> str:
                 row += [measures["asymmetry"]["before"].get(name), measures["asymmetry"]["after"].get(name)]
             rows.append(row)
         parts.append("<h2>Measures (after: the combination as planned)</h2>" + _table(head, rows, "measures"))
-    rows = [[s, r["fit"]["volume_cc"], r["fit"]["volume_cc_below_base"], r["fit"]["rms_mm"], r["fit"]["normalised_residual"],
-             "met" if r["fit"]["stopping_rule_met"] else "not met", r["fit"]["points"],
+    rows = [[s, r["fit"]["volume_cc"], r["fit"]["volume_cc_below_base"], r["fit"]["rms_mm"],
+             r["fit"]["normalised_residual"], "met" if r["fit"]["stopping_rule_met"] else "not met", r["fit"]["points"],
              NIPPLE_FOUND[r.get("nipple_found", "apex")]]
             for s, r in record["sides"].items()]
     parts.append("<h2>Fit quality</h2>" + _table(
-        ["side", "volume cc down to the chest wall", "of it below the base cc", "rms mm", "normalised residual", f"stopping rule {record['stopping_rule']}", "points",
-         "nipple found"], rows, "fit"))
+        ["side", "volume cc down to the chest wall", "of it below the base cc", "rms mm", "normalised residual",
+         f"stopping rule {record['stopping_rule']}", "points", "nipple found"], rows, "fit"))
     rows = [[s, c["name"], ", ".join(f"{d['kind']} {d['degree']:g} ({_how(d)})" for d in c["details"])]
             for s, r in record["sides"].items() for c in r["changes"]]
     parts.append("<h2>Planned changes</h2>" + _table(["side", "change", "how (parameters in model units)"], rows))
