@@ -158,6 +158,25 @@ def test_fit_command_writes_the_artefacts_it_reports(cli, case):
     assert np.sqrt(np.mean(np.square(_distances(mesh, points)))) == pytest.approx(out["rms_mm"], rel=0.02)
 
 
+@pytest.mark.parametrize("field, value, words", [
+    ("chest_wall", np.r_[3.0, 0.0, 0.0, 1.0, np.zeros(6)], "'chest_wall' whose coefficients do not match its degree"),
+    ("view_from_camera", np.diag([1.0, 1.0, 0.0, 1.0]), "'view_from_camera' that is not a rigid transform"),
+])
+def test_fit_of_a_case_whose_chest_wall_or_frames_are_damaged_is_bad_input(cli, case, tmp_path, field, value, words):
+    """Truth: the fit evaluates the case's chest wall and inverts its transforms; a scan.npz that
+    cannot give them is named in one sentence, exit 3, and no fit is written."""
+    import dataclasses
+    import shutil
+
+    damaged = tmp_path / "damaged"
+    shutil.copytree(case, damaged, ignore=shutil.ignore_patterns("fit.*"))
+    Case(damaged).save_scan(dataclasses.replace(Case(damaged).load_scan(), **{field: value}))
+    res = run(cli, "fit", damaged)
+    assert_bad_input(res, damaged / "scan.npz", damaged)
+    assert words in res.stderr, res.stderr
+    assert not list(damaged.glob("fit.*"))
+
+
 def _distances(mesh, points):
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor(mesh.points.astype(np.float32)), o3d.core.Tensor(mesh.faces.astype(np.uint32)))
