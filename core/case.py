@@ -22,6 +22,7 @@ import numpy as np
 from . import __version__
 from .artefacts import load_npz, save_npz
 from .atomic import atomic_set, recover
+from .chest_wall import ChestWall
 from .errors import ArtefactError
 from .frames import is_rigid
 from .options import SIDES
@@ -90,7 +91,7 @@ class Scan:
     view_from_camera: np.ndarray     # (4, 4) input frame → viewing frame
     side: str
     nipple_camera_mm: np.ndarray     # (3,)
-    chest_wall: np.ndarray           # [degree, x0, y0, sigma_mm, coefficients…], viewing frame
+    chest_wall: ChestWall            # viewing frame
     mound_centre_view_mm: np.ndarray  # (2,)
     mound_radius_mm: float
     crop_height_mm: float
@@ -187,7 +188,7 @@ class Case:
         arrays = {
             "transform_camera_to_breast": scan.camera_to_breast, "side": np.str_(scan.side),
             "nipple_camera_mm": scan.nipple_camera_mm, "nipple_breast_mm": scan.nipple_breast_mm,
-            "chest_wall": scan.chest_wall, "view_from_camera": scan.view_from_camera,
+            "chest_wall": scan.chest_wall.as_array(), "view_from_camera": scan.view_from_camera,
             "crop_mound_centre_view_mm": scan.mound_centre_view_mm,
             "crop_mound_radius_mm": np.float64(scan.mound_radius_mm),
             "crop_height_mm": np.float64(scan.crop_height_mm),
@@ -214,10 +215,10 @@ class Case:
         for key in ("transform_camera_to_breast", "view_from_camera"):
             if not is_rigid(art[key]):
                 raise ArtefactError(npz, f"has a '{key}' that is not a rigid transform")
-        wall = art["chest_wall"]
-        degree = wall[0] if len(wall) else 0.0
-        if not (degree in range(1, 6) and len(wall) == 4 + (degree + 1) * (degree + 2) // 2):
-            raise ArtefactError(npz, "has a 'chest_wall' whose coefficients do not match its degree")
+        try:
+            wall = ChestWall.from_array(art["chest_wall"])
+        except ValueError as e:
+            raise ArtefactError(npz, f"has a 'chest_wall' {e}") from None
         breast, torso = read_ply(self.path(self.SCAN_PLY)), read_ply(self.path(self.CAMERA_PLY))
         if breast.normals is None or len(breast.points) != int(art["points"]):
             raise ArtefactError(self.path(self.SCAN_PLY), "does not hold the points and normals scan.npz records")
@@ -226,7 +227,7 @@ class Case:
                         art["image_size"])
         return Scan(points=breast.points, normals=breast.normals, torso_camera=torso.points,
                     camera_to_breast=art["transform_camera_to_breast"], view_from_camera=art["view_from_camera"],
-                    side=side, nipple_camera_mm=art["nipple_camera_mm"], chest_wall=art["chest_wall"],
+                    side=side, nipple_camera_mm=art["nipple_camera_mm"], chest_wall=wall,
                     mound_centre_view_mm=art["crop_mound_centre_view_mm"],
                     mound_radius_mm=float(art["crop_mound_radius_mm"]), crop_height_mm=float(art["crop_height_mm"]),
                     roi_camera_mm=None if not roi.any() else roi, voxel_mm=float(art["voxel_mm"]), source=source,

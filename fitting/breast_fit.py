@@ -143,11 +143,8 @@ def fit_breast(points_mm: np.ndarray, options: FitOptions = FitOptions(),
 def chest_beneath(scan) -> ChestBeneath:
     """The chest wall under an ingested breast (a case's `Scan`, or `ingest_frames`' result), in
     its breast frame."""
-    from breastplan.ingest.chest_wall import ChestWall
-
-    wall = scan.chest_wall if isinstance(scan.chest_wall, ChestWall) else ChestWall.from_array(scan.chest_wall)
     breast_from_view = np.asarray(scan.camera_to_breast, float) @ np.linalg.inv(scan.view_from_camera)
-    return partial(wall.beneath, breast_from_view)
+    return partial(scan.chest_wall.beneath, breast_from_view)
 
 
 def ptosis_sag_mm(primitive: Primitive, params) -> float:

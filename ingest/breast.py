@@ -17,8 +17,9 @@ import open3d as o3d
 from scipy.spatial import cKDTree
 
 from breastplan import BadInputError
+from breastplan.chest_wall import ChestWall
 
-from .chest_wall import ChestWall, fit_chest_wall
+from .chest_wall import fit_chest_wall
 from .nipple import find_apex, find_nipple
 
 MOUND_MM = 10.0

@@ -14,10 +14,11 @@ import numpy as np
 import open3d as o3d
 from breastplan import BadInputError, transform_points
 from breastplan.clock import Clock
+from breastplan.chest_wall import ChestWall
 from breastplan.options import IngestOptions
 
 from . import breast as B
-from .chest_wall import ChestWall, fit_chest_wall
+from .chest_wall import fit_chest_wall
 from .depth import depth_range, fuse, to_points
 from .files import ScanCloud
 from .recording import DepthFrames

@@ -82,7 +82,7 @@ def scan_record(result: Ingested, source: Source, options: IngestOptions, proven
     return Scan(points=result.points, normals=result.normals, torso_camera=result.torso_camera,
                 camera_to_breast=result.camera_to_breast, view_from_camera=result.view_from_camera,
                 side=result.side, nipple_camera_mm=result.nipple_camera, nipple_found=result.nipple_found,
-                chest_wall=result.chest_wall.as_array(),
+                chest_wall=result.chest_wall,
                 mound_centre_view_mm=np.asarray(crop["mound_centre_view_mm"], float),
                 mound_radius_mm=float(crop["mound_radius_mm"]), crop_height_mm=float(crop["crop_height_mm"]),
                 roi_camera_mm=crop["roi_camera_mm"], voxel_mm=options.voxel_mm, source=source,

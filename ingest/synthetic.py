@@ -19,13 +19,13 @@ import open3d as o3d
 from scipy.spatial import cKDTree
 
 from breastplan import PARAM_NAMES, Primitive, load_npz, save_npz, transform_points
+from breastplan.chest_wall import ChestWall
 from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.global_deformations import Deformation
 from breastplan.deform.names import KIND_PARAMS
 from breastplan.meshes import volume_below_base
 from breastplan.options import SIDES
 
-from .chest_wall import ChestWall
 from .rendering import GRAZING_DEG, cast_depth, noisy_frames
 
 TRUTH_SCHEMA = "breastplan.scan-truth/1"

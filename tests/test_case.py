@@ -13,6 +13,7 @@ from scipy.spatial.transform import Rotation
 from breastplan import BadInputError, Primitive, read_ply, to_mm, write_ply
 from breastplan.atomic import atomic_set
 from breastplan.case import Case, Fit, Provenance, Scan, Source, sha256
+from breastplan.chest_wall import ChestWall
 from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.global_deformations import Deformation
 from breastplan.errors import ArtefactError, about
@@ -28,7 +29,7 @@ def a_scan(n=60, provenance=Provenance()):
     return Scan(points=rng.normal(size=(n, 3)) * 30, normals=normals / np.linalg.norm(normals, axis=1, keepdims=True),
                 torso_camera=rng.normal(size=(5 * n, 3)) * 200, camera_to_breast=T, view_from_camera=np.eye(4),
                 side="right", nipple_camera_mm=np.array([-100.0, 0.0, 650.0]),
-                chest_wall=np.r_[2.0, 0.0, 0.0, 1.0, np.arange(6.0)],
+                chest_wall=ChestWall.from_array(np.r_[2.0, 0.0, 0.0, 1.0, np.arange(6.0)]),
                 mound_centre_view_mm=np.array([-90.0, 5.0]), mound_radius_mm=80.0, crop_height_mm=2.0,
                 roi_camera_mm=None, voxel_mm=2.0,
                 source=Source("recording", "rec.mcap: 3 frames", 3, np.diag([450.0, 450.0, 1.0]), np.array([640, 400])),
@@ -57,8 +58,9 @@ def test_scan_round_trip(tmp_path):
     written = case.save_scan(scan)
     assert set(written) == {"scan.ply", "camera.ply", "scan.npz"} and Case.holds(case.folder)
     back = case.load_scan()
-    for name in ("points", "normals", "torso_camera", "camera_to_breast", "nipple_camera_mm", "chest_wall"):
+    for name in ("points", "normals", "torso_camera", "camera_to_breast", "nipple_camera_mm"):
         assert np.array_equal(getattr(back, name), getattr(scan, name)), name
+    assert np.array_equal(back.chest_wall.as_array(), scan.chest_wall.as_array())
     assert back.side == "right" and back.roi_camera_mm is None and back.source.frames == 3
     assert back.nipple_found == "areola"
     assert back.source.description == scan.source.description and np.array_equal(back.source.K, scan.source.K)
@@ -235,8 +237,9 @@ def test_errors_raised_without_a_path_get_the_command_s_file():
 @pytest.mark.parametrize("field, value, problem", [
     ("camera_to_breast", np.zeros((4, 4)), "'transform_camera_to_breast' that is not a rigid transform"),
     ("view_from_camera", np.diag([2.0, 1.0, 1.0, 1.0]), "'view_from_camera' that is not a rigid transform"),
-    ("chest_wall", np.r_[3.0, 0.0, 0.0, 1.0, np.arange(6.0)], "'chest_wall' whose coefficients do not match its degree"),
-    ("chest_wall", np.r_[2.5, 0.0, 0.0, 1.0, np.arange(6.0)], "'chest_wall' whose coefficients do not match its degree"),
+    ("chest_wall", ChestWall(np.arange(6.0), 3, np.zeros(2), 1.0), "'chest_wall' whose coefficients do not match its degree"),
+    ("chest_wall", ChestWall(np.arange(6.0), 2.5, np.zeros(2), 1.0), "'chest_wall' whose coefficients do not match its degree"),
+    ("chest_wall", ChestWall(np.r_[np.nan, np.zeros(5)], 2, np.zeros(2), 1.0), "NaN or infinite values in 'chest_wall'"),
 ])
 def test_a_scan_whose_frames_or_chest_wall_cannot_be_used_is_refused_by_name(tmp_path, field, value, problem):
     """Truth: the fit inverts the scan's transforms and evaluates its chest wall; a scan.npz whose

@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from breastplan import read_ply, to_mm, write_ply
+from breastplan.chest_wall import ChestWall
 from breastplan.ingest import synthetic
 from breastplan.ingest.chest_wall import fit_chest_wall
 from breastplan.ingest.depth import fuse
@@ -254,8 +255,6 @@ def _rotation(yaw, pitch, roll):
 def test_the_wall_beneath_a_frame_is_where_its_z_axis_meets_a_plane(p, q, yaw, pitch, roll):
     """Truth: for a plane z = 500 + p x + q y of the viewing frame, the line through (x, y, 0) of a
     turned and shifted frame along that frame's z axis meets it at a closed-form t."""
-    from breastplan.ingest.chest_wall import ChestWall
-
     wall = ChestWall(np.array([500.0, 100 * p, 100 * q]), 1, np.zeros(2), 0.0)
     view_from_frame = _rotation(yaw, pitch, roll) @ np.diag([1.0, -1.0, -1.0, 1.0])   # z towards the viewer
     view_from_frame[:3, 3] = [40.0, -30.0, 480.0]
@@ -268,8 +267,6 @@ def test_the_wall_beneath_a_frame_is_where_its_z_axis_meets_a_plane(p, q, yaw, p
 
 
 def test_a_chest_wall_survives_its_array():
-    from breastplan.ingest.chest_wall import ChestWall
-
     wall = ChestWall(np.arange(10.0), 3, np.array([5.0, -7.0]), 1.5)
     again = ChestWall.from_array(wall.as_array())
     xy = np.array([[10.0, 20.0], [-30.0, 5.0]])
