@@ -66,6 +66,7 @@ def _statistical(quick: bool, out: Path, cache: Path | None, as_json: bool, cloc
     written = write_report(out, results, meta)
     best = {f"{h['condition']} {h['control_points']} CP {h['fit']}": {
         "best": h["best"], "euclidean_mean_pct": round(h["euclidean"], 4), "hausdorff_mean_pct": round(h["hausdorff"], 4),
-        "spike_free_pct": round(h["spike_free_pct"], 1)} for h in written["best"]}
+        "spike_free_pct": round(h["spike_free_pct"], 1),
+        "vertex_spike_free_pct": round(h["vertex_spike_free_pct"], 1)} for h in written["best"]}
     report({"report": str(out / "report.md"), "rows": len(written["rows"]), "best": best,
             "fit_seconds": seconds, "seconds": clock.seconds}, as_json, "statistical study")

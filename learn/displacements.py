@@ -32,11 +32,13 @@ MARGIN = 0.25
 to carry the breast's surface where the change takes it."""
 
 
-SMOOTHNESS = 1e-6
-"""λ of ‖L(P − R)‖² per point in a fit from corresponding points. A change the lattice cannot hold
-(top-shape's crease along y = 0, docs/model.md §3) drives unregularised control points to tens of
-boxes away, fields no model can learn; this keeps them within a few boxes (and ptosis, which the
-lattice holds, within 0.03 mm of exact)."""
+SMOOTHNESS = {"ptosis": 1e-8, "turn": 1e-8, "top-shape": 1e-6}
+"""λ of ‖L(P − R)‖² per point in a fit from corresponding points, per deformation kind (the largest
+for a pair of no stated kind). Ptosis and turn shear the breast by a quadratic in z, which the
+lattice holds: 10⁻⁸ keeps their fits within microns of exact (10⁻⁶ left up to 0.03 mm at the apex,
+a floor whose shape every model learnt from the fields inherited). Top-shape's crease along y = 0
+(docs/model.md §3) is beyond the lattice: unregularised control points go tens of boxes away,
+fields no model can learn; 10⁻⁶ keeps them within a few boxes (10⁻⁸ doubled its models' error)."""
 
 
 CLOSEST_SMOOTHNESS = 1e-4
@@ -167,16 +169,17 @@ def fit_before(points: np.ndarray, n: int, cache: FitCache = MEMORY) -> Before:
 
 
 def fit_pair(before: Before, before_points: np.ndarray, after: np.ndarray, options: PairOptions = PairOptions(),
-             cache: FitCache = MEMORY) -> np.ndarray:
+             cache: FitCache = MEMORY, kind: str | None = None) -> np.ndarray:
     """(K·3,) displacement field, in box units, that takes the before breast to the after cloud (mm).
 
     Closest points: the before's fitted surface is FFD-fitted to the after cloud. Corresponding:
     least squares of the Bernstein rows of the before points against their displacements, with
-    SMOOTHNESS on the lattice Laplacian."""
+    the SMOOTHNESS of the pair's `kind` (one of KINDS) on the lattice Laplacian."""
     before_points, after = np.asarray(before_points, float), np.asarray(after, float)
     box = before.box(options.lattice)
+    smoothness = SMOOTHNESS[kind] if kind in SMOOTHNESS else max(SMOOTHNESS.values())
     key = FitCache.key("pair", before.vertices, before_points if options.corresponding else 0, after,
-                       sorted(asdict(options).items()), SMOOTHNESS, CLOSEST_SMOOTHNESS)
+                       sorted(asdict(options).items()), smoothness if options.corresponding else CLOSEST_SMOOTHNESS)
     hit = cache.get(key)
     if hit is None:
         if options.corresponding:
@@ -184,7 +187,7 @@ def fit_pair(before: Before, before_points: np.ndarray, after: np.ndarray, optio
                 raise ValueError(f"corresponding clouds must have equal shapes, got {before_points.shape} "
                                  f"and {after.shape}")
             B, L = box.basis(before_points), box.laplacian()
-            normal = B.T @ B + SMOOTHNESS * len(B) * (L.T @ L).toarray()
+            normal = B.T @ B + smoothness * len(B) * (L.T @ L).toarray()
             moved = np.linalg.solve(normal, B.T @ (after - before_points))
         else:
             moved = fit_ffd(after, before.vertices, before.faces, smoothness=CLOSEST_SMOOTHNESS, box=box,

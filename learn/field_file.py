@@ -107,7 +107,7 @@ def train_from_pairs(rows, options: PairOptions = PairOptions(), cache: FitCache
             clouds[r.before] = breast_cloud(r.before)
             befores[r.before] = fit_before(clouds[r.before], options.lattice, cache)
         advance()
-    fields = np.stack([fit_pair(befores[r.before], clouds[r.before], breast_cloud(r.after), options, cache)
+    fields = np.stack([fit_pair(befores[r.before], clouds[r.before], breast_cloud(r.after), options, cache, r.kind)
                        for r in train])
     kinds = sorted({r.kind for r in train}, key=KINDS.index)
     X = pair_features([befores[r.before] for r in train], [r.degree for r in train], [r.kind for r in train], kinds)

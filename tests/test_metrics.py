@@ -172,13 +172,30 @@ def test_six_plot_writes_png_atomically(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["six.png"]  # no temporary file left
 
 
-def test_spike_ratio_is_one_for_a_uniform_error_and_large_for_one_stray_point():
-    from breastplan.learn.metrics import spike_ratios
+def test_vertex_spike_ratio_is_one_for_a_uniform_error_and_large_for_one_stray_point():
+    from breastplan.learn.metrics import vertex_spike_ratios
 
     truth = np.random.default_rng(0).normal(size=(2, 200, 3)) * 50
     shifted = truth + [1.0, -2.0, 0.5]                  # every vertex off by the same vector
     stray = shifted.copy()
     stray[1, 7] += [0.0, 0.0, 40.0]                     # one vertex of the second breast astray
-    assert np.allclose(spike_ratios(truth, shifted), 1.0)
-    ratios = spike_ratios(truth, stray)
+    assert np.allclose(vertex_spike_ratios(truth, shifted), 1.0)
+    ratios = vertex_spike_ratios(truth, stray)
     assert ratios[0] == pytest.approx(1.0) and ratios[1] > 10
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.floats(0.01, 2.0))
+def test_spike_ratio_is_one_for_a_sphere_grown_evenly_and_large_for_one_stray_point(grow_mm):
+    """Truth: every point of a sphere of radius R moved out by the same δ (smaller than the sample
+    spacing) lies δ from its own original point and farther from any other, so every modelled→original
+    distance is δ / R: largest = median. One point pushed 40 mm out is a spike of 40 / δ."""
+    from breastplan.learn.metrics import spike_ratios
+
+    n = np.random.default_rng(1).normal(size=(2000, 3))
+    sphere = 80.0 * n / np.linalg.norm(n, axis=1, keepdims=True)
+    grown = sphere * (80.0 + grow_mm) / 80.0
+    stray = grown.copy()
+    stray[5] *= (80.0 + grow_mm + 40.0) / (80.0 + grow_mm)
+    ratios = spike_ratios(indirect_metrics(np.stack([sphere, sphere]), np.stack([grown, stray])))
+    assert ratios[0] == pytest.approx(1.0, rel=1e-9) and ratios[1] > 40.0 / grow_mm * 0.99
