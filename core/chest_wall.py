@@ -11,6 +11,7 @@ import numpy as np
 SCALE_MM = 100.0
 """Coordinates are divided by this before the polynomial, for conditioning."""
 MAX_DEGREE = 5
+"""The highest degree a stored wall may have."""
 
 
 def exponents(degree: int) -> np.ndarray:
@@ -27,7 +28,8 @@ class ChestWall:
     centre: np.ndarray         # (2,) x0, y0 mm
     scale_mm: float            # robust σ of the inlier residuals
 
-    def _basis(self, xy: np.ndarray) -> np.ndarray:
+    def basis(self, xy: np.ndarray) -> np.ndarray:
+        """(…, K) the polynomial's terms at (x, y), mm: the design matrix of a fit."""
         uv = (np.asarray(xy, float)[..., :2] - self.centre) / SCALE_MM
         px = np.cumprod(np.concatenate([np.ones_like(uv[..., :1]), np.repeat(uv[..., :1], self.degree, -1)], -1), -1)
         py = np.cumprod(np.concatenate([np.ones_like(uv[..., 1:]), np.repeat(uv[..., 1:], self.degree, -1)], -1), -1)
@@ -36,7 +38,7 @@ class ChestWall:
 
     def z(self, xy) -> np.ndarray:
         """Chest depth under (x, y), mm."""
-        return self._basis(xy) @ self.coefficients
+        return self.basis(xy) @ self.coefficients
 
     def height(self, points) -> np.ndarray:
         """Height of points in front of the chest along the view axis (towards the viewer), mm."""

@@ -25,7 +25,7 @@ def fit_chest_wall(points: np.ndarray, degree: int = 2, mask: np.ndarray | None 
     allowed = np.ones(len(p), bool) if mask is None else np.asarray(mask, bool)
     inlier = allowed.copy()
     wall = ChestWall(np.zeros(len(exponents(degree))), degree, np.median(p[allowed, :2], axis=0), 0.0)
-    A = wall._basis(p)
+    A = wall.basis(p)
     for it in range(iterations):
         coef, *_ = np.linalg.lstsq(A[inlier], p[inlier, 2], rcond=None)
         r = p[:, 2] - A @ coef  # > 0 behind the surface, < 0 in front (mounds)

@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import open3d as o3d
 from breastplan import BadInputError, transform_points
-from breastplan.clock import Clock
 from breastplan.chest_wall import ChestWall
+from breastplan.clock import Clock
 from breastplan.options import IngestOptions
 
 from . import breast as B

@@ -35,10 +35,9 @@ to carry the breast's surface where the change takes it."""
 SMOOTHNESS = {"ptosis": 1e-8, "turn": 1e-8, "top-shape": 1e-6}
 """λ of ‖L(P − R)‖² per point in a fit from corresponding points, per deformation kind (the largest
 for a pair of no stated kind). Ptosis and turn shear the breast by a quadratic in z, which the
-lattice holds: 10⁻⁸ keeps their fits within microns of exact (10⁻⁶ left up to 0.03 mm at the apex,
-a floor whose shape every model learnt from the fields inherited). Top-shape's crease along y = 0
-(docs/model.md §3) is beyond the lattice: unregularised control points go tens of boxes away,
-fields no model can learn; 10⁻⁶ keeps them within a few boxes (10⁻⁸ doubled its models' error)."""
+lattice holds: a light penalty keeps their fields exact to microns, so that no model learns a bump
+of the fit's own. Top-shape's crease along y = 0 is beyond the lattice: unregularised control points
+chase it boxes away, and a firmer penalty keeps its fields learnable (docs/model.md §8)."""
 
 
 CLOSEST_SMOOTHNESS = 1e-4

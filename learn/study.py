@@ -49,7 +49,7 @@ class Result:
     cv_rmse_pct: float
     target: np.ndarray          # (n_test, n_outputs) true parameters
     predicted: np.ndarray       # (n_test, n_outputs)
-    distances: dict = field(default_factory=dict)   # the four indirect keys → (n_test,) %
+    distances: dict = field(default_factory=dict)   # INDIRECT_KEYS → (n_test,) %
 
     @property
     def label(self) -> str:
