@@ -41,10 +41,9 @@ chase it boxes away, and a firmer penalty keeps its fields learnable (docs/model
 
 
 CLOSEST_SMOOTHNESS = 1e-4
-"""λ of the closest-point fit (`fit_ffd`'s smoothness, per data point). The breast fit's 10⁻⁹ lets
-control points far from the after cloud wander (fields up to 3 boxes); on ptosis b0>b1 (quick
-database) 10⁻⁹, 10⁻⁶, 10⁻⁵, 10⁻⁴ and 10⁻³ gave each pair's own field a Euclidean µ of 1.77, 1.32,
-0.91, 0.69 and 0.79 %, and the learnt models 3.1–3.4, 1.4, 1.3, 1.15 and 0.9 %."""
+"""λ of the closest-point fit (`fit_ffd`'s smoothness, per data point): the breast fit's own λ lets
+control points far from the after cloud wander boxes away; this one gave the most faithful fields
+(docs/model.md §8)."""
 
 
 @dataclass(frozen=True)
