@@ -234,11 +234,14 @@ def test_errors_raised_without_a_path_get_the_command_s_file():
     assert str(caught.value) == "fit.npz: is corrupt."
 
 
+MISMATCHED_WALL = "'chest_wall' whose coefficients do not match its degree"
+
+
 @pytest.mark.parametrize("field, value, problem", [
     ("camera_to_breast", np.zeros((4, 4)), "'transform_camera_to_breast' that is not a rigid transform"),
     ("view_from_camera", np.diag([2.0, 1.0, 1.0, 1.0]), "'view_from_camera' that is not a rigid transform"),
-    ("chest_wall", ChestWall(np.arange(6.0), 3, np.zeros(2), 1.0), "'chest_wall' whose coefficients do not match its degree"),
-    ("chest_wall", ChestWall(np.arange(6.0), 2.5, np.zeros(2), 1.0), "'chest_wall' whose coefficients do not match its degree"),
+    ("chest_wall", ChestWall(np.arange(6.0), 3, np.zeros(2), 1.0), MISMATCHED_WALL),
+    ("chest_wall", ChestWall(np.arange(6.0), 2.5, np.zeros(2), 1.0), MISMATCHED_WALL),
     ("chest_wall", ChestWall(np.r_[np.nan, np.zeros(5)], 2, np.zeros(2), 1.0), "NaN or infinite values in 'chest_wall'"),
 ])
 def test_a_scan_whose_frames_or_chest_wall_cannot_be_used_is_refused_by_name(tmp_path, field, value, problem):

@@ -160,7 +160,8 @@ def test_fit_command_writes_the_artefacts_it_reports(cli, case):
 
 
 @pytest.mark.parametrize("field, value, words", [
-    ("chest_wall", ChestWall(np.zeros(6), 3, np.zeros(2), 1.0), "'chest_wall' whose coefficients do not match its degree"),
+    ("chest_wall", ChestWall(np.zeros(6), 3, np.zeros(2), 1.0),
+     "'chest_wall' whose coefficients do not match its degree"),
     ("view_from_camera", np.diag([1.0, 1.0, 0.0, 1.0]), "'view_from_camera' that is not a rigid transform"),
 ])
 def test_fit_of_a_case_whose_chest_wall_or_frames_are_damaged_is_bad_input(cli, case, tmp_path, field, value, words):
