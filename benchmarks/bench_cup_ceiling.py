@@ -7,7 +7,7 @@ breast is measured as breastplan measures it — over the chest wall ingest foun
 the region ingest cropped — so that the fit's shortfall can be told from the truth's reach.
 
 Per cup pair × view × side, both bodies are rendered and ingested (`ingest_frames`, automatic
-isolation), and fitted (`fit_breast` on `chest_beneath`). On a 2 mm grid of the first body's
+isolation), and fitted (`fit_scan`, on the chest wall ingest found). On a 2 mm grid of the first body's
 viewing frame, each body's exact front surface (open3d ray casting of its mesh) and each body's
 ingested chest wall (`ChestWall.beneath`, along that frame's view axis) give:
 
@@ -34,11 +34,11 @@ from scipy.spatial import cKDTree
 from threadpoolctl import threadpool_limits
 
 from breastplan import transform_points
-from breastplan.fitting.breast_fit import chest_beneath, fit_breast
+from breastplan.fitting.breast_fit import fit_scan
 from breastplan.ingest.pipeline import ingest_frames
 from breastplan.ingest.realistic import make_body_scene
 from breastplan.ingest.recording import DepthFrames
-from breastplan.options import FitOptions, IngestOptions
+from breastplan.options import IngestOptions
 
 from bench_realistic import FRAMES, PAIRS, VIEWS, new_table
 
@@ -60,7 +60,7 @@ def member(pair, view: int, m: int, side: str) -> dict:
     scene = make_body_scene(pair.body(m, pose), camera)
     ingested = ingest_frames(DepthFrames(scene.frames(FRAMES, view), scene.camera.K, "synthetic"), IngestOptions(side=side))
     with threadpool_limits(1, "blas"):
-        fit = fit_breast(ingested.points, FitOptions(), chest_beneath(ingested))
+        fit = fit_scan(ingested)
     view_from_body = ingested.view_from_camera @ scene.camera_from_body
     view_from_breast = ingested.view_from_camera @ np.linalg.inv(ingested.camera_to_breast)
     return {"scene": scene, "ingested": ingested, "fit": fit, "view_from_body": view_from_body,

@@ -8,7 +8,7 @@ from 3 of the 8 views of VIEWS (pose a-pose / arms-down / hands-on-hips; camera 
 24 scenes, 8 noisy depth frames each (`ingest.realistic.make_body_scene(...).frames(8, view)`; both
 bodies of a pair share the view and its noise seed). Each scene goes through `ingest_frames` for the
 left and the right side (automatic isolation, no nipple given); a side that returns is fitted with
-`fit_breast(points, FitOptions(), chest_beneath(ingested))` (volumes down to the chest wall).
+`fit_scan(ingested)` (`fit_breast` on the chest wall ingest found: volumes down to that wall).
 Baseline scenes, in the same run and interleaved with the realistic ones (so that both see the
 same load): 6 Chen torsos (`ingest.synthetic.make_scene`), seeds 0, 1, 2 as drawn and with all five semi-axes × CHEN_SCALE (a known volume change), 8 frames
 (640×400), through the same calls.
@@ -38,7 +38,7 @@ volume and ptosis figures only when its side is isolated):
    fitted volume change against the true one, |fitted − true| in % of the same mean;
 5c. (no target) repeatability: per body and side fitted from several views, the spread of its fitted
    volumes, (max − min) / mean, median and worst;
-6. fit seconds per breast (the whole `fit_breast` call, one call per breast): median over the realistic
+6. fit seconds per breast (the whole `fit_scan` call, one call per breast): median over the realistic
    breasts ≤ 1 s; baseline: the median over the Chen breasts;
 7. ingest time of 8 frames at 800×600 (`ingest_frames`, frames already in memory): median ≤ 1 s, over
    the 800×600 scenes (up to TIMING_CASES scene × side cases), each a median of `repeats` calls after
@@ -69,13 +69,13 @@ from rich.table import Table
 from threadpoolctl import threadpool_limits
 
 from breastplan import BadInputError, transform_points
-from breastplan.fitting.breast_fit import chest_beneath, fit_breast, ptosis_sag_mm
+from breastplan.fitting.breast_fit import fit_scan, ptosis_sag_mm
 from breastplan.ingest import synthetic
 from breastplan.ingest.makehuman import BodyOptions
 from breastplan.ingest.pipeline import ingest_frames
 from breastplan.ingest.realistic import CameraOptions, make_body_scene
 from breastplan.ingest.recording import DepthFrames
-from breastplan.options import SIDES, FitOptions, IngestOptions
+from breastplan.options import SIDES, IngestOptions
 
 from timing import fmt, median_times, rounded
 
@@ -230,7 +230,7 @@ def run_side(frames: DepthFrames, side: str, truth_camera: np.ndarray) -> Side:
     out.points = int(len(ingested.points))
     t0 = time.perf_counter()
     try:
-        fit = fit_breast(ingested.points, FitOptions(), chest_beneath(ingested))
+        fit = fit_scan(ingested)
     except BadInputError as exc:
         out.fit_s, out.fit_status, out.fit_error = time.perf_counter() - t0, "rejected", str(exc)
         return out
@@ -481,7 +481,7 @@ def print_scenes(real: list[SceneResult], chen: list[SceneResult], console: Cons
     caption = (f"Nipple: 3-D distance of the found nipple from the truth (camera mm); 'raised' = ingest raised "
                f"BadInputError, '(far)' = farther than {ISOLATED_MM:g} mm (not isolated). Asymmetry: (left − right) "
                f"found offset minus the true offset in the body frame, X horizontal / Y vertical. Fit: fitted volume, "
-               f"ptosis b0, seconds of fit_breast (made whenever ingest returned) and FFD iterations ('cut': stopped at max_iterations). Chen rows are the baseline scenes "
+               f"ptosis b0, seconds of fit_scan (made whenever ingest returned) and FFD iterations ('cut': stopped at max_iterations). Chen rows are the baseline scenes "
                f"(640×400), run interleaved with the realistic ones.")
     table = new_table(f"bench_realistic — scenes ({FRAMES} frames each)",
                       ("scene", "pose", "camera", "ingest L / R", "nipple L", "nipple R", "asymmetry X / Y",

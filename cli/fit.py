@@ -53,11 +53,11 @@ def fit(
     from threadpoolctl import threadpool_limits
 
     from breastplan.case import Case, Provenance
-    from breastplan.fitting.breast_fit import chest_beneath, fit_breast
+    from breastplan.fitting.breast_fit import fit_breast, fit_scan
     from breastplan.fitting.ffd import STOP_RESIDUAL
 
     with about(source), threadpool_limits(1, "blas"):   # small dense solves: threads only add overhead
-        result = fit_breast(points, options, None if scan is None else chest_beneath(scan))
+        result = fit_breast(points, options) if scan is None else fit_scan(scan, options)
     fit = result.artefact(Provenance.of({source.name: source}, options.as_dict()))
     paths = Case(out or folder).save_fit(fit)
     if not fit.stopping_rule_met:

@@ -272,11 +272,11 @@ def _fitted(mesh: Mesh, side: str, units: str, up: str, options: FitOptions) -> 
     if fitted is None:
         from threadpoolctl import threadpool_limits
 
-        from breastplan.fitting.breast_fit import chest_beneath, fit_breast
+        from breastplan.fitting.breast_fit import fit_scan
         from breastplan.plan.job import SidePlan
 
         with threadpool_limits(1, "blas"):
-            fit = fit_breast(record.scan.points, options, chest_beneath(record.scan)).artefact()
+            fit = fit_scan(record.scan, options).artefact()
         fitted = replace(record, fitted=SidePlan(record.scan.side, None, record.scan, fit, ()))
         _MEMORY.put(key, fitted)
     return fitted

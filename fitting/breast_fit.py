@@ -116,7 +116,7 @@ ChestBeneath = Callable[[np.ndarray], np.ndarray]
 def fit_breast(points_mm: np.ndarray, options: FitOptions = FitOptions(),
                chest: ChestBeneath | None = None) -> BreastFit:
     """Fit the breast model to (N, 3) points (mm, breast frame, base on z = 0), on the chest wall
-    `chest` (`chest_beneath`; None: the plane z = 0, as on a database breast).
+    `chest` (None: the plane z = 0, as on a database breast; an ingested breast: `fit_scan`).
 
     A fit that runs out of iterations before the stopping rule is returned as it is (its
     `ffd.converged` and `stopping_rule_met` say so; `ffd.residuals_mm` maps where it misses);
@@ -140,11 +140,11 @@ def fit_breast(points_mm: np.ndarray, options: FitOptions = FitOptions(),
     return fit
 
 
-def chest_beneath(scan) -> ChestBeneath:
-    """The chest wall under an ingested breast (a case's `Scan`, or `ingest_frames`' result), in
-    its breast frame."""
+def fit_scan(scan, options: FitOptions = FitOptions()) -> BreastFit:
+    """`fit_breast` of an ingested breast (a case's `Scan`, or `ingest_frames`' result) on the chest
+    wall ingest found beneath it."""
     breast_from_view = np.asarray(scan.camera_to_breast, float) @ np.linalg.inv(scan.view_from_camera)
-    return partial(scan.chest_wall.beneath, breast_from_view)
+    return fit_breast(scan.points, options, partial(scan.chest_wall.beneath, breast_from_view))
 
 
 def ptosis_sag_mm(primitive: Primitive, params) -> float:

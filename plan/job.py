@@ -239,7 +239,7 @@ def _fit(case: Case, scan: Scan, clock: Clock, progress: Progress, side: str) ->
     """The side's fit: reused when the case holds one of this scan with the default options."""
     from threadpoolctl import threadpool_limits
 
-    from breastplan.fitting.breast_fit import chest_beneath, fit_breast
+    from breastplan.fitting.breast_fit import fit_scan
 
     options = FitOptions()
     scan_ply = case.path(Case.SCAN_PLY)
@@ -248,7 +248,7 @@ def _fit(case: Case, scan: Scan, clock: Clock, progress: Progress, side: str) ->
         return case.load_fit(), ["fit"]
     with clock(f"fit {side}"), about(scan_ply), threadpool_limits(1, "blas"):
         progress(f"fit {side}")
-        fit = fit_breast(scan.points, options, chest_beneath(scan)).artefact(wanted)
+        fit = fit_scan(scan, options).artefact(wanted)
     case.save_fit(fit)
     return fit, []
 

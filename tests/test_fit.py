@@ -120,11 +120,11 @@ def test_a_larger_cup_is_fitted_with_most_of_its_true_volume_change():
     from a frontal scan, about 4 mm higher under the larger one, and 6 % of the change lies over
     90 mm from the nipple; a breast's flat base alone, its chest wall ignored, kept 81 %; the old
     ring-fitted wall, 58 %) and by no more than 120 %."""
-    from breastplan.fitting.breast_fit import chest_beneath
+    from breastplan.fitting.breast_fit import fit_scan
     from breastplan.ingest.makehuman import BodyOptions, make_body
 
     body = dict(firmness=0.5, weight=0.5, muscle=0.5)
-    small, large = (fit_breast(b.points, chest=chest_beneath(b)).volume_cc
+    small, large = (fit_scan(b).volume_cc
                     for b in (realistic_breast("left", cup=c, **body) for c in (0.3, 0.8)))
     truth = (make_body(BodyOptions(cup=0.8, **body)).half_volumes_cc()["left"]
              - make_body(BodyOptions(cup=0.3, **body)).half_volumes_cc()["left"])
