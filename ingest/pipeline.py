@@ -29,6 +29,9 @@ COARSE_MM = 10.0
 DENSE_CELLS = 4_000_000
 """Voxel grids up to this many cells are indexed densely (no sort)."""
 MIN_BREAST_POINTS = 500
+REFINE_VIEW, REFINED_DEG = 4, 0.1
+"""A scan file's viewing axis is refined at most this many times on the trunk it shows, until it turns
+by under this angle (degrees)."""
 BODY_VOXELS = 1000
 """Clusters of this many coarse voxels (0.1 m² of surface) or more may be the body."""
 
@@ -106,19 +109,57 @@ def ingest_cloud(cloud: ScanCloud, options: IngestOptions, clock: Clock | None =
 
 
 def viewing_frame(points: np.ndarray, up: str) -> tuple[np.ndarray, BodyInView]:
-    """(4, 4) input → viewing frame for a frontal scan, and the body found in it: z along the cloud's
-    thinnest axis, away from the viewer, y opposite to the input's `up` axis. Of the two senses of z,
-    the viewer's is the one from which the nearest body's trunk bulges towards it (a chest is convex
-    across)."""
-    centred = points - points.mean(0)
-    _, vecs = np.linalg.eigh(np.cov(centred.T))
-    frames = [_frame(sense * vecs[:, 0], up) for sense in (1.0, -1.0)]
+    """(4, 4) input → viewing frame for a frontal scan, and the body found in it: z away from the viewer
+    along the thinnest axis of the body's trunk, y opposite to the input's `up` axis.
+
+    The body is first found looking along the cloud's principal axes, thinnest first (a wall or floor
+    in the file can make the depth its longest); of the two senses of an axis, the viewer's is the one
+    from which the nearest body's trunk bulges towards it (a chest is convex across). The axis is then
+    refined on that trunk alone, so that whatever else the file holds does not tilt the frame."""
+    skipped = False
+    for axis in _principal_axes(points):
+        try:
+            facing = _facing(points, axis, up)
+        except BadInputError:           # the axis lies along `up`: the viewer cannot look along it
+            skipped = True
+            continue
+        if facing is not None:
+            return _refined(points, *facing, up)
+    if skipped:
+        raise BadInputError(None, f"its up axis {up} is nearly its viewing direction; pass another --up")
+    raise BadInputError(None, "shows no trunk: nothing in view is as wide as a chest")
+
+
+def _refined(points: np.ndarray, frame: np.ndarray, found: BodyInView, up: str) -> tuple[np.ndarray, BodyInView]:
+    """The viewing frame turned, up to REFINE_VIEW times, to look along the thinnest axis of the trunk
+    it shows (the same sense), until that axis moves by under REFINED_DEG."""
+    for _ in range(REFINE_VIEW):
+        trunk = transform_points(np.linalg.inv(frame), found.points[found.trunk.mask])
+        axis = _principal_axes(trunk)[0]
+        axis *= -np.sign(np.dot(axis, frame[2, :3]))        # anterior: opposite the frame's z
+        if np.degrees(np.arccos(min(1.0, -np.dot(axis, frame[2, :3])))) < REFINED_DEG:
+            break
+        turned = _frame(axis, up)
+        body = _body_or_none(transform_points(turned, points))
+        if body is None:
+            break
+        frame, found = turned, body
+    return frame, found
+
+
+def _principal_axes(points: np.ndarray) -> np.ndarray:
+    """(3, 3) unit principal axes of a cloud as rows, thinnest first."""
+    return np.linalg.eigh(np.cov((points - points.mean(0)).T))[1].T
+
+
+def _facing(points: np.ndarray, axis: np.ndarray, up: str) -> tuple[np.ndarray, BodyInView] | None:
+    """The viewing frame looking along ±`axis` from which the nearest body's trunk bulges most
+    towards the viewer, and that body; None when neither sense shows a trunk."""
+    frames = [_frame(sense * axis, up) for sense in (1.0, -1.0)]
     found = [_body_or_none(transform_points(T, points)) for T in frames]
     bulge = [_trunk_bulge(body) for body in found]
-    if max(bulge) == -np.inf:
-        raise BadInputError(None, "shows no trunk: nothing in view is as wide as a chest")
     k = int(np.argmax(bulge))
-    return frames[k], found[k]
+    return None if bulge[k] == -np.inf else (frames[k], found[k])
 
 
 def _body_or_none(points: np.ndarray) -> BodyInView | None:

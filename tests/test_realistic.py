@@ -18,8 +18,9 @@ from breastplan import BadInputError, transform_points, write_ply
 from breastplan.ingest import breast
 from breastplan.ingest.makehuman import BodyOptions, make_body
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import (BodyScene, CameraOptions, file_axes, load_body_truth, make_body_scene,
-                                          write_scan_file)
+from breastplan.ingest.realistic import (BodyScene, CameraOptions, file_axes, file_from_body, load_body_truth,
+                                          make_body_scene, write_scan_file)
+from breastplan.ingest.scan import ingest
 from breastplan.ingest.recording import DepthFrames, write_recording
 from breastplan.ingest.rendering import noisy_frames
 from breastplan.options import IngestOptions
@@ -235,6 +236,25 @@ def test_ingest_of_a_scan_file_finds_the_nipple(cli, tmp_path, suffix, side, wal
     true_body = transform_points(np.linalg.inv(truth["camera_from_body"]), truth[f"{side}_nipple_camera_mm"][None])[0]
     found_body = file_to_body_mm([out["nipple_camera_mm"]])[0]        # ingest reports the file's frame, in mm
     assert np.linalg.norm(found_body - true_body) <= NIPPLE_MM, (found_body, true_body)
+
+
+@pytest.mark.parametrize("wall_mm", [0.0, 700.0, 1500.0])
+def test_a_wall_behind_her_in_a_scan_file_does_not_turn_her_viewing_frame(wall_mm, tmp_path):
+    """The same body and camera, written as a scan file in metres with a wall 0–1500 mm behind her or
+    none: the viewing axis found is the same (the wall is not her), and each nipple lies on the truth."""
+    body = BodyOptions(pose="arms-down")
+    axes, nipples = [], []
+    for wall in (None, wall_mm):
+        scene = make_body_scene(body, CameraOptions(resolution="640x400", pitch_deg=8.0, wall_mm=wall))
+        path = tmp_path / f"wall-{wall}.ply"
+        write_scan_file(path, scene, units="m")
+        scan = ingest(path, IngestOptions("left", units="m"))
+        axes.append(np.linalg.inv(scan.camera_to_breast)[:3, 2])          # the breast's z in the file frame
+        to_file = file_from_body("+y", "mm")
+        truth = transform_points(to_file, scene.body.nipples["left"][None])[0]
+        nipples.append(np.linalg.norm(scan.nipple_camera_mm - truth))
+    assert np.degrees(np.arccos(np.clip(np.dot(*axes), -1, 1))) < 1.0, axes
+    assert max(nipples) <= NIPPLE_MM, nipples
 
 
 # --- 5. the watershed of height_basins ------------------------------------------------------------
