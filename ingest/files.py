@@ -34,6 +34,8 @@ SAMPLE_SEED = 0
 METRE_EXTENT = (0.05, 3.0)
 MM_EXTENT = (50.0, 3000.0)
 """Plausible extents of a torso or breast scan in metres and in millimetres."""
+MIN_CLOUD_POINTS = 500
+"""A point cloud with fewer points cannot hold a breast (ingest keeps at least as many of one)."""
 _CHUNK = 1 << 24
 _MAX_LINE = 1 << 16
 """Bytes scanned at a time, and the longest line a text scan file may hold."""
@@ -84,6 +86,9 @@ def scan_cloud(points, faces=None, normals=None, units: str = "auto", *, name: s
     faces = None if faces is None else as_rows(path, faces, 3, np.int64, "faces")
     normals = None if normals is None else as_rows(path, normals, 3, np.float64, "normals")
     _check_points(path, points)
+    if faces is None and len(points) < MIN_CLOUD_POINTS:
+        raise BadInputError(path, f"has only {_count(len(points), 'point')}; a point cloud of a body needs at least "
+                                  f"{MIN_CLOUD_POINTS}")
     if faces is not None and len(faces) and (faces.min() < 0 or faces.max() >= len(points)):
         raise BadInputError(path, f"has faces that refer to missing vertices (it has {_count(len(points), 'point')})")
     if normals is not None and len(normals) != len(points):

@@ -39,7 +39,7 @@ def write_pcd(path, points, normals=None):
     return path
 
 
-def grid_points_mm(n=5):
+def grid_points_mm(n=8):
     """n³ points on a 0..200 mm grid (extent 200: millimetres)."""
     g = np.linspace(0.0, 200.0, n)
     return np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
@@ -114,7 +114,7 @@ def test_pcd_round_trip_with_and_without_normals(tmp_path):
     assert np.allclose(plain.points, pts, atol=1e-4) and plain.normals is None
     with_n = read_scan_file(write_pcd(tmp_path / "normals.pcd", pts, nrm))
     assert np.allclose(with_n.points, pts, atol=1e-4) and np.allclose(with_n.normals, nrm, atol=1e-6)
-    assert "125 points with normals" in with_n.description
+    assert "512 points with normals" in with_n.description
 
 
 def test_xyz_round_trip_and_metres(tmp_path):
@@ -263,3 +263,10 @@ def test_one_far_point_under_declared_units_is_bad_input(tmp_path, units):
     np.savetxt(tmp_path / "far.xyz", pts)
     with pytest.raises(BadInputError, match=r"far\.xyz: has an extent of 1e\+30 " + units + ", more than any body scan"):
         read_scan_file(tmp_path / "far.xyz", units=units)
+
+
+def test_too_few_points_is_said_before_their_units(tmp_path):
+    """Five points cannot hold a breast, whatever their extent: that is the sentence, not a units guess."""
+    path = write_ply(tmp_path / "five.ply", grid_points_mm()[:5] / 20.0)     # extent 10: ambiguous units
+    with pytest.raises(BadInputError, match=r"five\.ply: has only 5 points; a point cloud of a body needs at least"):
+        read_scan_file(path)
