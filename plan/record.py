@@ -1,5 +1,5 @@
 """A finished plan written out: each side's planned changes, the changed torso, plan.json, report.html
-and summary.png.
+and summary.png; the files of changes an earlier plan of the folder made and this one does not, removed.
 
 Each side's changes go to its case (`Case.save_change`); the plan's own files form one set written
 all or nothing, plan.json last, so that a plan.json always describes the report beside it.
@@ -54,7 +54,19 @@ def write_plan(plan: Plan, folder: Path) -> dict:
         Path(stage(folder / Case.REPORT)).write_text(render(plan, record), encoding="utf-8")
         summary_png(plan, record, stage(folder / SUMMARY))
         Path(stage(folder / Case.PLAN_JSON)).write_text(json.dumps(record, indent=1), encoding="utf-8")
+    _remove_earlier_plans(folder, record)
     return record
+
+
+def _remove_earlier_plans(folder: Path, record: dict) -> None:
+    """Remove what an earlier plan of the case folder left in its plan/ folders (changes no longer
+    planned) once the new plan.json, which does not name them, is in place."""
+    kept = {folder / f for f in record["files"]["torso"].values()}
+    kept |= {folder / f for side in record["sides"].values() for c in side["changes"] for f in c["files"].values()}
+    for plans in [folder / Case.PLAN, *(folder / side / Case.PLAN for side in ("left", "right"))]:
+        for path in plans.glob("*") if plans.is_dir() else ():
+            if path.is_file() and path.suffix in (".ply", ".npz") and path not in kept:
+                path.unlink()
 
 
 def fit_record(sp: SidePlan) -> dict:
