@@ -56,8 +56,7 @@ def _plan(task: Task) -> None:
     from breastplan.options import PlanOptions
     from breastplan.plan.job import PLAN_SCHEMA, run_plan
 
-    o = task.options
-    options = PlanOptions(tuple(map(tuple, o["changes"])), tuple(o["sides"]), o["method"])
+    options = PlanOptions.from_dict(task.options)
     case = Path(task.case)
     if not case.exists():
         run_plan(Path(task.input), case, options)

@@ -78,6 +78,8 @@ def _options(
 
 
 JSON = typer.Option(False, "--json", help="Print one JSON object on stdout (logs go to stderr).")
+UNITS_HELP = "Units of a scan file: auto (from its extent), mm or m."
+UP_HELP = "Superior axis of a scan file: +x, -x, +y, -y, +z or -z."
 
 
 def parse_pairs(items: List[str], what: str, option: str) -> dict[str, float]:

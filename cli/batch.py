@@ -8,7 +8,7 @@ import typer
 
 from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, BatchOptions, OptionError, PlanOptions
 
-from .app import JSON, command
+from .app import JSON, UNITS_HELP, UP_HELP, command
 from .output import report, stderr, stdout, usage_error, writable
 from .plan import FLAGS as PLAN_FLAGS
 from .plan import check_method
@@ -28,6 +28,8 @@ def batch(
                                      f"{', '.join(DEGREE_KINDS)}. Default: "
                                      + " ".join(f"{k}:{d:g}" for k, d in DEFAULT_PLAN) + "."),
     method: str = typer.Option("exact", "--method", help="exact, learnt or MODEL.npz, as for plan."),
+    units: str = typer.Option("auto", "--units", help=UNITS_HELP + " The same for every scan file."),
+    up: str = typer.Option("+y", "--up", help=UP_HELP + " The same for every scan file."),
     executor: str = typer.Option("local", "--executor", help="local (worker processes) or dask (a Dask "
                                  "distributed cluster)."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="With --executor dask: the address of a "
@@ -40,7 +42,7 @@ def batch(
     from breastplan.errors import require_folder
 
     try:
-        options = BatchOptions(PlanOptions.parse(deform, side, method), jobs, executor, scheduler)
+        options = BatchOptions(PlanOptions.parse(deform, side, method, units, up), jobs, executor, scheduler)
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
     check_method(method)

@@ -10,7 +10,7 @@ from breastplan.clock import Clock
 from breastplan.errors import about
 from breastplan.options import IngestOptions, OptionError
 
-from .app import JSON, command, parse_numbers
+from .app import JSON, UNITS_HELP, UP_HELP, command, parse_numbers
 from .output import report, usage_error, writable
 
 FLAGS = {"side": "--side", "voxel_mm": "--voxel", "frames": "--frames", "roi_camera_mm": "--roi",
@@ -27,8 +27,8 @@ def ingest(
     frames: Optional[int] = typer.Option(None, "--frames", help="Fuse at most N depth frames (default: all; 10 live)."),
     roi: Optional[str] = typer.Option(None, "--roi", help="X0,Y0,Z0,X1,Y1,Z1: box (camera mm) holding the breast."),
     nipple: Optional[str] = typer.Option(None, "--nipple", help="X,Y,Z: the nipple (camera mm), overriding the apex."),
-    units: str = typer.Option("auto", "--units", help="Units of a scan file: auto (from its extent), mm or m."),
-    up: str = typer.Option("+y", "--up", help="Superior axis of a scan file: +x, -x, +y, -y, +z or -z."),
+    units: str = typer.Option("auto", "--units", help=UNITS_HELP),
+    up: str = typer.Option("+y", "--up", help=UP_HELP),
     device: bool = typer.Option(False, "--device", help="Capture from a live OAK device instead of INPUT."),
     device_id: Optional[str] = typer.Option(None, "--device-id", help="With --device: the OAK's ID (default: the first)."),
     as_json: bool = JSON,

@@ -10,10 +10,10 @@ from breastplan.clock import Clock
 from breastplan.errors import require_file
 from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, OptionError, PlanOptions
 
-from .app import JSON, command
+from .app import JSON, UNITS_HELP, UP_HELP, command
 from .output import report, stderr, usage_error, writable
 
-FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method"}
+FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method", "units": "--units", "up": "--up"}
 
 
 @command()
@@ -29,13 +29,15 @@ def plan(
                                "condition, for its kind)."),
     out: Optional[Path] = typer.Option(None, "--out", help="Case folder to write (default: INPUT if it is a case "
                                        "folder, else ./<input name>-plan)."),
+    units: str = typer.Option("auto", "--units", help=UNITS_HELP),
+    up: str = typer.Option("+y", "--up", help=UP_HELP),
     as_json: bool = JSON,
 ):
     """Plan changes on a patient's scan: ingest, fit, each change and their combination, measures and
     an interactive report (report.html)."""
     clock = Clock()
     try:
-        options = PlanOptions.parse(deform, side, method)
+        options = PlanOptions.parse(deform, side, method, units, up)
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
     check_method(method)

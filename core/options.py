@@ -56,10 +56,7 @@ class IngestOptions:
             raise OptionError("voxel_mm", f"the voxel size must be 0.5..20 mm, got {self.voxel_mm}")
         if self.frames is not None and self.frames < 1:
             raise OptionError("frames", f"the number of frames must be at least 1, got {self.frames}")
-        if self.units not in UNITS:
-            raise OptionError("units", f"the units are auto, mm or m, not '{self.units}'")
-        if self.up not in UP_AXES:
-            raise OptionError("up", f"the up axis is one of {' '.join(UP_AXES)}, not '{self.up}'")
+        _check_scan_file(self.units, self.up)
         roi = _finite(self.roi_camera_mm, 6, "roi_camera_mm", "the region of interest")
         if roi is not None and not all(a < b for a, b in zip(roi[:3], roi[3:])):
             raise OptionError("roi_camera_mm", "the region of interest needs X0<X1, Y0<Y1, Z0<Z1")
@@ -97,16 +94,27 @@ PLAN_DEGREES = (1.0, 8.0)
 DEFAULT_PLAN = (("ptosis", 3.0), ("turn", 3.0), ("top-shape", 3.0))
 
 
+def _check_scan_file(units: str, up: str) -> None:
+    """OptionError unless `units` and `up` say how to read a scan file (UNITS, UP_AXES)."""
+    if units not in UNITS:
+        raise OptionError("units", f"the units are auto, mm or m, not '{units}'")
+    if up not in UP_AXES:
+        raise OptionError("up", f"the up axis is one of {' '.join(UP_AXES)}, not '{up}'")
+
+
 @dataclass(frozen=True)
 class PlanOptions:
     """What `plan` plans: (kind, degree) changes, each side's, and how degrees become parameters.
 
     `method` is exact (the inverse solver), learnt (the shipped regressions) or the path of a
-    `breastplan.model/1` file of one condition."""
+    `breastplan.model/1` file of one condition; `units` and `up` say how to read a scan file, as
+    for `IngestOptions`."""
 
     changes: tuple[tuple[str, float], ...] = DEFAULT_PLAN
     sides: tuple[str, ...] = SIDES
     method: str = "exact"
+    units: str = "auto"
+    up: str = "+y"
 
     def __post_init__(self):
         changes = tuple((str(k), float(d)) for k, d in self.changes)
@@ -124,12 +132,14 @@ class PlanOptions:
         sides = tuple(self.sides)
         if not sides or any(s not in SIDES for s in sides) or len(set(sides)) != len(sides):
             raise OptionError("sides", f"the sides are left, right or both, not {'/'.join(sides) or 'none'}")
+        _check_scan_file(self.units, self.up)
         object.__setattr__(self, "changes", changes)
         object.__setattr__(self, "sides", sides)
 
     @classmethod
-    def parse(cls, deform: list[str], side: str = "both", method: str = "exact") -> "PlanOptions":
-        """From the command line's KIND:DEGREE items and side (left, right or both)."""
+    def parse(cls, deform: list[str], side: str = "both", method: str = "exact", units: str = "auto",
+              up: str = "+y") -> "PlanOptions":
+        """From the command line's KIND:DEGREE items, side (left, right or both) and the rest as given."""
         changes = []
         for item in deform:
             kind, sep, degree = item.partition(":")
@@ -141,10 +151,16 @@ class PlanOptions:
                 raise OptionError("changes", f"'{item}' is not KIND:DEGREE (e.g. ptosis:3)") from None
         if side not in (*SIDES, "both"):
             raise OptionError("sides", f"'{side}' is not a side; choose left, right or both")
-        return cls(tuple(changes) or DEFAULT_PLAN, SIDES if side == "both" else (side,), method)
+        return cls(tuple(changes) or DEFAULT_PLAN, SIDES if side == "both" else (side,), method, units, up)
 
     def as_dict(self) -> dict:
-        return {"changes": [list(c) for c in self.changes], "sides": list(self.sides), "method": self.method}
+        return {"changes": [list(c) for c in self.changes], "sides": list(self.sides), "method": self.method,
+                "units": self.units, "up": self.up}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "PlanOptions":
+        """The options `as_dict` gave."""
+        return cls(tuple(map(tuple, d["changes"])), tuple(d["sides"]), d["method"], d["units"], d["up"])
 
 
 EXECUTORS = ("local", "dask")

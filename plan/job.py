@@ -141,7 +141,7 @@ def _sides(source: Path, folder: Path, options: PlanOptions, clock: Clock, progr
             scans[side], reused[side] = case.load_scan(), ["ingest"]
     else:
         cases = {side: Case(folder / side) for side in options.sides}
-        scans, reused = _ingest(source, cases, clock, progress)
+        scans, reused = _ingest(source, cases, options, clock, progress)
     sides = {}
     for side, case in cases.items():
         fit, fit_reused = _fit(case, scans[side], clock, progress, side)
@@ -213,11 +213,11 @@ def _check_schema(folder: Path) -> None:
                                     f"{PLAN_SCHEMA}); plan the patient's scan again into a new folder")
 
 
-def _ingest(source: Path, cases: dict[str, Case], clock: Clock, progress: Progress):
+def _ingest(source: Path, cases: dict[str, Case], options: PlanOptions, clock: Clock, progress: Progress):
     """Each side's scan: reused when the case holds one made from this input with the same options."""
     from breastplan.ingest.scan import ingest_sides
 
-    wanted = {side: IngestOptions(side) for side in cases}
+    wanted = {side: IngestOptions(side, units=options.units, up=options.up) for side in cases}
     scans, reused = {}, {}
     stale = []
     for side, case in cases.items():

@@ -19,7 +19,8 @@ from clitools import assert_bad_input, run
 from breastplan import read_ply, transform_points
 from breastplan.case import Case
 from breastplan.deform.global_deformations import Deformation
-from breastplan.ingest.realistic import write_scan_file
+from breastplan.ingest.makehuman import BodyOptions
+from breastplan.ingest.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
 from breastplan.plan.job import sample_recording
 from breastplan.plan.surface import BAND, PlannedChange, smoothstep
 from breastplan import Primitive
@@ -184,6 +185,10 @@ def test_plan_again_reuses_ingest_and_fit(planned, cli, tmp_path):
         before, after = record["measures"]["before"][side], record["measures"]["after"][side]
         assert after["volume_cc"] == pytest.approx(before["volume_cc"], abs=0.02)
         assert after["width_mm"] == pytest.approx(before["width_mm"], abs=0.02)
+    # the earlier plan's changes, which this plan.json does not name, are gone with it
+    left = {p.relative_to(case).as_posix() for p in case.rglob("plan/*")}
+    assert left == {f"{s}/plan/ptosis-5{x}" for s in ("left", "right") for x in (".ply", "-scan.ply", ".npz")} | {
+        "plan/ptosis-5-torso.ply"}
 
 
 def test_plan_of_one_sides_case_from_ingest(cli, tmp_path):
@@ -255,6 +260,8 @@ def test_a_planned_change_is_continuous_across_the_rim_and_the_band(angle, z):
     (["--deform", "ptosis:3", "--deform", "ptosis:4"], "once"),
     (["--side", "middle"], "not a side"),
     (["--method", "guess"], "not a method"),
+    (["--up", "z"], "up axis"),
+    (["--units", "cm"], "units"),
 ])
 def test_plan_usage_errors_exit_2_before_any_work(cli, tmp_path, args, message):
     res = run(cli, "plan", "--out", tmp_path / "case", *args)
@@ -268,6 +275,22 @@ def test_plan_of_a_corrupt_recording_leaves_no_case(cli, tmp_path):
     res = run(cli, "plan", bad, "--out", tmp_path / "out-case")
     assert_bad_input(res, bad, tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scan.mcap"]
+
+
+def test_plan_reads_a_scan_file_with_its_own_units_and_up_axis(cli, tmp_path):
+    """A realistic body written in metres with +z up: planned with --units m --up +z, each side's nipple
+    lies where the body's truth puts it (the file's frame, in mm)."""
+    scene = make_body_scene(BodyOptions(), CameraOptions(resolution="640x400", wall_mm=None))
+    scan = tmp_path / "body.ply"
+    write_scan_file(scan, scene, units="m", up="+z")
+    res = run(cli, "plan", scan, "--units", "m", "--up", "+z", "--deform", "ptosis:2", "--out", tmp_path / "case")
+    assert res.returncode == 0, res.stderr[-2000:]
+    record = json.loads((tmp_path / "case" / "plan.json").read_text())
+    assert (record["options"]["units"], record["options"]["up"]) == ("m", "+z")
+    file_mm = file_from_body("+z", "mm")
+    for side in ("left", "right"):
+        truth = transform_points(file_mm, scene.body.nipples[side][None])[0]
+        assert np.linalg.norm(np.array(record["sides"][side]["nipple_input_mm"]) - truth) <= 8.0
 
 
 def test_plan_of_a_patients_back_says_no_breast_and_leaves_no_case(cli, tmp_path):
