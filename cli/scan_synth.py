@@ -6,6 +6,7 @@ ingest/realistic.py, which can also write what the camera sees as a scan file.
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import List, Optional
 
@@ -15,13 +16,15 @@ from breastplan.clock import Clock
 from breastplan.options import UP_AXES
 
 from .app import JSON, command, parse_pairs
-from .output import report, usage_error
+from .output import report, usage_error, writable
 
 BODIES = ("chen", "makehuman")
 FLAGS = {"cup": "--cup", "firmness": "--firmness", "weight": "--weight", "muscle": "--muscle",
          "modifiers": "--modifier", "pose": "--pose", "distance_mm": "--distance", "pitch_deg": "--pitch",
          "yaw_deg": "--yaw", "resolution": "--resolution", "noise_mm": "--noise", "wall_mm": "--wall"}
 """Field of makehuman.BodyOptions / realistic.CameraOptions → the option that sets it."""
+SUFFIXES = {"--out": (".mcap",), "--truth": (".npz",)}
+"""How the names of the outputs end, by option (--scan-file: realistic.SCAN_SUFFIXES)."""
 
 
 @command("scan-synth")
@@ -90,6 +93,7 @@ def scan_synth(
         raise usage_error(f"{given[0]} applies to --body makehuman only", given[0])
     if out is None:
         raise usage_error("--body chen needs --out, the recording to write", "--out")
+    outputs = _outputs({"--out": out, "--truth": truth})
     if not (distance is None or 400.0 <= distance <= 1200.0):
         raise usage_error(f"--distance must be 400..1200 mm, got {distance}", "--distance")
     if not (0.0 <= noise <= 10.0 and -30.0 <= tilt <= 30.0):
@@ -98,6 +102,7 @@ def scan_synth(
     import numpy as np
 
     from breastplan import PARAM_NAMES
+    from breastplan.atomic import atomic_set
     from breastplan.ingest import synthetic
     from breastplan.ingest.recording import write_recording
 
@@ -106,9 +111,11 @@ def scan_synth(
         scene = synthetic.make_scene(seed, tilt, distance, noise, overrides)
     except ValueError as exc:
         raise usage_error(str(exc), "--side-params") from None
+    _check_writable(outputs)
     depth = synthetic.depth_frames(scene, frames, seed)
-    write_recording(out, depth, scene.K)
-    synthetic.save_truth(truth, scene, frames)
+    with atomic_set() as stage:                         # the recording and its truth, all or nothing
+        write_recording(stage(out), depth, scene.K)
+        synthetic.save_truth(stage(truth), scene, frames)
     report({"recording": str(out), "truth": str(truth), "frames": frames, "size": [synthetic.WIDTH, synthetic.HEIGHT],
             "distance_mm": round(scene.meta["distance_mm"], 1), "tilt_deg": tilt,
             "valid_pixels": round(float(np.mean(depth > 0)), 4), "megabytes": round(out.stat().st_size / 1e6, 2),
@@ -135,9 +142,7 @@ def _scan_makehuman(clock: Clock, as_json: bool, *, out, truth, frames, seed, pi
     from breastplan.ingest import realistic          # light: it imports open3d only to render
     from breastplan.ingest.makehuman import MODIFIERS, BodyOptions
 
-    if scan_file is not None and scan_file.suffix.lower() not in realistic.SCAN_SUFFIXES:
-        raise usage_error(f"--scan-file must end in {' or '.join(realistic.SCAN_SUFFIXES)}, not "
-                          f"'{scan_file.suffix}'", "--scan-file")
+    outputs = _outputs({"--out": out, "--truth": truth, "--scan-file": scan_file}, realistic.SCAN_SUFFIXES)
     if units is not None and units not in realistic.SCAN_UNITS:
         raise usage_error(f"--units must be {' or '.join(realistic.SCAN_UNITS)}, not '{units}'", "--units")
     unknown = sorted(set(modifiers) - set(MODIFIERS))
@@ -150,35 +155,83 @@ def _scan_makehuman(clock: Clock, as_json: bool, *, out, truth, frames, seed, pi
         raise usage_error(str(exc), FLAGS[exc.option]) from None
 
     camera_values = {"distance_mm": distance, "pitch_deg": pitch, "yaw_deg": yaw, "resolution": resolution,
-                     "noise_mm": noise}
+                     "noise_mm": noise, "wall_mm": wall}
     try:
         camera = realistic.CameraOptions(**{k: v for k, v in camera_values.items() if v is not None},
-                                         **({"wall_mm": None} if no_wall else {} if wall is None else {"wall_mm": wall}))
+                                         **({"wall_mm": None} if no_wall else {}))
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
 
+    _check_writable(outputs)
+
     import numpy as np
 
+    from breastplan.atomic import atomic_set
     from breastplan.ingest.recording import write_recording
 
     scene = realistic.make_body_scene(body, camera)
     result = {"body": "makehuman"}
-    if out is not None:
-        depth = scene.frames(frames, seed)
-        write_recording(out, depth, camera.K)
-        result.update(recording=str(out), frames=frames, valid_pixels=round(float(np.mean(depth > 0)), 4),
-                      megabytes=round(out.stat().st_size / 1e6, 2))
-    if scan_file is not None:
-        counts = realistic.write_scan_file(scan_file, scene, units or "mm", up or "+y")
-        result.update(scan_file=str(scan_file), scan_points=counts["points"], scan_faces=counts["faces"],
-                      units=units or "mm", up=up or "+y")
-    realistic.save_body_truth(truth, scene, frames if out is not None else 0)
+    with atomic_set() as stage:                         # recording, scan file and truth, all or nothing
+        if out is not None:
+            depth = scene.frames(frames, seed)
+            staged = write_recording(stage(out), depth, camera.K)
+            result.update(recording=str(out), frames=frames, valid_pixels=round(float(np.mean(depth > 0)), 4),
+                          megabytes=round(staged.stat().st_size / 1e6, 2))
+        if scan_file is not None:
+            counts = _write_scan_file(stage(scan_file), scan_file, scene, units or "mm", up or "+y")
+            result.update(scan_file=str(scan_file), scan_points=counts["points"], scan_faces=counts["faces"],
+                          units=units or "mm", up=up or "+y")
+        realistic.save_body_truth(stage(truth), scene, frames if out is not None else 0)
     volumes = scene.body.half_volumes_cc()
     result.update(truth=str(truth), size=list(camera.size), distance_mm=camera.distance_mm, pitch_deg=camera.pitch_deg,
                   yaw_deg=camera.yaw_deg, wall_mm=camera.wall_mm, pose=body.pose,
                   nipples_camera_mm={s: p.round(1) for s, p in scene.nipples_camera().items()},
                   half_volumes_cc={s: round(v, 1) for s, v in volumes.items()}, seconds=clock.seconds)
     report(result, as_json, f"realistic synthetic scan → {out or scan_file}")
+
+
+def _outputs(given: dict[str, Optional[Path]], scan_suffixes: tuple[str, ...] = ()) -> dict[str, Path]:
+    """The output files given, by option; a usage error if one's name ends wrongly or two name the same file."""
+    outputs = {option: Path(path) for option, path in given.items() if path is not None}
+    seen: dict[str, str] = {}
+    for option, path in outputs.items():
+        other = seen.setdefault(os.path.normcase(os.path.realpath(path)), option)
+        if other != option:
+            raise usage_error(f"{other} and {option} both name {path}; give each output its own file",
+                              f"{other}/{option}")
+    suffixes = dict(SUFFIXES, **{"--scan-file": scan_suffixes})
+    for option, path in outputs.items():
+        if path.suffix.lower() not in suffixes[option]:
+            raise usage_error(f"{option} must end in {' or '.join(suffixes[option])}: '{path}' does not", option)
+    return outputs
+
+
+def _check_writable(outputs: dict[str, Path]) -> None:
+    """BadInputError naming the first output that cannot be written (exit 3), before any work."""
+    from breastplan import BadInputError
+
+    for option, path in outputs.items():
+        if os.path.isdir(path):
+            raise BadInputError(path, f"is a folder; {option} needs a file name")
+        writable(path)
+
+
+def _write_scan_file(staged: Path, target: Path, scene, units: str, up: str) -> dict:
+    """Write `target`'s scan file into its staged file `staged`; the counts written. write_scan_file takes the
+    format from the name, so it writes under `target`'s name in a temporary folder, copied into `staged`."""
+    import shutil
+    import tempfile
+
+    from breastplan.ingest import realistic
+
+    with tempfile.TemporaryDirectory(prefix="breastplan-scan-") as folder:
+        written = Path(folder) / target.name
+        try:
+            counts = realistic.write_scan_file(written, scene, units, up)
+        except OSError as exc:                          # name the user's file, not the temporary one
+            raise OSError(exc.errno, exc.strerror, str(target)) from None
+        shutil.copyfile(written, staged)
+    return counts
 
 
 def _side_overrides(items: List[str], names: set[str]) -> dict[str, dict[str, float]]:

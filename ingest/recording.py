@@ -8,6 +8,7 @@ through `dai.node.ReplayMessage`, unpaced (as fast as the host can take the fram
 from __future__ import annotations
 
 import datetime
+import errno
 import os
 import time
 from dataclasses import dataclass
@@ -16,15 +17,15 @@ from pathlib import Path
 import numpy as np
 
 from breastplan import BadInputError
+from breastplan.atomic import atomic_set
 
 from .mcap_check import check_recording
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 END_OF_RECORDING = 2**31 - 1
-"""Sequence number of the end marker (a copy of the last frame) that readers skip: the
-recorder writes a message only after taking the next one, so the marker flushes the last
-real frame."""
-SETTLE_S = 0.05
+"""Sequence number of the end marker (a copy of the last frame) that readers skip: once the
+recorder has taken it from its input, every real frame before it is written."""
+DRAIN_POLL_S = 0.002
 UNPACED_FPS = 1e6
 """Replay rate asked of ReplayMessage: far above any camera's, so replay is not paced."""
 
@@ -65,31 +66,52 @@ def write_recording(path: str | Path, depth, K: np.ndarray, fps: float = 30.0) -
 
 
 def record_messages(path: str | Path, messages) -> Path:
-    """Record depthai messages through RecordMessage into an MCAP file, atomically.
+    """Record depthai messages through RecordMessage into an MCAP file, atomically; OSError naming
+    `path` unless the file holds every message.
 
-    The recorder writes a message only once it has taken the next, so the caller ends with
-    a marker message (readers skip it) to have every real message written.
+    Messages go straight into the recorder's blocking input, which writes each before taking the
+    next: once it has taken the last, all before it are written. The caller ends with a marker
+    message (readers skip it) so that the last real message is written before the pipeline stops.
     """
+    path, messages = Path(path), list(messages)
+    with atomic_set() as stage:
+        part = stage(path)
+        open(part, "wb").close()  # an unwritable path fails here, naming itself, not in depthai's thread
+        _record(part, messages)
+        _verify(part, len(messages))
+    return path
+
+
+def _record(part: Path, messages: list) -> None:
+    """Send `messages` to a RecordMessage node writing `part`; stop it once it has taken the last."""
     dai = depthai()
-    path = Path(path)
-    part = path.with_name(f".{path.stem}.part{path.suffix or '.mcap'}")
     pipeline = dai.Pipeline(False)
     rec = pipeline.create(dai.node.RecordMessage)
     rec.setRecordFile(str(part))
     rec.input.setBlocking(True)  # a non-blocking input drops messages sent faster than they are written
-    queue = rec.input.createInputQueue(maxSize=4, blocking=True)
+    rec.input.setMaxSize(4)
     pipeline.start()
     try:
         for message in messages:
-            queue.send(message)
-        while rec.input.has():  # the recorder drains asynchronously; stopping early loses messages
-            time.sleep(0.005)
-        time.sleep(SETTLE_S)
+            rec.input.send(message)  # not via createInputQueue: its forwarding node hides messages in flight
+        while rec.input.has():
+            time.sleep(DRAIN_POLL_S)
+    except dai.MessageQueue.QueueException:  # the recorder failed and its input was closed
+        raise OSError(errno.EIO, "depthai's recorder stopped before it had written every message", str(part)) from None
     finally:
         pipeline.stop()
         pipeline.wait()
-    os.replace(part, path)  # only a whole recording gets its name
-    return path
+
+
+def _verify(part: Path, expected: int) -> None:
+    """OSError naming `part` unless it is a whole MCAP recording of `expected` messages."""
+    try:
+        written = check_recording(part)
+    except BadInputError as exc:
+        raise OSError(errno.EIO, f"depthai's recorder wrote a file that {exc.problem}", str(part)) from None
+    if written != expected:
+        raise OSError(errno.EIO, f"depthai's recorder wrote {written} of the {expected} messages sent to it",
+                      str(part))
 
 
 def _img_frame(dai, depth: np.ndarray, K: np.ndarray, seq: int, seconds: float):
