@@ -30,10 +30,11 @@ def deform(
                                            "(instead of --param): ptosis, turn or top-shape."),
     condition: Optional[str] = typer.Option(None, "--condition", help="Condition of --degree, e.g. \"b0>b1\" "
                                             f"(defaults: {', '.join(DEFAULT_CONDITION.values())})."),
-    method: str = typer.Option("exact", "--method", help="How --degree finds the parameters: exact (the inverse "
-                               "solver) or learnt (the shipped regression models)."),
+    method: Optional[str] = typer.Option(None, "--method", help="How --degree finds the parameters: exact (the "
+                                         "inverse solver, the default) or learnt (the shipped regression models)."),
     model: Optional[Path] = typer.Option(None, "--model", help="A statistical model (train-statistical's .npz) that "
-                                         "deforms by --degree instead: it moves the points by its learnt FFD field."),
+                                         "deforms by --degree instead: it moves the points by its learnt FFD field; "
+                                         "it has no condition and no parameters."),
     primitive: Optional[str] = typer.Option(None, "--primitive", help="a1=..,a2=..,a3=..,a4=..,a5=..[,eps1=..,eps2=..] "
                                             "in model units (1 mu = 6 mm); needed by top-shape, flatten-side, turn-top "
                                             "when INPUT carries none; overrides the one it carries."),
@@ -57,10 +58,25 @@ def deform(
     unknown = sorted(set(params) - set(KIND_PARAMS[kind]))
     if unknown:
         raise usage_error(f"{kind} takes {', '.join(KIND_PARAMS[kind])}, not {', '.join(unknown)}", "--param")
-    if degree is not None and method not in METHODS:
-        raise usage_error(f"'{method}' is not a method; choose one of {', '.join(METHODS)}", "--method")
     if model is not None and degree is None:
         raise usage_error("--model deforms by degree: give --degree too", "--model")
+    for option, value in (("--condition", condition), ("--method", method)):
+        if value is not None and degree is None:
+            raise usage_error(f"{option} goes with --degree; --param gives the parameters themselves", option)
+        if value is not None and model is not None:
+            raise usage_error(f"give either {option} or --model: a statistical model has no condition and no "
+                              "method, it moves the points by the FFD field it learnt", option)
+    method = method or "exact"
+    if method not in METHODS:
+        raise usage_error(f"'{method}' is not a method; choose one of {', '.join(METHODS)}", "--method")
+    if degree is not None:
+        from breastplan.deform.by_degree import pick_condition
+
+        try:
+            pick_condition(kind, condition)
+        except ValueError as exc:
+            raise usage_error(str(exc), "--condition" if kind in DEFAULT_CONDITION else "--kind") from None
+    fields = None if model is None else _statistical_model(model, kind)
     geometry, carried, pose = _breast(input)
     problem = breast_units_problem(geometry.points)
     if problem:
@@ -82,9 +98,7 @@ def deform(
         from breastplan.learn.field_file import by_degree
 
         if model is not None:                                   # a statistical model works in the breast frame
-            from breastplan import require_file
-
-            method = str(require_file(model, "statistical model file"))
+            method = str(fields.path)
         try:
             if model is None:
                 result = deform_by_degree(local, kind, degree, condition=condition, method=method, primitive=prim)
@@ -108,12 +122,39 @@ def deform(
                                    f"any breast spans ({BREAST_EXTENT_MM[1]:g} mm)")
     after = transform_points(pose, moved)
     carry = [] if prim is None else [prim.comment(), pose_comment(pose)]
-    write_ply(out, after, faces=geometry.faces,
-              comments=[f"breastplan deform {kind} " + " ".join(f"{k}={v:g}" for k, v in params.items()), *carry])
+    how = " ".join([kind, *(f"{k}={v:g}" for k, v in params.items())])
+    if degree is not None:
+        how += (f" (degree {degree:g}, " + (f"{result.condition.name}, {method})" if model is None else
+                                            f"the FFD field of the statistical model {model.name})"))
+    write_ply(out, after, faces=geometry.faces, comments=[f"breastplan deform {how}", *carry])
     report({"output": str(out), "points": len(after), "kind": kind, **extra,
             "primitive": "given" if given else "carried by the input" if carried else None,
             "mean_displacement_mm": float(shift.mean()), "max_displacement_mm": float(shift.max()),
             "seconds": clock.seconds}, as_json, f"{kind} → {out}")
+
+
+def _statistical_model(path: Path, kind: str):
+    """The statistical model file `path` of `--model`, checked to make `kind`; BadInputError naming it
+    and saying what it is otherwise (a parametric model, another artefact, another type)."""
+    from breastplan import ArtefactError, require_file
+    from breastplan.learn.field_file import field_file, is_field_model
+    from breastplan.model_file import load_model
+
+    require_file(path, "statistical model file")
+    try:
+        loaded = load_model(path)
+    except ArtefactError as exc:
+        raise ArtefactError(path, f"{exc.problem}, and --model takes a statistical model "
+                                  "(train-statistical writes those)") from None
+    if not is_field_model(loaded):
+        what = f"of the condition '{loaded.meta['condition']}' " if loaded.meta.get("condition") else ""
+        raise ArtefactError(path, f"is a parametric model {what}(a position on the condition's line, for "
+                                  "`plan --method`), not the statistical model --model takes (an FFD field, "
+                                  "written by train-statistical)")
+    fields = field_file(loaded, path)
+    if kind not in fields.kinds:
+        raise ArtefactError(path, f"is a statistical model that models {', '.join(fields.kinds)}, not {kind} (--kind)")
+    return fields
 
 
 def _breast(input: Path):
@@ -124,15 +165,31 @@ def _breast(input: Path):
     from breastplan import Geometry, Primitive, read_ply
     from breastplan.case import Case, pose_from_comments
 
+    if input.is_dir() and not (require_folder(input, "case folder") / Case.FIT_NPZ).exists():
+        raise BadInputError(input, f"holds no {Case.FIT_NPZ}: deform takes a case folder once `breastplan fit` "
+                                   "has fitted it, a PLY file or a fit.npz")
     if input.is_dir() or input.name == Case.FIT_NPZ:
         fit = Case(require_folder(input if input.is_dir() else input.parent, "case folder")).load_fit()
         return Geometry(fit.vertices, fit.faces), fit.primitive, fit.pose
+    if input.suffix.lower() != ".ply" and not _starts_with(input, b"ply"):
+        raise BadInputError(input, f"is neither a PLY file nor a {Case.FIT_NPZ} or case folder holding a fit, "
+                                   "which deform takes")
     geometry = read_ply(input)
     try:
         carried, pose = Primitive.from_comments(geometry.comments), pose_from_comments(geometry.comments)
     except ValueError as exc:
         raise BadInputError(input, str(exc)) from None
     return geometry, carried, np.eye(4) if pose is None or carried is None else pose
+
+
+def _starts_with(path: Path, magic: bytes) -> bool:
+    """Whether `path` starts with `magic`; True when it is empty or cannot be read: the reader then says why."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(len(magic))
+    except OSError:
+        return True
+    return head in (magic, b"")
 
 
 def _parse_primitive(text: Optional[str]) -> Optional[Primitive]:

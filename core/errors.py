@@ -25,6 +25,11 @@ class ArtefactError(BadInputError):
     """An artefact file (PLY or NPZ) that is missing, corrupt or of the wrong schema."""
 
 
+def counted(n: int, noun: str, plural: str | None = None) -> str:
+    """A count and its noun for an error sentence: '1 vertex', '2 vertices', '12,034 points'."""
+    return f"{n:,} {noun if n == 1 else plural or noun + 's'}"
+
+
 def require_file(path: str | Path, kind: str, error: type[BadInputError] = BadInputError) -> Path:
     """`path` as a Path if it is an existing, non-empty regular file; else `error` saying why."""
     path = Path(path)

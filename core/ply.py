@@ -15,7 +15,7 @@ from typing import BinaryIO
 import numpy as np
 
 from .atomic import atomic_open
-from .errors import ArtefactError, require_file
+from .errors import ArtefactError, counted, require_file
 
 _TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
@@ -136,8 +136,8 @@ def _check_declared(path: Path, elements: list[_Element], fmt: str | None, body_
 
 
 def _truncated(path: Path, el: _Element) -> ArtefactError:
-    return ArtefactError(path, f"is truncated: its header declares {el.count} '{el.name}' "
-                               f"elements but the file ends before their data does")
+    return ArtefactError(path, f"is truncated: its header declares {counted(el.count, repr(el.name) + ' element')} "
+                               f"but the file ends before their data does")
 
 
 def _read_binary(path: Path, elements: list[_Element], fh: BinaryIO, order: str, size: int) -> dict:
@@ -156,8 +156,8 @@ def _read_binary(path: Path, elements: list[_Element], fh: BinaryIO, order: str,
         arrays[el.name] = np.frombuffer(fh.read(dtype.itemsize * el.count), dtype=dtype, count=el.count)
     extra = size - fh.tell()
     if extra > _TRAILING or fh.read(extra).strip():
-        raise ArtefactError(path, f"is not a valid PLY file: it holds {extra:,} bytes after the data its header "
-                                  f"declares (a wrong element count or property type?)")
+        raise ArtefactError(path, f"is not a valid PLY file: it holds {counted(extra, 'byte')} after the data its "
+                                  f"header declares (a wrong element count or property type?)")
     return arrays
 
 
@@ -177,7 +177,7 @@ def _face_dtype(path: Path, el: _Element, fh: BinaryIO, order: str, size: int) -
             k = int(np.frombuffer(fh.read(np.dtype(count_t).itemsize), order + count_t)[0])
             fh.seek(at - np.dtype(fields).itemsize)
         if k < 3:
-            raise ArtefactError(path, f"has a face with {k} vertices; faces need at least 3")
+            raise ArtefactError(path, f"has a face with {counted(k, 'vertex', 'vertices')}; faces need at least 3")
         if fh.tell() + el.count * (np.dtype(fields).itemsize + np.dtype(count_t).itemsize
                                    + k * np.dtype(t).itemsize) > size:
             raise _truncated(path, el)
@@ -255,7 +255,8 @@ def _read_ascii(path: Path, elements: list[_Element], numbers: _Numbers) -> dict
                 raise ArtefactError(path, f"has a PLY element '{el.name}' with list properties breastplan cannot read")
             first = numbers.peek() if el.count else 3.0          # the first face's vertex count
             if first is not None and first < 3:
-                raise ArtefactError(path, f"has a face with {first:g} vertices; faces need at least 3")
+                raise ArtefactError(path, f"has a face with {first:g} vert{'ex' if first == 1 else 'ices'}; "
+                                          "faces need at least 3")
             k = int(first) if first is not None and first <= _MAX_POLYGON else 3
             width = 1 + k
         else:
@@ -291,7 +292,7 @@ def _to_geometry(path: Path, elements: list[_Element], arrays: dict, comments: l
     points = np.column_stack([np.asarray(v[c], dtype=np.float64) for c in "xyz"])
     if not np.isfinite(points).all():
         bad = int((~np.isfinite(points).all(axis=1)).sum())
-        raise ArtefactError(path, f"has {bad} vertices with NaN or infinite coordinates")
+        raise ArtefactError(path, f"has {counted(bad, 'vertex', 'vertices')} with NaN or infinite coordinates")
     normals = None
     if {"nx", "ny", "nz"} <= set(names):
         normals = np.column_stack([np.asarray(v[c], dtype=np.float64) for c in ("nx", "ny", "nz")])

@@ -27,6 +27,8 @@ def mu3_to_cc(volume_mu3):
 
 BREAST_EXTENT_MM = (5.0, 1000.0)
 """A breast (or its fit) in millimetres spans more than 5 mm and less than a metre."""
+BODY_EXTENT_MM = 3000.0
+"""A whole body (or a scan of one, a wall behind included) in millimetres spans less than 3 m."""
 FAR_EXTENT_MM = 3.0e6
 """More than a body spans even in micrometres (3 m): a point lies far from the others."""
 
@@ -50,6 +52,10 @@ def breast_units_problem(points_mm) -> str | None:
     if size > FAR_EXTENT_MM:
         return (f"spans {size:.3g} units, more than any body in millimetres or micrometres "
                 f"(a point lies far from the others?)")
+    if size > BODY_EXTENT_MM:
+        return (f"spans {size:.4g} units, more than a breast or a whole body in millimetres "
+                f"(is it in micrometres?)")
     if size > BREAST_EXTENT_MM[1]:
-        return f"spans {size:.4g} units, too much for a breast in millimetres (is it in micrometres?)"
+        return (f"spans {size:.4g} mm, far too large for one breast: if it is a whole scan, "
+                f"`breastplan ingest` (or `breastplan plan`) cuts its breast out first")
     return None

@@ -19,6 +19,7 @@ from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.global_deformations import (REFERENCE_AXIS, TABLE_SIZE, TABULATED, Deformation,
                                                    apply_kind, beta, top_shape_table)
 from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
+from breastplan.errors import counted
 
 from .sampling import seeded_subset
 
@@ -546,7 +547,7 @@ def _checked(points_mm) -> np.ndarray:
     if not np.isfinite(p).all():
         raise BadInputError(None, "has NaN or infinite coordinates")
     if len(p) < 50:
-        raise BadInputError(None, f"has only {len(p)} points; a fit needs at least 50")
+        raise BadInputError(None, f"has only {counted(len(p), 'point')}; a fit needs at least 50")
     s = np.linalg.svd(p - p.mean(0), compute_uv=False)
     if s[2] <= 1e-6 * s[0]:                            # all three 0: the points are one point
         raise BadInputError(None, "has coplanar or collinear points: no surface to fit")

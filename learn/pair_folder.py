@@ -28,7 +28,7 @@ from breastplan.atomic import atomic_open, recover
 from breastplan.deform.by_degree import slug
 from breastplan.deform.conditions import CONDITIONS, find_condition
 from breastplan.deform.names import DD
-from breastplan.errors import require_file
+from breastplan.errors import counted, require_file
 from breastplan.units import breast_units_problem
 
 PAIRS_CSV = "pairs.csv"
@@ -104,7 +104,8 @@ def read_pairs(folder: str | Path) -> list[PairRow]:
     if not rows:
         raise BadInputError(table, "holds no pairs: only a header")
     if not any(r.split == "train" for r in rows):
-        raise BadInputError(table, f"holds no training pair: all {len(rows)} pairs are in the test split")
+        raise BadInputError(table, f"holds no training pair: {'all ' * (len(rows) > 1)}{counted(len(rows), 'pair')} "
+                                     f"{'is' if len(rows) == 1 else 'are'} in the test split")
     return rows
 
 
@@ -199,9 +200,9 @@ def breast_cloud(path: str | Path) -> np.ndarray:
         raise BadInputError(path, f"holds points of shape {points.shape}, not (N, 3)")
     finite = np.isfinite(points).all(axis=1)
     if not finite.all():
-        raise BadInputError(path, f"has {int((~finite).sum())} points with NaN or infinite coordinates")
+        raise BadInputError(path, f"has {counted(int((~finite).sum()), 'point')} with NaN or infinite coordinates")
     if len(points) < MIN_POINTS:
-        raise BadInputError(path, f"has {len(points)} points, fewer than the {MIN_POINTS} a breast needs")
+        raise BadInputError(path, f"has {counted(len(points), 'point')}, fewer than the {MIN_POINTS} a breast needs")
     problem = breast_units_problem(points)
     if problem is not None:
         raise BadInputError(path, problem)

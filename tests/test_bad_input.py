@@ -31,6 +31,7 @@ PCD_100M = ("VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDT
             "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 100000000\nDATA binary\n")
 DEFORM = ["deform", "--kind", "ptosis", "--param", "b0=1"]
 INGEST = ["ingest", "--side", "left"]
+WHOLE_SCAN = "far too large for one breast: if it is a whole scan, `breastplan ingest`"
 FIT = ["fit"]
 CASES = {  # name → (file name, builder(path) → path, command, extra options, words of the sentence)
     "ascii ply, a line of 4 numbers (deform)": ("four.ply", four_numbers_ply, DEFORM, [], "1 value more than its"),
@@ -41,6 +42,26 @@ CASES = {  # name → (file name, builder(path) → path, command, extra options
                                       "all its points at one place"),
     "breast in micrometres (fit)": ("um.ply", lambda p: write_ply(p, breast_mm() * 1000), FIT, [], "micrometres"),
     "breast in metres (deform)": ("m.ply", lambda p: write_ply(p, breast_mm() / 1000), DEFORM, [], "is it in metres"),
+    "whole body 1.9 m tall in mm (fit)": ("body.ply", lambda p: write_ply(p, breast_mm() * 16), FIT, [], WHOLE_SCAN),
+    "whole body 1.9 m tall in mm (deform)": ("body.ply", lambda p: write_ply(p, breast_mm() * 16), DEFORM, [],
+                                             WHOLE_SCAN),
+    "a body in micrometres (fit)": ("um.ply", lambda p: write_ply(p, breast_mm() * 16000), FIT, [],
+                                    "more than a breast or a whole body in millimetres (is it in micrometres?)"),
+    "one vertex with NaN (fit)": ("nan.ply", lambda p: write_ply(p, np.r_[breast_mm(), [[np.nan, 0, 0]]]), FIT, [],
+                                  "has 1 vertex with NaN or infinite coordinates"),
+    "two vertices with NaN (deform)": ("nan.ply", lambda p: write_ply(p, np.r_[breast_mm(), [[np.nan, 0, 0]] * 2]),
+                                       DEFORM, [], "has 2 vertices with NaN or infinite coordinates"),
+    "ascii ply, a face of 1 vertex (deform)": (
+        "face1.ply", lambda p: p.write_bytes(ply_header(3, "ascii").replace(
+            b"end_header", b"element face 1\nproperty list uchar int vertex_indices\nend_header")
+            + b"0 0 0\n1 0 0\n0 1 0\n1 0" + b" " * 8 + b"\n"), DEFORM, [],
+        "has a face with 1 vertex; faces need at least 3"),
+    "ascii ply of 1 vertex and no data (fit)": ("short1.ply", lambda p: p.write_bytes(ply_header(1, "ascii")), FIT, [],
+                                                "its header declares 1 'vertex' element but the file ends"),
+    "text file named .npz (deform)": ("text.npz", lambda p: p.write_text("not an archive\n"), DEFORM, [],
+                                      "is neither a PLY file nor a fit.npz or case folder holding a fit, which deform"),
+    "folder without a fit (deform)": ("case", lambda p: p.mkdir(), DEFORM, [],
+                                      "holds no fit.npz: deform takes a case folder once `breastplan fit` has fitted"),
     "one coordinate 1e30, --units mm (ingest)": ("far.ply", lambda p: write_ply(p, np.r_[breast_mm(), [[1e30, 0, 0]]]),
                                                  INGEST, ["--units", "mm"], "more than any body scan spans"),
     "one coordinate 1e30 (fit)": ("far.ply", lambda p: write_ply(p, np.r_[breast_mm(), [[1e30, 0, 0]]]), FIT, [],
@@ -172,4 +193,47 @@ def test_a_primitive_larger_than_any_breast_is_a_usage_error(cli, tmp_path):
     assert res.returncode == 2, res.stderr
     assert "--primitive" in res.stderr and "larger than any breast" in res.stderr
     assert "Traceback" not in res.stderr and "Warning" not in res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["breast.ply"]
+
+
+def test_deform_refuses_a_parametric_model_saying_what_it_is_and_what_model_takes(cli, tmp_path):
+    from breastplan.deform.by_degree import MODELS
+
+    write_ply(tmp_path / "breast.ply", breast_mm())
+    model = MODELS / "ptosis-b0-gt-b1.npz"
+    res = run(cli, "deform", tmp_path / "breast.ply", "--kind", "ptosis", "--degree", 3, "--model", model,
+              "--out", tmp_path / "out.ply")
+    assert_bad_input(res, model, tmp_path)
+    assert "is a parametric model of the condition 'ptosis b0>b1'" in res.stderr
+    assert "not the statistical model --model takes" in res.stderr
+
+
+def test_deform_refuses_an_npz_that_is_no_model_as_the_model(cli, tmp_path):
+    write_ply(tmp_path / "breast.ply", breast_mm())
+    np.savez(tmp_path / "arrays.npz", a=np.zeros(3))
+    res = run(cli, "deform", tmp_path / "breast.ply", "--kind", "ptosis", "--degree", 3, "--model",
+              tmp_path / "arrays.npz", "--out", tmp_path / "out.ply")
+    assert_bad_input(res, tmp_path / "arrays.npz", tmp_path)
+    assert "is not a breastplan artefact" in res.stderr and "--model takes a statistical model" in res.stderr
+
+
+PARAMETRIC = "deform/models/ptosis-b0-gt-b1.npz"
+
+
+@pytest.mark.parametrize("args,option", [
+    (["--kind", "ptosis", "--param", "b0=1", "--condition", "b0>b1"], "--condition"),
+    (["--kind", "ptosis", "--param", "b0=1", "--method", "learnt"], "--method"),
+    (["--kind", "ptosis", "--degree", "3", "--model", PARAMETRIC, "--condition", "ptosis b1>=b0"], "--condition"),
+    (["--kind", "ptosis", "--degree", "3", "--model", PARAMETRIC, "--method", "exact"], "--method"),
+    (["--kind", "ptosis", "--degree", "3", "--condition", "turn c0>c1"], "--condition"),
+    (["--kind", "flatten-side", "--degree", "3", "--condition", "b0>b1"], "--kind"),
+])
+def test_deform_options_that_do_not_apply_are_usage_errors_never_ignored(cli, tmp_path, args, option):
+    from breastplan.deform.by_degree import MODELS
+
+    write_ply(tmp_path / "breast.ply", breast_mm())
+    args = [str(MODELS.parent.parent / a) if a == PARAMETRIC else a for a in args]
+    res = run(cli, "deform", tmp_path / "breast.ply", *args, "--out", tmp_path / "out.ply")
+    assert res.returncode == 2, res.stderr
+    assert f"Invalid value for {option}" in res.stderr and "Traceback" not in res.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["breast.ply"]

@@ -122,6 +122,9 @@ def test_deform_by_degree_command(cli, db_s, tmp_path):
     assert info["condition"] == "turn c1>c0" and info["degree_reached"] == pytest.approx(5.5, abs=1e-6)
     expected = to_mm(apply_kind(db_s.points_mu(3), "turn", [info["params"]["c0"], info["params"]["c1"]]))
     np.testing.assert_allclose(read_ply(tmp_path / "t.ply").points, expected, atol=1e-4)
+    header = [c for c in read_ply(tmp_path / "t.ply").comments if c.startswith("breastplan deform")]
+    assert len(header) == 1 and header[0].startswith("breastplan deform turn c0=")
+    assert header[0].endswith(" (degree 5.5, turn c1>c0, exact)") and " c1=" in header[0]
     res = run(cli, "deform", src, "--kind", "ptosis", "--degree", 3, "--method", "learnt",
               "--out", tmp_path / "p.ply", "--json")
     assert res.returncode == 0, res.stderr

@@ -250,7 +250,9 @@ LINE2 = "a.ply,b.ply,ptosis,3,train,\n"
     (HEADER + LINE2 + "a.ply,b.ply,ptosis,3,,\xff\n", 3, "not UTF-8"),
     (HEADER, None, "no pairs"),
     ("\n \n", None, "no header"),
-    (HEADER + "a.ply,b.ply,ptosis,3,test,\n" + "b.ply,a.ply,turn,2,test,\n", None, "no training pair"),
+    (HEADER + "a.ply,b.ply,ptosis,3,test,\n" + "b.ply,a.ply,turn,2,test,\n", None,
+     "no training pair: all 2 pairs are in the test split"),
+    (HEADER + "a.ply,b.ply,ptosis,3,test,\n", None, "no training pair: 1 pair is in the test split"),
 ])
 def test_a_defective_table_is_bad_input_naming_pairs_csv_and_the_line(tmp_path, text, line, words):
     outside = tmp_path / "outside.ply"
@@ -300,6 +302,8 @@ def test_breast_cloud_returns_the_points_exactly(tmp_path):
 
 @pytest.mark.parametrize("make, words", [
     (lambda p: write_ply(p, hemisphere(99)), "99 points, fewer than the 100"),
+    (lambda p: write_ply(p, hemisphere(1)), "has 1 point, fewer than the 100"),
+    (lambda p: write_ply(p, hemisphere() * 15), "far too large for one breast: if it is a whole scan"),
     (lambda p: write_ply(p, hemisphere() / 1000.0), "metres"),
     (lambda p: write_ply(p, hemisphere() * 1000.0), "micrometres"),
     (lambda p: write_ply(p, np.where(np.arange(300)[:, None] == 7, np.nan, hemisphere())), "NaN"),

@@ -180,6 +180,21 @@ def test_a_model_of_another_type_or_a_parametric_file_is_refused(cli, trained, t
         load_field_model(next(MODELS.glob("*.npz")))
 
 
+def test_deform_with_a_model_names_the_model_and_degree_and_claims_no_parameters(cli, trained, tmp_path):
+    tmp, _ = trained
+    before = next((tmp / "pairs" / "before").glob("*.ply"))
+    res = run(cli, "deform", before, "--kind", "ptosis", "--degree", 3, "--model", tmp / "model.npz",
+              "--out", tmp_path / "out.ply", "--json")
+    assert res.returncode == 0, res.stderr
+    assert "breastplan deform ptosis (degree 3, the FFD field of the statistical model model.npz)" in \
+        read_ply(tmp_path / "out.ply").comments
+    assert not {"params", "t"} & set(json.loads(res.stdout))
+    res = run(cli, "deform", before, "--kind", "ptosis", "--degree", 3, "--model", tmp / "model.npz",
+              "--condition", "b1>=b0", "--out", tmp_path / "other.ply")
+    assert res.returncode == 2 and "--condition" in res.stderr
+    assert not (tmp_path / "other.ply").exists()
+
+
 def test_bad_model_files_and_pairs_folders_exit_3(cli, trained, tmp_path):
     tmp, _ = trained
     before = next((tmp / "pairs" / "before").glob("*.ply"))
