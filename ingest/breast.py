@@ -176,12 +176,14 @@ def _within(values: np.ndarray, bounds: tuple[float, float]) -> np.ndarray:
     return (values >= bounds[0]) & (values <= bounds[1])
 
 
-def choose_mound(mounds: list[Mound], nipple: np.ndarray | None) -> Mound:
-    """The mound under a given nipple, else the largest one (of those in a region of interest)."""
+def choose_mound(mounds: list[Mound], nipple: np.ndarray | None, given: tuple | None = None) -> Mound:
+    """The mound under a given nipple (viewing frame; `given`: as the user gave it, for the error),
+    else the largest one (of those in a region of interest)."""
     if nipple is not None:
         near = [m for m in mounds if np.linalg.norm(m.centre - nipple[:2]) <= m.radius]
         if not near:
-            raise BadInputError(None, f"no breast mound lies under the given nipple {np.round(nipple, 1).tolist()} mm")
+            where = "" if given is None else " " + ",".join(format(float(v), "g") for v in given) + " (camera mm)"
+            raise BadInputError(None, f"no breast mound lies under the given nipple{where}")
         return near[0]
     if not mounds:
         raise BadInputError(None, "no breast mound found in the region of interest")

@@ -215,7 +215,7 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
         wall = fit_chest_wall(coarse, 2)
     with clock("mounds (height basins) + breasts"):
         mounds = B.find_mounds(coarse, wall, trunk.midline_x, COARSE_MM)
-        mound = _breast_mound(mounds, trunk, side, nipple_view, in_roi)
+        mound = _breast_mound(mounds, trunk, options, nipple_view, in_roi)
         wall = B.chest_wall_under(coarse, mound, wall)
     with clock("crop + breast frame"):
         region = B.breast_region(torso, mound, wall, COARSE_MM)
@@ -275,13 +275,14 @@ def _roi_test(roi, to_camera: np.ndarray):
     return inside
 
 
-def _breast_mound(mounds: list, trunk, side: str, nipple_view, in_roi) -> B.Mound:
+def _breast_mound(mounds: list, trunk, options: IngestOptions, nipple_view, in_roi) -> B.Mound:
     """The requested breast's mound: the one under a given nipple, the largest in a region of
-    interest, else the breast of `side` (docs/isolation.md §4); BadInputError saying why if none."""
+    interest, else the breast of `options.side` (docs/isolation.md §4); BadInputError saying why if none."""
+    side = options.side
     if in_roi is not None:
         mounds = [m for m in mounds if in_roi(m.voxels).any()]
     if in_roi is not None or nipple_view is not None:
-        return B.choose_mound(mounds, nipple_view)
+        return B.choose_mound(mounds, nipple_view, options.nipple_camera_mm)
     breasts = B.find_breasts(mounds, trunk.midline_x, trunk.top_y)
     if side in breasts:
         return breasts[side]

@@ -92,6 +92,7 @@ def bad_inputs(recording, tmp_path_factory):
     far[9] = [1e30, 0.0, 0.0]
     write_ply(folder / "far.ply", far)
     cases["one coordinate 1e30 in mm"] = (folder / "far.ply", ["--units", "mm"])
+    cases["no mound under the given nipple"] = (rec, ["--nipple", "-900.25,12.5,640"])
     return folder, cases
 
 
@@ -101,7 +102,9 @@ SENTENCES = {
     "MCAP without depth frames": "without RAW16 depth frames", "all-zero depth": "are all zero",
     "frames change size": "change size", "fewer than 500 points after cropping": "fewer than 500",
     "no mound on the requested side": "no breast mound found on the right side",
-    "one coordinate 1e30 in mm": "more than any body scan spans"}
+    "one coordinate 1e30 in mm": "more than any body scan spans",
+    "no mound under the given nipple":              # echoed as typed, not in the pipeline's viewing frame
+        "no breast mound lies under the given nipple -900.25,12.5,640 (camera mm)"}
 
 
 @pytest.mark.parametrize("case", list(SENTENCES))
