@@ -1,0 +1,101 @@
+"""How much a breast's fitted volume moves when the same scan is shifted by a few millimetres.
+
+A shift of the input points changes nothing of the patient, but it moves the grids ingest works on
+(10 mm coarse voxels for the chest wall and the mounds, the downsampling voxels), so every threshold
+on them (mound height, skirt, crop) may fall on other voxels. This script measures that: per breast,
+the same fused depth image is ingested (`isolate`, automatic isolation) and fitted (`fit_scan`) with
+its points shifted by each of SHIFTS_MM (the viewing frame shifted with them, so the truth is the
+same), and the spread of the fitted volumes, (max − min) / mean, is reported; with the mean height
+of the chest wall found under the breast (at the unshifted nipple's foot, ±60 mm around it) against
+the unshifted one. Cases: 4 MakeHuman bodies of bench_realistic's pairs (cup 0.3 and 0.2, firmness 0
+of cup 0.7 and 0.9) in one view each, both sides; baseline: 2 Chen torsos in the same run.
+
+Nothing is asserted and there is no target; the last line is the JSON summary.
+
+Run:  .venv/bin/python benchmarks/bench_repeatability.py     (about 3 minutes)
+"""
+from __future__ import annotations
+
+import json
+import statistics
+
+import numpy as np
+from rich.console import Console
+from threadpoolctl import threadpool_limits
+
+from breastplan.clock import Clock
+from breastplan.fitting.breast_fit import fit_scan
+from breastplan.ingest import synthetic
+from breastplan.ingest.depth import depth_range, fuse, to_points
+from breastplan.ingest.pipeline import isolate
+from breastplan.ingest.realistic import make_body_scene
+from breastplan.options import SIDES, IngestOptions
+
+from bench_realistic import FRAMES, PAIRS, VIEWS, new_table
+
+SHIFTS_MM = ((0, 0, 0), (3, 0, 0), (0, 3, 0), (0, 0, 3), (5, 5, 0), (-4, 2, 6))
+CASES = ((0, 0, 1), (1, 0, 3), (2, 0, 4), (3, 0, 7))
+"""(pair index in bench_realistic.PAIRS, member, view)."""
+CHEN_SEEDS = (0, 1)
+GRID_MM = np.mgrid[-60:61:30, -60:61:30].reshape(2, -1).T
+
+
+def realistic_points(pair: int, member: int, view: int) -> tuple[str, np.ndarray]:
+    pose, camera = VIEWS[view]
+    p = PAIRS[pair]
+    scene = make_body_scene(p.body(member, pose), camera)
+    return f"{p.name}/{('lo', 'hi')[member]} v{view}", camera_points(scene.frames(FRAMES, view), scene.camera.K)
+
+
+def chen_points(seed: int) -> tuple[str, np.ndarray]:
+    scene = synthetic.make_scene(seed)
+    return f"chen s{seed}", camera_points(synthetic.depth_frames(scene, FRAMES, seed), scene.K)
+
+
+def camera_points(depth: np.ndarray, K: np.ndarray) -> np.ndarray:
+    image = fuse(depth)
+    return to_points(image, K, *depth_range(image))
+
+
+def shifted_fits(points: np.ndarray, side: str) -> dict:
+    """Volume (cc) and chest-wall offset (mm, mean over GRID_MM around the unshifted nipple) per shift."""
+    volumes, walls, nipple = [], [], None
+    for shift in np.array(SHIFTS_MM, float):
+        view_from_camera = np.eye(4)
+        view_from_camera[:3, 3] = shift
+        ingested = isolate(points + shift, view_from_camera, IngestOptions(side=side), Clock(), viewer=shift)
+        with threadpool_limits(1, "blas"):
+            volumes.append(fit_scan(ingested).volume_cc)
+        nipple = ingested.nipple_camera[:2] if nipple is None else nipple
+        walls.append(float(np.mean(ingested.chest_wall.z(nipple + GRID_MM + shift[:2]) - shift[2])))
+    return {"volumes_cc": volumes, "spread_pct": 100.0 * (max(volumes) - min(volumes)) / statistics.mean(volumes),
+            "wall_offsets_mm": [w - walls[0] for w in walls]}
+
+
+def main() -> None:
+    console = Console(width=160)
+    rows = []
+    for kind, (label, points) in [("realistic", realistic_points(*c)) for c in CASES] + \
+                                 [("chen", chen_points(s)) for s in CHEN_SEEDS]:
+        for side in SIDES:
+            rows.append({"kind": kind, "case": label, "side": side, **shifted_fits(points, side)})
+            console.log(f"{label} {side}: spread {rows[-1]['spread_pct']:.1f} %")
+    table = new_table("bench_repeatability — one scan shifted by a few mm: fitted volumes",
+                      ("case", "side", "volumes (cc) per shift", "spread", "wall offsets (mm)"),
+                      f"shifts (mm): {', '.join(str(s) for s in SHIFTS_MM)}; spread (max − min) / mean; wall "
+                      "offsets: the chest wall's mean depth around the nipple against the unshifted one.")
+    for r in rows:
+        table.add_row(r["case"], r["side"], " ".join(f"{v:.0f}" for v in r["volumes_cc"]), f"{r['spread_pct']:.1f} %",
+                      " ".join(f"{w:+.1f}" for w in r["wall_offsets_mm"]))
+    console.print(table)
+    real = [r["spread_pct"] for r in rows if r["kind"] == "realistic"]
+    chen = [r["spread_pct"] for r in rows if r["kind"] == "chen"]
+    print(json.dumps({"benchmark": "bench_repeatability", "figure": "volume_spread_under_shift_pct",
+                      "median": round(statistics.median(real), 2), "worst": round(max(real), 2), "target": None,
+                      "baseline_median": round(statistics.median(chen), 2), "baseline_worst": round(max(chen), 2),
+                      "breasts": len(real), "baseline_breasts": len(chen), "shifts_mm": SHIFTS_MM,
+                      "rows": [{k: (round(v, 2) if isinstance(v, float) else v) for k, v in r.items()} for r in rows]}))
+
+
+if __name__ == "__main__":
+    main()
