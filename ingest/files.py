@@ -130,7 +130,8 @@ def _check_file(path: Path) -> None:
     """Raise BadInputError unless path is a readable, non-empty file of a supported type."""
     if path.suffix.lower() not in SUPPORTED and path.is_file():
         kind = f"has the extension '{path.suffix}'" if path.suffix else "has no file extension"
-        raise BadInputError(path, f"{kind}; supported scan files are {', '.join(SUPPORTED)}")
+        raise BadInputError(path, f"{kind}; supported scan files are {', '.join(SUPPORTED)} (depthai recordings: "
+                                  f".mcap)")
     require_file(path, "scan file")
 
 
