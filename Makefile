@@ -74,6 +74,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_statistical.py
 	$(BIN)/python benchmarks/bench_realistic.py
 	$(BIN)/python benchmarks/bench_cup_ceiling.py
+	$(BIN)/python benchmarks/bench_repeatability.py
 	$(BIN)/python benchmarks/bench_refusal.py
 	$(BIN)/python benchmarks/bench_plan.py
 

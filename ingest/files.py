@@ -21,6 +21,7 @@ from typing import Iterator
 import numpy as np
 
 from breastplan import BadInputError, read_ply, require_file
+from breastplan.errors import counted
 from breastplan.case import CAMERA_FRAME
 from breastplan.ply import MAX_ELEMENTS as MAX_POINTS
 from breastplan.units import FAR_EXTENT_MM as FAR_EXTENT
@@ -215,10 +216,13 @@ def _read_ply(path: Path):
 
 def _read_mesh(path: Path):
     """OBJ/STL through open3d; polygon OBJs, whose non-triangles open3d drops, through pymeshlab."""
-    polygons = _check_obj(path) if path.suffix.lower() == ".obj" else _check_stl(path)   # STL: None
+    obj = path.suffix.lower() == ".obj"
+    polygons, n_vertices, n_faces = _check_obj(path) if obj else (_check_stl(path), 0, 0)
     with _open3d() as o3d:
         mesh = o3d.io.read_triangle_mesh(str(path))
     points, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.triangles, dtype=np.int64)
+    if obj and not polygons and len(faces) < n_faces:
+        _check_face_references(path, n_vertices)
     if polygons:
         points, faces = _read_polygon_obj(path)
     if len(faces) == 0:
@@ -297,9 +301,9 @@ def _text_chunks(path: Path) -> Iterator[bytes]:
         yield carry
 
 
-def _check_obj(path: Path) -> bool:
+def _check_obj(path: Path) -> tuple[bool, int, int]:
     """Refuse an OBJ that is not text or holds more vertices or faces than any body scan; whether it
-    has a face ('f' line) of 4 or more vertices."""
+    has a face ('f' line) of 4 or more vertices, and its numbers of vertices and faces."""
     vertices = faces = 0
     polygons = False
     for chunk in _text_chunks(path):
@@ -310,7 +314,22 @@ def _check_obj(path: Path) -> bool:
         for count, what in ((vertices, "vertices"), (faces, "faces")):
             if count > MAX_POINTS:
                 raise BadInputError(path, f"holds more than {MAX_POINTS:,} {what}, more than any body scan")
-    return polygons
+    return polygons, vertices, faces
+
+
+def _check_face_references(path: Path, vertices: int) -> None:
+    """Refuse an OBJ with a face referring to vertex 0 or beyond its `vertices` (read when a reader
+    dropped faces, to say why)."""
+    highest = 0
+    for chunk in _text_chunks(path):
+        lines = b"\n".join(re.findall(rb"(?m)^[ \t]*f([ \t][^\r\n]*)", b"\n" + chunk))
+        refs = np.array(re.findall(rb"[ \t](\d+)", lines)).astype(np.int64)   # each corner's vertex
+        if (refs == 0).any():
+            raise BadInputError(path, "has a face that refers to vertex 0 (OBJ counts vertices from 1)")
+        highest = max(highest, int(refs.max(initial=0)))
+    if highest > vertices:
+        raise BadInputError(path, f"has a face that refers to vertex {highest:,} of "
+                                  f"{counted(vertices, 'vertex', 'vertices')}")
 
 
 def _check_stl(path: Path) -> None:

@@ -200,7 +200,8 @@ def _bad_files(tmp_path):
     write_stl(d / "nan.stl", np.stack([tri, np.where([[True, False, False], [0] * 3, [0] * 3], np.nan, tri)]))
     write_stl(d / "flat.stl", np.stack([tri * [1, 0, 0], tri * [0, 1, 0]]))   # collinear: no area
     (d / "vertices.obj").write_text("v 0 0 0\nv 100 0 0\nv 0 100 0\n")
-    (d / "bad_index.obj").write_text("v 0 0 0\nv 100 0 0\nv 0 100 0\nf 1 2 9\n")
+    (d / "bad_index.obj").write_text("v 0 0 0\nv 100 0 0\nv 0 100 0\nf 1/1 2/2 9/3\n")
+    (d / "index_zero.obj").write_text("v 0 0 0\nv 100 0 0\nv 0 100 0\nf 0 1 2\n")
     write_pcd(d / "inf.pcd", np.array([[0, 0, 0], [100, 0, 0], [np.inf, 0, 0]]))
     write_pcd(d / "two.pcd", np.array([[0, 0, 0], [100, 0, 0]]))
     (d / "truncated.pcd").write_bytes(write_pcd(d / "whole.pcd", grid_points_mm()).read_bytes()[:-50])
@@ -228,7 +229,8 @@ def _bad_files(tmp_path):
         "nan stl": (d / "nan.stl", "has 1 point with NaN or infinite coordinates"),
         "flat stl": (d / "flat.stl", "triangles have no area"),
         "vertex-only obj": (d / "vertices.obj", "is not a valid OBJ file or holds no triangles"),
-        "bad index obj": (d / "bad_index.obj", "is not a valid OBJ file"),
+        "bad index obj": (d / "bad_index.obj", "has a face that refers to vertex 9 of 3 vertices"),
+        "index 0 obj": (d / "index_zero.obj", "refers to vertex 0 (OBJ counts vertices from 1)"),
         "inf pcd": (d / "inf.pcd", "NaN or infinite"),
         "two-point pcd": (d / "two.pcd", "has only 2 points; a scan needs at least 3"),
         "truncated pcd": (d / "truncated.pcd", "is not a valid PCD file"),
