@@ -178,7 +178,7 @@ def _scan_makehuman(clock: Clock, as_json: bool, *, out, truth, frames, seed, pi
             result.update(recording=str(out), frames=frames, valid_pixels=round(float(np.mean(depth > 0)), 4),
                           megabytes=round(staged.stat().st_size / 1e6, 2))
         if scan_file is not None:
-            counts = _write_scan_file(stage(scan_file), scan_file, scene, units or "mm", up or "+y")
+            counts = realistic.write_scan_file(stage(scan_file), scene, units or "mm", up or "+y", scan_file.suffix)
             result.update(scan_file=str(scan_file), scan_points=counts["points"], scan_faces=counts["faces"],
                           units=units or "mm", up=up or "+y")
         realistic.save_body_truth(stage(truth), scene, frames if out is not None else 0)
@@ -214,24 +214,6 @@ def _check_writable(outputs: dict[str, Path]) -> None:
         if os.path.isdir(path):
             raise BadInputError(path, f"is a folder; {option} needs a file name")
         writable(path)
-
-
-def _write_scan_file(staged: Path, target: Path, scene, units: str, up: str) -> dict:
-    """Write `target`'s scan file into its staged file `staged`; the counts written. write_scan_file takes the
-    format from the name, so it writes under `target`'s name in a temporary folder, copied into `staged`."""
-    import shutil
-    import tempfile
-
-    from breastplan.ingest import realistic
-
-    with tempfile.TemporaryDirectory(prefix="breastplan-scan-") as folder:
-        written = Path(folder) / target.name
-        try:
-            counts = realistic.write_scan_file(written, scene, units, up)
-        except OSError as exc:                          # name the user's file, not the temporary one
-            raise OSError(exc.errno, exc.strerror, str(target)) from None
-        shutil.copyfile(written, staged)
-    return counts
 
 
 def _side_overrides(items: List[str], names: set[str]) -> dict[str, dict[str, float]]:

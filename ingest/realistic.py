@@ -208,20 +208,23 @@ def visible_faces(scene: BodyScene) -> np.ndarray:
     return np.flatnonzero(seen[F].all(1) & (cos_inc >= np.cos(np.radians(GRAZING_DEG))))
 
 
-def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: str = "+y") -> dict:
+def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: str = "+y",
+                    suffix: str | None = None) -> dict:
     """Write what the camera sees as a scan file, atomically: a `.ply` holds the noise-free depth
     pixels (body and wall) back-projected, an `.obj` the body's visible triangles (`visible_faces`).
+    The format is `path`'s suffix, or `suffix` when given (a staged file's name says none).
     Coordinates: the body frame turned by `file_from_body(up, units)`. Returns the counts written
     (points or vertices, faces)."""
     path = Path(path)
-    if path.suffix.lower() not in SCAN_SUFFIXES:
-        raise OptionError("path", f"a scan file ends in {' or '.join(SCAN_SUFFIXES)}, not '{path.suffix}'")
+    suffix = (suffix or path.suffix).lower()
+    if suffix not in SCAN_SUFFIXES:
+        raise OptionError("path", f"a scan file ends in {' or '.join(SCAN_SUFFIXES)}, not '{suffix}'")
     if units not in SCAN_UNITS:
         raise OptionError("units", f"the units of a scan file are {' or '.join(SCAN_UNITS)}, not '{units}'")
     if up not in UP_ROTATIONS:
         raise OptionError("up", f"the up axis is one of {' '.join(UP_AXES)}, not '{up}'")
     frame = f"units {units}; body frame turned so that its up lies on {up}: {file_axes(up)}"
-    if path.suffix.lower() == ".ply":
+    if suffix == ".ply":
         points, ids = visible_points(scene)
         to_file = file_from_body(up, units) @ np.linalg.inv(scene.camera_from_body)
         what = "body and wall" if (ids == 1).any() else "body"
