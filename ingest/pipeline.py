@@ -116,18 +116,16 @@ def viewing_frame(points: np.ndarray, up: str) -> tuple[np.ndarray, BodyInView]:
     in the file can make the depth its longest); of the two senses of an axis, the viewer's is the one
     from which the nearest body's trunk bulges towards it (a chest is convex across). The axis is then
     refined on that trunk alone, so that whatever else the file holds does not tilt the frame."""
-    skipped = False
+    along_up = None
     for axis in _principal_axes(points):
         try:
             facing = _facing(points, axis, up)
-        except BadInputError:           # the axis lies along `up`: the viewer cannot look along it
-            skipped = True
+        except BadInputError as exc:    # the axis lies along `up`: the viewer cannot look along it
+            along_up = exc
             continue
         if facing is not None:
             return _refined(points, *facing, up)
-    if skipped:
-        raise BadInputError(None, f"its up axis {up} is nearly its viewing direction; pass another --up")
-    raise BadInputError(None, "shows no trunk: nothing in view is as wide as a chest")
+    raise along_up or BadInputError(None, "shows no trunk: nothing in view is as wide as a chest")
 
 
 def _refined(points: np.ndarray, frame: np.ndarray, found: BodyInView, up: str) -> tuple[np.ndarray, BodyInView]:

@@ -69,7 +69,7 @@ def _points(p, name: str) -> np.ndarray:
     return p
 
 
-def _indirect(original, modelled, workers: int) -> tuple[float, float, float, float]:
+def _indirect(original, modelled, workers: int) -> tuple[float, ...]:
     """The values of `indirect_distances` (unbalanced trees: half the build time, exact)."""
     o = _points(original, "original")
     m = _points(modelled, "modelled")
