@@ -39,7 +39,7 @@ class Batch:
 
 
 def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress = lambda row, total: None) -> Batch:
-    """Plan every scan and recording under `folder` into `out` (docs/batch.md)."""
+    """Plan every scan and recording under `folder` into `out` (docs/cli.md, `batch`)."""
     folder, out = Path(folder), Path(out)
     require_folder(folder, "folder")
     out.mkdir(parents=True, exist_ok=True)
