@@ -57,8 +57,8 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
             run_dask(tasks, options.jobs, options.scheduler)
         for task, result in results:
             row = by_case[Path(task.case).relative_to(out.resolve()).as_posix()]
-            shown = str(folder / row.input)           # errors name the input as the user gave its folder
-            row.status, row.seconds, row.error = result["status"], result["seconds"], result["error"].replace(task.input, shown)
+            error = result["error"].replace(task.input, str(folder / row.input)).replace(task.case, str(out / row.case))
+            row.status, row.seconds, row.error = result["status"], result["seconds"], error   # paths as the user gave them
             manifest.write()
             progress(row, len(tasks))
     return Batch(manifest, tuple(removed))

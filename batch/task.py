@@ -49,6 +49,8 @@ def plan_case(task: Task) -> dict:
         status, error = "failed", f"{exc.filename or task.input}: {exc.strerror or exc}."
     except Exception as exc:  # a bug or a library's failure on this input: reported, the batch goes on
         status, error = "failed", f"{task.input}: unexpected error ({type(exc).__name__}: {exc})."
+    if status == "failed" and _planned_input(Path(task.case)) not in (None, task.sha256):
+        error += f" Its case folder {task.case} still holds the plan of this file's earlier content."
     return {"status": status, "seconds": round(time.perf_counter() - start, 3), "error": error}
 
 
@@ -88,6 +90,12 @@ def finished(case: Path, sha256: str, options: dict) -> bool:
                 and record["options"] == options)
     except (KeyError, TypeError, AttributeError):
         return False
+
+
+def _planned_input(case: Path) -> str | None:
+    """The SHA-256 of the input `case` holds a plan of; None if it holds none."""
+    planned = _record(case).get("input")
+    return planned.get("sha256") if isinstance(planned, dict) else None
 
 
 def _record(case: Path) -> dict:

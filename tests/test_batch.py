@@ -157,6 +157,23 @@ def test_other_options_replan_a_case_in_place(patients, cli, tmp_path):
     assert not _hidden(out)
 
 
+def test_a_scan_replaced_by_a_corrupt_file_fails_and_says_its_case_holds_the_earlier_plan(cli, tmp_path):
+    """The earlier plan is the clinic's record and is kept untouched, but the failed row must not let
+    it pass for a plan of the file now in the folder."""
+    folder, out = tmp_path / "one", tmp_path / "cases"
+    folder.mkdir()
+    shutil.copy(SAMPLE, folder / "anna.mcap")
+    assert run(cli, "batch", folder, "--out", out).returncode == 0
+    before = (out / "anna" / "plan.json").read_bytes()
+    (folder / "anna.mcap").write_bytes(SAMPLE.read_bytes()[:200_000])
+    res = run(cli, "batch", folder, "--out", out)
+    assert res.returncode == 3, res.stderr[-2000:]
+    row = _manifest(out)["anna.mcap"]
+    assert row["status"] == "failed" and "is a truncated MCAP recording" in row["error"]
+    assert "still holds the plan of this file's earlier content" in row["error"] and str(out / "anna") in row["error"]
+    assert (out / "anna" / "plan.json").read_bytes() == before and not _hidden(out)
+
+
 def test_a_batch_where_every_input_fails_exits_3(cli, tmp_path):
     folder = tmp_path / "bad"
     folder.mkdir()
