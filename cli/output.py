@@ -24,10 +24,10 @@ def usage_error(message: str, param: str | None = None) -> typer.BadParameter:
     return typer.BadParameter(message, param_hint=param)
 
 
-def writable(path: Path, folder: bool = False) -> Path:
+def writable(path: Path, folder: bool = False, option: str = "--out") -> Path:
     """`path` if an output file (or `folder`) can be written there; else BadInputError naming it (exit 3),
-    raised before any work: a name longer than the file system holds, a file where a folder is needed,
-    a folder the user may not write in."""
+    raised before any work: a name longer than the file system holds, a file where a folder is needed
+    (or a folder where `option` needs a file), a folder the user may not write in."""
     from breastplan import BadInputError
 
     path = Path(path)
@@ -38,7 +38,7 @@ def writable(path: Path, folder: bool = False) -> Path:
         raise BadInputError(path, f"cannot be written: its name has {len(os.fsencode(long[0]))} bytes, more "
                                   f"than the {limit} a file name may have")
     if existing == path and path.is_dir() != folder:
-        raise BadInputError(path, "is a file, not a folder" if folder else "is a folder; --out needs a file name")
+        raise BadInputError(path, "is a file, not a folder" if folder else f"is a folder; {option} needs a file name")
     where = existing if existing != path else path if folder else path.parent    # the folder written in
     if not where.is_dir():
         raise BadInputError(path, f"cannot be written: {where} is a file, not a folder")

@@ -208,12 +208,8 @@ def _outputs(given: dict[str, Optional[Path]], scan_suffixes: tuple[str, ...] = 
 
 def _check_writable(outputs: dict[str, Path]) -> None:
     """BadInputError naming the first output that cannot be written (exit 3), before any work."""
-    from breastplan import BadInputError
-
     for option, path in outputs.items():
-        if os.path.isdir(path):
-            raise BadInputError(path, f"is a folder; {option} needs a file name")
-        writable(path)
+        writable(path, option=option)
 
 
 def _side_overrides(items: List[str], names: set[str]) -> dict[str, dict[str, float]]:

@@ -16,6 +16,7 @@ from breastplan import __version__, transform_points, write_ply
 from breastplan.atomic import atomic_set
 from breastplan.case import Case, Provenance, sha256
 from breastplan.fitting.ffd import STOP_RESIDUAL
+from breastplan.options import SIDES
 
 from .job import PLAN_SCHEMA, Plan, SidePlan, input_record
 from .measures import asymmetry, breast_measures, find_landmarks
@@ -63,7 +64,7 @@ def _remove_earlier_plans(folder: Path, record: dict) -> None:
     planned) once the new plan.json, which does not name them, is in place."""
     kept = {folder / f for f in record["files"]["torso"].values()}
     kept |= {folder / f for side in record["sides"].values() for c in side["changes"] for f in c["files"].values()}
-    for plans in [folder / Case.PLAN, *(folder / side / Case.PLAN for side in ("left", "right"))]:
+    for plans in [folder / Case.PLAN, *(folder / side / Case.PLAN for side in SIDES)]:
         for path in plans.glob("*") if plans.is_dir() else ():
             if path.is_file() and path.suffix in (".ply", ".npz") and path not in kept:
                 path.unlink()
