@@ -88,23 +88,23 @@ def scan_cloud(points, faces=None, normals=None, units: str = "auto", *, name: s
     normals = None if normals is None else as_rows(path, normals, 3, np.float64, "normals")
     _check_points(path, points)
     if faces is None and len(points) < MIN_CLOUD_POINTS:
-        raise BadInputError(path, f"has only {_count(len(points), 'point')}; a point cloud of a body needs at least "
+        raise BadInputError(path, f"has only {counted(len(points), 'point')}; a point cloud of a body needs at least "
                                   f"{MIN_CLOUD_POINTS}")
     if faces is not None and len(faces) and (faces.min() < 0 or faces.max() >= len(points)):
-        raise BadInputError(path, f"has faces that refer to missing vertices (it has {_count(len(points), 'point')})")
+        raise BadInputError(path, f"has faces that refer to missing vertices (it has {counted(len(points), 'point')})")
     if normals is not None and len(normals) != len(points):
-        raise BadInputError(path, f"has {len(normals)} normals for {_count(len(points), 'point')}")
+        raise BadInputError(path, f"has {len(normals)} normals for {counted(len(points), 'point')}")
     extent = extent_of(points)
     mm_per_unit, units_text = _mm_per_unit(path, extent, units)
     points = points * mm_per_unit
     if faces is not None:
         n_faces = len(faces)
         points, normals = _sample_surface(path, points, faces)
-        what = f"triangle mesh, {_count(n_faces, 'face')}, sampled to {_count(len(points), 'point')}"
+        what = f"triangle mesh, {counted(n_faces, 'face')}, sampled to {counted(len(points), 'point')}"
     else:
         normals = _unit_normals(path, normals)
         with_normals = " with normals" if normals is not None else ""
-        what = f"point cloud, {_count(len(points), 'point')}{with_normals}"
+        what = f"point cloud, {counted(len(points), 'point')}{with_normals}"
     hint = "camera-opencv" if any(CAMERA_FRAME in c for c in comments) else None
     return ScanCloud(points=_frozen(points), normals=None if normals is None else _frozen(normals),
                      frame_hint=hint, description=f"{path.name if path is not None else name}: {what}, {units_text}")
@@ -140,9 +140,9 @@ def _check_points(path: Path | None, points: np.ndarray) -> None:
     """Raise BadInputError for NaN/Inf coordinates or fewer than 3 points."""
     bad = int((~np.isfinite(points).all(axis=1)).sum())
     if bad:
-        raise BadInputError(path, f"has {_count(bad, 'point')} with NaN or infinite coordinates")
+        raise BadInputError(path, f"has {counted(bad, 'point')} with NaN or infinite coordinates")
     if len(points) < 3:
-        raise BadInputError(path, f"has only {_count(len(points), 'point')}; a scan needs at least 3")
+        raise BadInputError(path, f"has only {counted(len(points), 'point')}; a scan needs at least 3")
 
 
 def _mm_per_unit(path: Path | None, extent: float, units: str) -> tuple[float, str]:
@@ -199,11 +199,6 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     a = np.array(a, dtype=np.float64)
     a.flags.writeable = False
     return a
-
-
-def _count(n: int, noun: str) -> str:
-    """'1 point', '12 034 points'."""
-    return f"{n:,}".replace(",", " ") + f" {noun}" + "s" * (n != 1)
 
 
 # --- format readers: path → (points, faces or None, normals or None, comments), file units ---
