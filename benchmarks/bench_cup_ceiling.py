@@ -93,9 +93,9 @@ def case(pair, view: int, side: str) -> dict:
     on_lo = transform_points(hi["view_from_body"] @ np.linalg.inv(frame), wall.point(grid[::25]))
     with threadpool_limits(1, "blas"):
         hi_on_lo = fit_scan(replace(hi["ingested"], chest_wall=fit_chest_wall(on_lo, wall.degree)))
-    return {"pair": pair.name, "view": view, "side": side, "true_change_cc": true,
-            "fitted_pct": 100.0 * fitted / true,
-            "fitted_one_wall_pct": 100.0 * (hi_on_lo.volume_cc - lo["fit"].volume_cc) / true, "own_wall_pct": 100.0 * own / true, "one_wall_pct": 100.0 * one / true,
+    return {"pair": pair.name, "view": view, "side": side, "true_change_cc": true, "fitted_pct": 100.0 * fitted / true,
+            "fitted_one_wall_pct": 100.0 * (hi_on_lo.volume_cc - lo["fit"].volume_cc) / true,
+            "own_wall_pct": 100.0 * own / true, "one_wall_pct": 100.0 * one / true,
             "wall_lift_mm": float(np.nanmean((lo["wall"] - hi["wall"])[hi["crop"]]))}
 
 
