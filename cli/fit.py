@@ -34,6 +34,10 @@ def fit(
                                      "plain primitive."),
     max_iterations: int = typer.Option(1000, "--max-iterations", help="FFD iterations before stopping (thesis: "
                                        "1000); a fit that stops above the stopping rule is written and says so."),
+    wall_from: Optional[Path] = typer.Option(None, "--wall-from", help="An earlier case folder of the same patient "
+                                             "and side: the breast is measured down to that case's chest wall, "
+                                             "carried over by registering the two chests around the breast (a "
+                                             "follow-up scan: a change measured on one wall)."),
     as_json: bool = JSON,
 ):
     """Fit the breast primitive, its pose and an FFD lattice to a breast in the breast frame."""
@@ -48,6 +52,10 @@ def fit(
         raise usage_error(str(exc), {"lattice": "--lattice", "max_iterations": "--max-iterations"}[exc.option]) from None
 
     points, scan, source, folder = _breast_points(input)     # bad input is refused before the stage loads
+    if wall_from is not None and scan is None:
+        raise usage_error("--wall-from measures a case folder from `breastplan ingest` on an earlier case's chest "
+                          f"wall; {input} is a breast-frame PLY, whose chest is not known", "--wall-from")
+    earlier = None if wall_from is None else _earlier_scan(wall_from)
     writable(out or folder, folder=True)
 
     from threadpoolctl import threadpool_limits
@@ -56,9 +64,20 @@ def fit(
     from breastplan.fitting.breast_fit import fit_breast, fit_scan
     from breastplan.fitting.ffd import STOP_RESIDUAL
 
+    inputs, carried = {source.name: source}, {}
+    if earlier is not None:
+        from dataclasses import replace
+
+        from breastplan.ingest.follow_up import carried_wall
+
+        with about(wall_from):
+            wall, registration = carried_wall(earlier, scan)
+        scan = replace(scan, chest_wall=wall)
+        inputs[f"earlier {Case.SCAN_NPZ}"] = wall_from / Case.SCAN_NPZ
+        carried = {"wall_from": {"case": str(wall_from), **registration.as_dict()}}
     with about(source), threadpool_limits(1, "blas"):   # small dense solves: threads only add overhead
         result = fit_breast(points, options) if scan is None else fit_scan(scan, options)
-    fit = result.artefact(Provenance.of({source.name: source}, options.as_dict()))
+    fit = result.artefact(Provenance.of(inputs, {**options.as_dict(), **carried}))
     paths = Case(out or folder).save_fit(fit)
     if not fit.stopping_rule_met:
         how = ("stopped improving" if fit.converged else
@@ -81,8 +100,15 @@ def fit(
             "normalised_residual": round(fit.normalised_residual, 6), "stopping_rule": STOP_RESIDUAL,
             "stopping_rule_met": fit.stopping_rule_met, "converged": fit.converged, "at_bounds": at_bounds,
             "iterations": {"superquadric": fit.iterations[0], "ffd": fit.iterations[1]},
-            "params": {k: round(v, 5) for k, v in result.params().items()},
+            "params": {k: round(v, 5) for k, v in result.params().items()}, **carried,
             "seconds": clock.seconds}, as_json, f"fit → {paths[Case.FIT_PLY]}")
+
+
+def _earlier_scan(folder: Path) -> Scan:
+    """The scan of an earlier case folder (`--wall-from`)."""
+    from breastplan.case import Case
+
+    return Case(require_folder(folder, "case folder")).load_scan()
 
 
 def _breast_points(input: Path) -> tuple[np.ndarray, Scan | None, Path, Path]:

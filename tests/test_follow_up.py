@@ -1,0 +1,120 @@
+"""A follow-up scan measured down to an earlier scan's chest wall (ingest/follow_up.py, `fit --wall-from`).
+
+Truths the module does not compute: the true pose of each scene's camera relative to the body
+(`scene.camera_from_body`, which the registration must recover from the depth images alone), and
+the exact change of the half-body volume between two MakeHuman bodies differing only in cup.
+"""
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from breastplan import BadInputError, transform_points
+from breastplan.case import Provenance, Source
+from breastplan.fitting.breast_fit import fit_scan
+from breastplan.ingest import synthetic
+from breastplan.ingest.follow_up import carried_wall, chest_around_breast
+from breastplan.ingest.makehuman import BodyOptions
+from breastplan.ingest.pipeline import ingest_frames
+from breastplan.ingest.realistic import CameraOptions, make_body_scene
+from breastplan.ingest.recording import DepthFrames
+from breastplan.options import IngestOptions
+
+from clitools import assert_bad_input, run
+
+BODY = BodyOptions(firmness=0.5, weight=0.5, muscle=0.5)
+CUPS = (0.3, 0.8)
+CAMERAS = {"same": CameraOptions(650.0, 0.0, 0.0, "640x400", wall_mm=400.0),
+           "other": CameraOptions(850.0, 12.0, 8.0, "640x400", wall_mm=None)}
+FRAMES = 4
+
+
+def scene_and_scan(cup: float, camera: str, side: str = "left", view: int = 0):
+    scene = make_body_scene(replace(BODY, cup=cup), CAMERAS[camera])
+    frames = DepthFrames(scene.frames(FRAMES, view), scene.camera.K, "synthetic")
+    return scene, _scan(frames, side)
+
+
+def _scan(frames: DepthFrames, side: str):
+    from breastplan.ingest.scan import scan_record
+    options = IngestOptions(side=side)
+    return scan_record(ingest_frames(frames, options), Source("recording", "synthetic"), options, Provenance())
+
+
+@pytest.fixture(scope="module")
+def before():
+    return scene_and_scan(CUPS[0], "same")
+
+
+def test_the_registration_recovers_the_true_pose_of_a_follow_up_seen_from_another_camera(before):
+    scene_a, earlier = before
+    scene_b, later = scene_and_scan(CUPS[1], "other", view=1)
+    _, registration = carried_wall(earlier, later)
+    chest = chest_around_breast(later)
+    truth = scene_a.camera_from_body @ np.linalg.inv(scene_b.camera_from_body)     # later camera → earlier camera
+    error = np.linalg.norm(transform_points(registration.earlier_from_later, chest) - transform_points(truth, chest),
+                           axis=1)
+    assert error.max() < 3.0, error.max()
+
+
+def test_a_cup_change_measured_on_the_earlier_wall_is_within_a_tenth_of_the_true_change(before):
+    scene_a, earlier = before
+    scene_b, later = scene_and_scan(CUPS[1], "same")
+    wall, _ = carried_wall(earlier, later)
+    change = fit_scan(replace(later, chest_wall=wall)).volume_cc - fit_scan(earlier).volume_cc
+    true = scene_b.body.half_volumes_cc()["left"] - scene_a.body.half_volumes_cc()["left"]
+    assert abs(change - true) <= 0.10 * true, (change, true)
+
+
+def test_an_earlier_scan_of_the_other_side_is_refused(before):
+    _, earlier = before
+    _, later = scene_and_scan(CUPS[1], "same", side="right")
+    with pytest.raises(BadInputError, match="holds the left breast, and the follow-up the right one"):
+        carried_wall(earlier, later)
+
+
+def test_an_earlier_scan_of_another_chest_is_refused(before):
+    _, later = before
+    chen = synthetic.make_scene(0)
+    earlier = _scan(DepthFrames(synthetic.depth_frames(chen, FRAMES, 0), chen.K, "synthetic"), "left")
+    with pytest.raises(BadInputError, match="shows another chest around the breast than the follow-up"):
+        carried_wall(earlier, later)
+
+
+@pytest.fixture(scope="module")
+def cases(cli, tmp_path_factory):
+    """Case folders of the smaller and the larger breast (left), and of the larger one's right side."""
+    root = tmp_path_factory.mktemp("follow-up")
+    for cup in CUPS:
+        res = run(cli, "scan-synth", "--body", "makehuman", "--cup", cup, "--frames", FRAMES, "--resolution", "640x400",
+                  "--out", root / f"cup{cup}.mcap", "--truth", root / f"cup{cup}.npz")
+        assert res.returncode == 0, res.stderr
+    for cup, side in ((CUPS[0], "left"), (CUPS[1], "left"), (CUPS[1], "right")):
+        res = run(cli, "ingest", root / f"cup{cup}.mcap", "--side", side, "--out", root / f"{side}{cup}")
+        assert res.returncode == 0, res.stderr
+    return root
+
+
+def test_fit_wall_from_measures_the_follow_up_on_the_earlier_chest(cli, cases):
+    out = cases / "measured"
+    res = run(cli, "fit", cases / f"left{CUPS[1]}", "--wall-from", cases / f"left{CUPS[0]}", "--out", out, "--json")
+    assert res.returncode == 0, res.stderr
+    report = json.loads(res.stdout)
+    assert report["wall_from"]["case"] == str(cases / f"left{CUPS[0]}")
+    assert report["wall_from"]["rms_mm"] < 3.0
+    assert (out / "fit.npz").is_file()
+
+
+def test_fit_wall_from_an_earlier_case_of_the_other_side_is_bad_input(cli, cases):
+    out = cases / "out-other-side"
+    res = run(cli, "fit", cases / f"right{CUPS[1]}", "--wall-from", cases / f"left{CUPS[0]}", "--out", out)
+    assert_bad_input(res, cases / f"left{CUPS[0]}", cases)
+    assert "holds the left breast, and the follow-up the right one" in res.stderr
+
+
+def test_fit_wall_from_with_a_breast_frame_ply_is_a_usage_error(cli, cases, tmp_path):
+    res = run(cli, "fit", cases / f"left{CUPS[1]}" / "scan.ply", "--wall-from", cases / f"left{CUPS[0]}",
+              "--out", tmp_path / "out")
+    assert res.returncode == 2, res.stderr
+    assert "--wall-from" in res.stderr and not (tmp_path / "out").exists()
