@@ -18,8 +18,8 @@ ingested chest wall (`ChestWall.beneath`, along that frame's view axis) give:
 * wall lift: how much higher the larger breast's wall lies, mean over its crop, mm;
 * fitted: the fitted volume change (bench_realistic's figure 4), in % of the true change;
 * fitted, one wall: the same, the larger breast fitted down to the smaller one's wall (taken into
-  the larger body's viewing frame through the true body poses, refitted there as a height field of
-  the same degree): what the fit holds when the wall does not move;
+  the larger body's viewing frame through the true body poses by `ingest.follow_up.carry_wall`):
+  what the fit holds when the wall does not move;
 * follow-up: the same with the smaller breast's wall carried over as `fit --wall-from` carries it
   (`ingest.follow_up.carried_wall`: the two chests registered, no truth used), and the
   registration's error: the largest distance, over the larger body's chest around the breast,
@@ -46,8 +46,7 @@ from threadpoolctl import threadpool_limits
 from breastplan import transform_points
 from breastplan.case import Provenance, Source
 from breastplan.fitting.breast_fit import fit_scan
-from breastplan.ingest.chest_wall import fit_chest_wall
-from breastplan.ingest.follow_up import carried_wall, chest_around_breast
+from breastplan.ingest.follow_up import carried_wall, carry_wall, chest_around_breast
 from breastplan.ingest.pipeline import ingest_frames
 from breastplan.ingest.realistic import make_body_scene
 from breastplan.ingest.recording import DepthFrames
@@ -100,15 +99,14 @@ def case(pair, view: int, side: str) -> dict:
     own = held(hi["surface"], hi["wall"], hi["crop"]) - held(lo["surface"], lo["wall"], lo["crop"])
     one = held(hi["surface"], lo["wall"], hi["crop"]) - held(lo["surface"], lo["wall"], hi["crop"])
     fitted = hi["fit"].volume_cc - lo["fit"].volume_cc
-    wall = lo["ingested"].chest_wall                              # into the larger body's viewing frame
-    on_lo = transform_points(hi["view_from_body"] @ np.linalg.inv(frame), wall.point(grid[::25]))
+    on_lo = carry_wall(lo["ingested"].chest_wall, hi["view_from_body"] @ np.linalg.inv(frame), centre)
     follow_wall, registration = carried_wall(lo["scan"], hi["scan"])
     chest = chest_around_breast(hi["scan"])
     truth = lo["scene"].camera_from_body @ np.linalg.inv(hi["scene"].camera_from_body)   # hi's camera → lo's
     registration_error = np.linalg.norm(transform_points(registration.earlier_from_later, chest)
                                         - transform_points(truth, chest), axis=1).max()
     with threadpool_limits(1, "blas"):
-        hi_on_lo = fit_scan(replace(hi["ingested"], chest_wall=fit_chest_wall(on_lo, wall.degree)))
+        hi_on_lo = fit_scan(replace(hi["ingested"], chest_wall=on_lo))
         follow_up = fit_scan(replace(hi["ingested"], chest_wall=follow_wall))
     return {"pair": pair.name, "view": view, "side": side, "true_change_cc": true, "fitted_pct": 100.0 * fitted / true,
             "fitted_one_wall_pct": 100.0 * (hi_on_lo.volume_cc - lo["fit"].volume_cc) / true,

@@ -55,7 +55,7 @@ def fit(
     if wall_from is not None and scan is None:
         raise usage_error("--wall-from measures a case folder from `breastplan ingest` on an earlier case's chest "
                           f"wall; {input} is a breast-frame PLY, whose chest is not known", "--wall-from")
-    earlier = None if wall_from is None else _earlier_scan(wall_from)
+    earlier = None if wall_from is None else _case_scan(wall_from)
     writable(out or folder, folder=True)
 
     from threadpoolctl import threadpool_limits
@@ -104,8 +104,8 @@ def fit(
             "seconds": clock.seconds}, as_json, f"fit → {paths[Case.FIT_PLY]}")
 
 
-def _earlier_scan(folder: Path) -> Scan:
-    """The scan of an earlier case folder (`--wall-from`)."""
+def _case_scan(folder: Path) -> Scan:
+    """The scan of a case folder from `ingest` (INPUT, or the earlier case of `--wall-from`)."""
     from breastplan.case import Case
 
     return Case(require_folder(folder, "case folder")).load_scan()
@@ -119,8 +119,7 @@ def _breast_points(input: Path) -> tuple[np.ndarray, Scan | None, Path, Path]:
     from breastplan.units import breast_units_problem
 
     if input.is_dir():
-        require_folder(input, "case folder")
-        scan = Case(input).load_scan()
+        scan = _case_scan(input)
         points, source, folder = scan.points, input / Case.SCAN_PLY, input
     elif input.suffix.lower() == ".ply" or not input.exists():
         scan, points, source, folder = None, read_ply(input).points, input, input.parent

@@ -59,7 +59,7 @@ def chest_around_breast(scan) -> np.ndarray:
     viewing frame, and beyond CHEST_MM[0] of the other breast's nipple, taken as the mirror image
     of this one across the torso's middle at the nipple's height."""
     view = transform_points(scan.view_from_camera, scan.torso_camera)
-    nipple = transform_points(scan.view_from_camera, np.asarray(scan.nipple_camera_mm, float)[None])[0]
+    nipple = _nipple_view(scan)
     level = view[np.abs(view[:, 1] - nipple[1]) < LEVEL_MM, 0]
     other = np.array([np.sum(np.percentile(level, [2, 98])) - nipple[0], nipple[1]]) if len(level) else nipple[:2]
     r = np.linalg.norm(view[:, :2] - nipple[:2], axis=1)
@@ -102,14 +102,23 @@ def carried_wall(earlier, later) -> tuple[ChestWall, Registration]:
                                   f"{100 * registration.agreement:.0f} % of the chest both show lies within "
                                   f"{PASSES_MM[-1]:g} mm of it (at least {100 * MIN_AGREEMENT:.0f} % for the same "
                                   "patient)")
-    wall = earlier.chest_wall
-    nipple = transform_points(earlier.view_from_camera, np.asarray(earlier.nipple_camera_mm, float)[None])[0]
-    axis = np.linspace(-WALL_HALF_MM, WALL_HALF_MM, 33)
-    grid = np.stack(np.meshgrid(axis, axis), -1).reshape(-1, 2) + nipple[:2]
     later_from_earlier_view = (later.view_from_camera @ np.linalg.inv(registration.earlier_from_later)
                                @ np.linalg.inv(earlier.view_from_camera))
-    carried = transform_points(later_from_earlier_view, wall.point(grid))
-    return fit_chest_wall(carried, wall.degree), registration
+    return carry_wall(earlier.chest_wall, later_from_earlier_view, _nipple_view(earlier)[:2]), registration
+
+
+def carry_wall(wall: ChestWall, to_frame: np.ndarray, around_xy: np.ndarray) -> ChestWall:
+    """`wall` (a viewing frame's) in another viewing frame (`to_frame`: (4, 4), the wall's frame → the
+    other), refitted there as a height field of its degree on its points within WALL_HALF_MM of
+    `around_xy` (mm, the wall's frame)."""
+    axis = np.linspace(-WALL_HALF_MM, WALL_HALF_MM, 33)
+    grid = np.stack(np.meshgrid(axis, axis), -1).reshape(-1, 2) + around_xy
+    return fit_chest_wall(transform_points(to_frame, wall.point(grid)), wall.degree)
+
+
+def _nipple_view(scan) -> np.ndarray:
+    """A scan's nipple in its viewing frame (mm)."""
+    return transform_points(scan.view_from_camera, np.asarray(scan.nipple_camera_mm, float)[None])[0]
 
 
 def _cloud(points: np.ndarray) -> o3d.geometry.PointCloud:
