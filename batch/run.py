@@ -58,6 +58,8 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
         for task, result in results:
             row = by_case[Path(task.case).relative_to(out.resolve()).as_posix()]
             error = result["error"].replace(task.input, str(folder / row.input)).replace(task.case, str(out / row.case))
+            if options.wall_from is not None:
+                error = error.replace(task.options["wall_from"], str(Path(options.wall_from) / row.case))
             row.status, row.seconds, row.error = result["status"], result["seconds"], error   # paths as the user gave them
             manifest.write()
             progress(row, len(tasks))
@@ -65,8 +67,8 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
 
 
 def _rows_and_tasks(folder: Path, out: Path, options: BatchOptions) -> tuple[list[Row], list[Task]]:
-    """A row for every input (settled for the skipped, unreadable and reused) and a task for the rest."""
-    plan = options.plan.as_dict()
+    """A row for every input (settled for the skipped, unreadable and reused) and a task for the rest
+    (with `wall_from`, a follow-up of the earlier batch's case of the same name)."""
     rows, tasks = [], []
     for i in find_inputs(folder, out):
         row = Row(i.name, i.case)
@@ -80,6 +82,8 @@ def _rows_and_tasks(folder: Path, out: Path, options: BatchOptions) -> tuple[lis
             row.status, row.error = "failed", f"{i.path}: cannot be read ({exc.strerror})."
             continue
         case = out.resolve() / i.case
+        earlier = None if options.wall_from is None else str(Path(options.wall_from).resolve() / i.case)
+        plan = {**options.plan.as_dict(), "wall_from": earlier}
         if finished(case, row.sha256, plan):
             row.status = "reused"
         else:

@@ -34,6 +34,9 @@ def batch(
                                  "distributed cluster)."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="With --executor dask: the address of a "
                                             "running scheduler (e.g. tcp://host:8786); default: a local cluster."),
+    wall_from: Optional[Path] = typer.Option(None, "--wall-from", help="An earlier batch's output folder: each "
+                                             "input is planned as a follow-up (plan --wall-from) of the case of "
+                                             "the same name there."),
     as_json: bool = JSON,
 ):
     """Plan every scan and recording of a folder, one case folder each, with a manifest; resumable.
@@ -42,11 +45,14 @@ def batch(
     from breastplan.errors import require_folder
 
     try:
-        options = BatchOptions(PlanOptions.parse(deform, side, method, units, up), jobs, executor, scheduler)
+        options = BatchOptions(PlanOptions.parse(deform, side, method, units, up), jobs, executor, scheduler,
+                               None if wall_from is None else str(wall_from))
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
     check_method(method)
     require_folder(input, "folder of scans and recordings")
+    if wall_from is not None:
+        require_folder(wall_from, "folder of earlier cases")
     writable(out, folder=True)
 
     from breastplan.batch.run import run_batch

@@ -73,8 +73,8 @@ def fit(
         with about(wall_from):
             wall, registration = carried_wall(earlier, scan)
         scan = replace(scan, chest_wall=wall)
-        inputs[f"earlier {Case.SCAN_NPZ}"] = wall_from / Case.SCAN_NPZ
-        carried = {"wall_from": {"case": str(wall_from), **registration.as_dict()}}
+        earlier_inputs, carried = registration.provenance(wall_from)
+        inputs.update(earlier_inputs)
     with about(source), threadpool_limits(1, "blas"):   # small dense solves: threads only add overhead
         result = fit_breast(points, options) if scan is None else fit_scan(scan, options)
     fit = result.artefact(Provenance.of(inputs, {**options.as_dict(), **carried}))

@@ -31,13 +31,17 @@ def plan(
                                        "folder, else ./<input name>-plan)."),
     units: str = typer.Option("auto", "--units", help=UNITS_HELP),
     up: str = typer.Option("+y", "--up", help=UP_HELP),
+    wall_from: Optional[Path] = typer.Option(None, "--wall-from", help="An earlier case folder of the same patient "
+                                             "(a plan's, or one side's from `ingest`): each breast is measured "
+                                             "down to that case's chest wall, and its volume change since then "
+                                             "reported (a follow-up scan)."),
     as_json: bool = JSON,
 ):
     """Plan changes on a patient's scan: ingest, fit, each change and their combination, measures and
     an interactive report (report.html)."""
     clock = Clock()
     try:
-        options = PlanOptions.parse(deform, side, method, units, up)
+        options = PlanOptions.parse(deform, side, method, units, up, None if wall_from is None else str(wall_from))
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
     check_method(method)
@@ -53,7 +57,8 @@ def plan(
         result = run_plan(input, out, options, step)
     record = _read_record(out)
     sides = {s: {"volume_cc": r["fit"]["volume_cc"], "stopping_rule_met": r["fit"]["stopping_rule_met"],
-                 "changes": [c["name"] for c in r["changes"]], "reused": r["reused"]}
+                 "changes": [c["name"] for c in r["changes"]], "reused": r["reused"],
+                 **({"wall_from": r["wall_from"]} if "wall_from" in r else {})}
              for s, r in record["sides"].items()}
     result = {"case": str(out), "report": str(out / "report.html"), "plan": str(out / "plan.json"),
               "input": str(result.input), "sides": sides, "measures": record["measures"], "seconds": clock.seconds}
@@ -100,6 +105,11 @@ def _print_plan(result: dict, record: dict) -> None:
         stdout.print(f"{s} fit: {fit['volume_cc']:.1f} cc ({fit['volume_cc'] - below:.1f} + {below:.1f} below the base), "
                      f"rms {fit['rms_mm']:.2f} mm, normalised residual "
                      f"{fit['normalised_residual']:.4f}" + (f"; reused: {', '.join(reused)}" if reused else ""))
+        since = record["sides"][s].get("wall_from")
+        if since:
+            stdout.print(f"{s} since {since['case']}: {since['volume_change_cc']:+.1f} cc "
+                         f"({since['volume_change_pct']:+.1f} %; then {since['earlier_volume_cc']:.1f} cc, measured "
+                         f"down to its chest wall, registered at rms {since['rms_mm']:.2f} mm)")
     stdout.print(f"report → {result['report']}  ({result['seconds']:.1f} s)")
 
 

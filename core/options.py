@@ -108,13 +108,16 @@ class PlanOptions:
 
     `method` is exact (the inverse solver), learnt (the shipped regressions) or the path of a
     `breastplan.model/1` file of one condition; `units` and `up` say how to read a scan file, as
-    for `IngestOptions`."""
+    for `IngestOptions`; `wall_from`, an earlier case folder of the patient (a plan's, or one
+    side's from `ingest`), makes the plan a follow-up: each breast measured down to that case's
+    chest wall, and its volume change since then."""
 
     changes: tuple[tuple[str, float], ...] = DEFAULT_PLAN
     sides: tuple[str, ...] = SIDES
     method: str = "exact"
     units: str = "auto"
     up: str = "+y"
+    wall_from: str | None = None
 
     def __post_init__(self):
         changes = tuple((str(k), float(d)) for k, d in self.changes)
@@ -138,7 +141,7 @@ class PlanOptions:
 
     @classmethod
     def parse(cls, deform: list[str], side: str = "both", method: str = "exact", units: str = "auto",
-              up: str = "+y") -> "PlanOptions":
+              up: str = "+y", wall_from: str | None = None) -> "PlanOptions":
         """From the command line's KIND:DEGREE items, side (left, right or both) and the rest as given."""
         changes = []
         for item in deform:
@@ -151,16 +154,17 @@ class PlanOptions:
                 raise OptionError("changes", f"'{item}' is not KIND:DEGREE (e.g. ptosis:3)") from None
         if side not in (*SIDES, "both"):
             raise OptionError("sides", f"'{side}' is not a side; choose left, right or both")
-        return cls(tuple(changes) or DEFAULT_PLAN, SIDES if side == "both" else (side,), method, units, up)
+        return cls(tuple(changes) or DEFAULT_PLAN, SIDES if side == "both" else (side,), method, units, up, wall_from)
 
     def as_dict(self) -> dict:
         return {"changes": [list(c) for c in self.changes], "sides": list(self.sides), "method": self.method,
-                "units": self.units, "up": self.up}
+                "units": self.units, "up": self.up, "wall_from": self.wall_from}
 
     @classmethod
     def from_dict(cls, d: dict) -> "PlanOptions":
         """The options `as_dict` gave."""
-        return cls(tuple(map(tuple, d["changes"])), tuple(d["sides"]), d["method"], d["units"], d["up"])
+        return cls(tuple(map(tuple, d["changes"])), tuple(d["sides"]), d["method"], d["units"], d["up"],
+                   d.get("wall_from"))
 
 
 EXECUTORS = ("local", "dask")
@@ -171,12 +175,14 @@ EXECUTORS = ("local", "dask")
 class BatchOptions:
     """How `batch` plans a folder: the plan of every case, how many cases at once (one BLAS thread
     each), and where (local processes, or Dask: a local cluster of `jobs` workers, or the scheduler at
-    `scheduler`, e.g. tcp://host:8786)."""
+    `scheduler`, e.g. tcp://host:8786); `wall_from`, an earlier batch's output folder, makes each
+    case a follow-up of the case of the same name there."""
 
     plan: PlanOptions = PlanOptions()
     jobs: int = 1
     executor: str = "local"
     scheduler: str | None = None
+    wall_from: str | None = None
 
     def __post_init__(self):
         if self.jobs < 1:
@@ -187,4 +193,5 @@ class BatchOptions:
             raise OptionError("scheduler", "a scheduler address needs --executor dask")
 
     def as_dict(self) -> dict:
-        return {"plan": self.plan.as_dict(), "jobs": self.jobs, "executor": self.executor, "scheduler": self.scheduler}
+        return {"plan": self.plan.as_dict(), "jobs": self.jobs, "executor": self.executor, "scheduler": self.scheduler,
+                "wall_from": self.wall_from}

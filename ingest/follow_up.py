@@ -8,12 +8,14 @@ that grew lifts it: measured on one wall, before and after, a change is measured
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
 from breastplan import BadInputError, transform_points
+from breastplan.case import Case
 from breastplan.chest_wall import ChestWall
 
 from .chest_wall import fit_chest_wall
@@ -52,6 +54,12 @@ class Registration:
     def as_dict(self) -> dict:
         return {"rms_mm": round(self.rms_mm, 3), "overlap": round(self.overlap, 3),
                 "agreement": round(self.agreement, 3)}
+
+    def provenance(self, earlier_case: Path) -> tuple[dict[str, Path], dict]:
+        """What a fit down to `earlier_case`'s wall adds to its provenance: that case's scan.npz
+        among the inputs, and `wall_from` (the case and this registration) among the options."""
+        return ({f"earlier {Case.SCAN_NPZ}": Path(earlier_case) / Case.SCAN_NPZ},
+                {"wall_from": {"case": str(earlier_case), **self.as_dict()}})
 
 
 def chest_around_breast(scan) -> np.ndarray:

@@ -25,7 +25,8 @@ import numpy as np
 from breastplan import BadInputError, Primitive, transform_points
 from breastplan.case import Case, Fit, Provenance, Scan, sha256
 from breastplan.clock import Clock
-from breastplan.errors import about
+from breastplan.errors import about, require_folder
+from breastplan.ingest.follow_up import Registration
 from breastplan.options import FitOptions, IngestOptions, PlanOptions
 
 from .changes import Change, combine, solve_change
@@ -39,6 +40,23 @@ def sample_recording() -> Path:
     return Path(str(resources.files("breastplan.plan") / "data" / "sample.mcap"))
 
 
+@dataclass(frozen=True)
+class FollowUp:
+    """A side measured down to an earlier case's chest wall: that case, the registration that carried
+    its wall over, and the earlier breast's volume down to its own wall (cc)."""
+
+    case: Path
+    registration: Registration
+    earlier_volume_cc: float
+
+    def record(self, volume_cc: float) -> dict:
+        """plan.json's `wall_from` of a side whose breast now measures `volume_cc` on the earlier wall."""
+        change = volume_cc - self.earlier_volume_cc
+        return {"case": str(self.case), **self.registration.as_dict(),
+                "earlier_volume_cc": round(self.earlier_volume_cc, 2), "volume_change_cc": round(change, 2),
+                "volume_change_pct": round(100.0 * change / self.earlier_volume_cc, 2)}
+
+
 @dataclass(frozen=True, eq=False)
 class SidePlan:
     """One side's case, scan, fit and planned changes (each as solved on the fitted surface)."""
@@ -49,6 +67,7 @@ class SidePlan:
     fit: Fit
     changes: tuple[Change, ...]              # one per requested change, then the combination
     reused: tuple[str, ...] = ()             # stages taken from the case folder as they were
+    follow_up: FollowUp | None = None        # with `wall_from`: the earlier case it is measured against
 
     @property
     def anatomical(self) -> np.ndarray:
@@ -133,7 +152,9 @@ def _building(out: Path) -> Iterator[Path]:
 
 
 def _sides(source: Path, folder: Path, options: PlanOptions, clock: Clock, progress: Progress) -> dict[str, SidePlan]:
-    """Scan and fit each side (reusing what the case folder holds), then solve its changes."""
+    """Scan and fit each side (reusing what the case folder holds; down to the earlier case's wall
+    with `wall_from`), then solve its changes."""
+    earlier = {} if options.wall_from is None else earlier_cases(Path(options.wall_from), options.sides)
     if source.is_dir():
         cases = _cases_of(source, folder, options)
         scans, reused = {}, {}
@@ -144,8 +165,10 @@ def _sides(source: Path, folder: Path, options: PlanOptions, clock: Clock, progr
         scans, reused = _ingest(source, cases, options, clock, progress)
     sides = {}
     for side, case in cases.items():
-        fit, fit_reused = _fit(case, scans[side], clock, progress, side)
-        unsolved = SidePlan(side, case, scans[side], fit, (), tuple(reused[side] + fit_reused))
+        with clock(f"fit {side}"):
+            progress(f"fit {side}")
+            fit, fit_reused, follow_up = _fit(case, scans[side], earlier.get(side))
+        unsolved = SidePlan(side, case, scans[side], fit, (), tuple(reused[side] + fit_reused), follow_up)
         with clock(f"changes {side}"):
             progress(f"changes {side}")
             sides[side] = replace(unsolved, changes=solve_changes(unsolved, options))
@@ -235,22 +258,64 @@ def _ingest(source: Path, cases: dict[str, Case], options: PlanOptions, clock: C
     return scans, reused
 
 
-def _fit(case: Case, scan: Scan, clock: Clock, progress: Progress, side: str) -> tuple[Fit, list[str]]:
-    """The side's fit: reused when the case holds one of this scan with the default options."""
+def _fit(case: Case, scan: Scan, earlier: Case | None) -> tuple[Fit, list[str], FollowUp | None]:
+    """The side's fit (reused when the case holds one of this scan, and of the earlier scan it is
+    measured against, with the default options), the stages reused, and the follow-up."""
+    from dataclasses import replace as replaced
+
+    from breastplan.ingest.follow_up import carried_wall
+
+    scan_ply = case.path(Case.SCAN_PLY)
+    inputs, options, follow_up = {scan_ply.name: scan_ply}, FitOptions().as_dict(), None
+    if earlier is not None:
+        with about(earlier.folder):
+            earlier_scan = earlier.load_scan()
+            wall, registration = carried_wall(earlier_scan, scan)
+        scan = replaced(scan, chest_wall=wall)
+        more_inputs, more_options = registration.provenance(earlier.folder)
+        inputs, options = {**inputs, **more_inputs}, {**options, **more_options}
+        follow_up = FollowUp(earlier.folder, registration, _own_wall_volume_cc(earlier, earlier_scan))
+    wanted = Provenance.of(inputs, options)
+    if case.is_fresh(Case.FIT_NPZ, wanted):
+        return case.load_fit(), ["fit"], follow_up
+    fit = _fitted(scan, scan_ply).artefact(wanted)
+    case.save_fit(fit)
+    return fit, [], follow_up
+
+
+def _own_wall_volume_cc(case: Case, scan: Scan) -> float:
+    """An earlier breast's volume down to its own chest wall (cc): its case's fit.npz when that was
+    made with the default options, else fitted now (and not written: the earlier case is only read)."""
+    scan_ply = case.path(Case.SCAN_PLY)
+    if case.is_fresh(Case.FIT_NPZ, Provenance.of({scan_ply.name: scan_ply}, FitOptions().as_dict())):
+        return case.load_fit().volume_cc
+    return _fitted(scan, scan_ply).volume_cc
+
+
+def _fitted(scan: Scan, scan_ply: Path):
+    """`fit_scan` with the default options, one BLAS thread, bad input naming `scan_ply`."""
     from threadpoolctl import threadpool_limits
 
     from breastplan.fitting.breast_fit import fit_scan
 
-    options = FitOptions()
-    scan_ply = case.path(Case.SCAN_PLY)
-    wanted = Provenance.of({scan_ply.name: scan_ply}, options.as_dict())
-    if case.is_fresh(Case.FIT_NPZ, wanted):
-        return case.load_fit(), ["fit"]
-    with clock(f"fit {side}"), about(scan_ply), threadpool_limits(1, "blas"):
-        progress(f"fit {side}")
-        fit = fit_scan(scan, options).artefact(wanted)
-    case.save_fit(fit)
-    return fit, []
+    with about(scan_ply), threadpool_limits(1, "blas"):
+        return fit_scan(scan, FitOptions())
+
+
+def earlier_cases(folder: Path, sides: tuple[str, ...]) -> dict[str, Case]:
+    """Each side's case in an earlier case folder (a plan's `left/` and `right/`, or one side's
+    from `ingest`); BadInputError naming the folder when it holds no scan of a side."""
+    require_folder(folder, "case folder of an earlier scan to measure the follow-up against")
+    if Case.holds(folder):
+        held = Case(folder).load_scan().side
+        if set(sides) != {held}:
+            raise BadInputError(folder, f"holds a scan of the {held} breast only; plan --side {held} against it")
+        return {held: Case(folder)}
+    missing = [s for s in sides if not Case.holds(folder / s)]
+    if missing:
+        raise BadInputError(folder, f"holds no scan of the {' and '.join(missing)} breast to measure the "
+                                    "follow-up against (an earlier plan's or ingest's case folder)")
+    return {s: Case(folder / s) for s in sides}
 
 
 def input_record(plan: Plan) -> dict:

@@ -36,6 +36,8 @@ def write_plan(plan: Plan, folder: Path) -> dict:
                        "nipple_found": sp.scan.nipple_found,
                        "fit": fit_record(sp), "reused": list(sp.reused),
                        "changes": [_save_change(sp, c, folder) for c in sp.changes]}
+        if sp.follow_up is not None:
+            sides[side]["wall_from"] = sp.follow_up.record(sp.fit.volume_cc)
     torso_files = {}
     record = {"schema": PLAN_SCHEMA, "version": __version__, "input": input_record(plan),
               "options": plan.options.as_dict(), "stopping_rule": STOP_RESIDUAL, "sides": sides,

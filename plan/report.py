@@ -3,8 +3,8 @@
 The page draws the torso (grey points), each original breast (dark points) and the planned breast
 (a skin-coloured mesh) superimposed, the torso near the breasts coloured by how far the plan moves
 it, a degree slider per planned kind, the combination as planned, front/side/top views, the
-measures before and after with the asymmetry between sides, the fits' quality, and the inputs,
-options and versions. Geometry travels as base64 typed arrays (`views`); a small script decodes
+measures before and after with the asymmetry between sides, the fits' quality, a follow-up's volume
+change since the earlier scan, and the inputs, options and versions. Geometry travels as base64 typed arrays (`views`); a small script decodes
 it and restyles the plot when a slider moves.
 
 The page opens on a poster, a front view of the first state drawn here (a PNG), above its tables:
@@ -189,6 +189,14 @@ def tables(record: dict) -> str:
     parts.append("<h2>Fit quality</h2>" + _table(
         ["side", "volume cc down to the chest wall", "of it below the base cc", "rms mm", "normalised residual",
          f"stopping rule {record['stopping_rule']}", "points", "nipple found"], rows, "fit"))
+    since = {s: r["wall_from"] for s, r in record["sides"].items() if "wall_from" in r}
+    if since:
+        rows = [[s, f["case"], f["earlier_volume_cc"], record["sides"][s]["fit"]["volume_cc"],
+                 f"{f['volume_change_cc']:+.1f}", f"{f['volume_change_pct']:+.1f}", f["rms_mm"],
+                 f"{100 * f['agreement']:.0f} %"] for s, f in since.items()]
+        parts.append("<h2>Since the earlier scan (measured down to its chest wall)</h2>" + _table(
+            ["side", "earlier case", "volume then cc", "volume now cc", "change cc", "change %",
+             "chests registered, rms mm", "chest agreeing"], rows, "since"))
     rows = [[s, c["name"], ", ".join(f"{d['kind']} {d['degree']:g} ({_how(d)})" for d in c["details"])]
             for s, r in record["sides"].items() for c in r["changes"]]
     parts.append("<h2>Planned changes</h2>" + _table(["side", "change", "how (parameters in model units)"], rows))

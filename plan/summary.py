@@ -39,6 +39,10 @@ def summary_png(plan: Plan, record: dict, path: Path) -> Path:
         fit = record["sides"][side]["fit"]
         text.append(f"fit residual {fit['normalised_residual']:.4f} (rule "
                     f"{'met' if fit['stopping_rule_met'] else 'not met'})")
+        since = record["sides"][side].get("wall_from")
+        if since:
+            text.append(f"since the earlier scan: {since['volume_change_cc']:+.1f} cc "
+                        f"({since['earlier_volume_cc']:.1f} → {fit['volume_cc']:.1f} cc)")
         row[2].axis("off")
         row[2].text(0, 1, "\n".join(text), va="top", family="monospace", fontsize=8)
     fig.tight_layout()

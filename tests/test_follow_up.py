@@ -118,3 +118,74 @@ def test_fit_wall_from_with_a_breast_frame_ply_is_a_usage_error(cli, cases, tmp_
               "--out", tmp_path / "out")
     assert res.returncode == 2, res.stderr
     assert "--wall-from" in res.stderr and not (tmp_path / "out").exists()
+
+
+def _true_change(cases, side: str) -> float:
+    """The change of the half-body volume between the two bodies (their truth files), cc."""
+    volumes = [float(np.load(cases / f"cup{cup}.npz")[f"{side}_half_volume_cc"]) for cup in CUPS]
+    return volumes[1] - volumes[0]
+
+
+@pytest.fixture(scope="module")
+def earlier_plan(cli, cases):
+    res = run(cli, "plan", cases / f"cup{CUPS[0]}.mcap", "--out", cases / "plan-before", "--json")
+    assert res.returncode == 0, res.stderr
+    return cases / "plan-before"
+
+
+def test_plan_wall_from_reports_each_sides_change_since_the_earlier_plan(cli, cases, earlier_plan):
+    out = cases / "plan-after"
+    res = run(cli, "plan", cases / f"cup{CUPS[1]}.mcap", "--wall-from", earlier_plan, "--out", out, "--json")
+    assert res.returncode == 0, res.stderr
+    sides = json.loads(res.stdout)["sides"]
+    before = json.loads((earlier_plan / "plan.json").read_text())["sides"]
+    for side in ("left", "right"):
+        since, true = sides[side]["wall_from"], _true_change(cases, side)
+        assert since["case"] == str(earlier_plan / side)
+        assert since["earlier_volume_cc"] == before[side]["fit"]["volume_cc"]      # the earlier plan's own fit
+        assert abs(since["volume_change_cc"] - true) <= 0.10 * true, (side, since, true)
+    assert "Since the earlier scan" in (out / "report.html").read_text()
+    again = run(cli, "plan", out, "--wall-from", earlier_plan, "--json")               # the same follow-up, in place
+    assert again.returncode == 0, again.stderr
+    assert all("fit" in s["reused"] for s in json.loads(again.stdout)["sides"].values())
+
+
+def test_plan_wall_from_one_sides_case_plans_that_side(cli, cases):
+    earlier = cases / f"left{CUPS[0]}"
+    res = run(cli, "plan", cases / f"cup{CUPS[1]}.mcap", "--wall-from", earlier, "--out", cases / "out-both")
+    assert_bad_input(res, earlier, cases)
+    assert "holds a scan of the left breast only; plan --side left against it" in res.stderr
+    res = run(cli, "plan", cases / f"cup{CUPS[1]}.mcap", "--side", "left", "--wall-from", earlier,
+              "--out", cases / "plan-left", "--json")
+    assert res.returncode == 0, res.stderr
+    since = json.loads(res.stdout)["sides"]["left"]["wall_from"]
+    assert since["case"] == str(earlier)
+    assert abs(since["volume_change_cc"] - _true_change(cases, "left")) <= 0.10 * _true_change(cases, "left")
+
+
+def test_plan_wall_from_a_missing_folder_is_bad_input(cli, cases):
+    res = run(cli, "plan", cases / f"cup{CUPS[1]}.mcap", "--wall-from", cases / "nowhere", "--out", cases / "out-none")
+    assert_bad_input(res, cases / "nowhere", cases)
+
+
+def test_batch_wall_from_plans_each_input_as_a_follow_up_of_its_earlier_case(cli, cases, tmp_path):
+    import shutil
+
+    for visit, cup, names in (("visit1", CUPS[0], ("anna",)), ("visit2", CUPS[1], ("anna", "bea"))):
+        (tmp_path / visit).mkdir()
+        for name in names:
+            shutil.copy(cases / f"cup{cup}.mcap", tmp_path / visit / f"{name}.mcap")
+    res = run(cli, "batch", tmp_path / "visit1", "--out", tmp_path / "out1", "--side", "left")
+    assert res.returncode == 0, res.stderr
+    res = run(cli, "batch", tmp_path / "visit2", "--out", tmp_path / "out2", "--side", "left",
+              "--wall-from", tmp_path / "out1", "--json")
+    assert res.returncode == 0, res.stderr
+    result = json.loads(res.stdout)
+    assert result["summary"]["done"] == 1 and result["summary"]["failed"] == 1
+    assert str(tmp_path / "out1" / "bea") in result["failed"]["bea.mcap"]      # no earlier case: said, not guessed
+    since = json.loads((tmp_path / "out2" / "anna" / "plan.json").read_text())["sides"]["left"]["wall_from"]
+    assert since["case"] == str((tmp_path / "out1" / "anna").resolve() / "left")
+    assert abs(since["volume_change_cc"] - _true_change(cases, "left")) <= 0.10 * _true_change(cases, "left")
+    again = run(cli, "batch", tmp_path / "visit2", "--out", tmp_path / "out2", "--side", "left",
+                "--wall-from", tmp_path / "out1", "--json")
+    assert json.loads(again.stdout)["summary"]["reused"] == 1
