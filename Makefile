@@ -73,7 +73,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_learn.py
 	$(BIN)/python benchmarks/bench_statistical.py
 	$(BIN)/python benchmarks/bench_realistic.py
-	$(BIN)/python benchmarks/bench_cup_ceiling.py
+	$(BIN)/python benchmarks/bench_volume_ceiling.py
 	$(BIN)/python benchmarks/bench_repeatability.py
 	$(BIN)/python benchmarks/bench_refusal.py
 	$(BIN)/python benchmarks/bench_plan.py
