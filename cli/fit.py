@@ -35,9 +35,10 @@ def fit(
     max_iterations: int = typer.Option(1000, "--max-iterations", help="FFD iterations before stopping (thesis: "
                                        "1000); a fit that stops above the stopping rule is written and says so."),
     wall_from: Optional[Path] = typer.Option(None, "--wall-from", help="An earlier case folder of the same patient "
-                                             "and side: the breast is measured down to that case's chest wall, "
-                                             "carried over by registering the two chests around the breast (a "
-                                             "follow-up scan: a change measured on one wall)."),
+                                             "and side (or a plan's, holding that side): the breast is measured "
+                                             "down to that case's chest wall, carried over by registering the two "
+                                             "chests around the breast (a follow-up scan: a change measured on one "
+                                             "wall)."),
     as_json: bool = JSON,
 ):
     """Fit the breast primitive, its pose and an FFD lattice to a breast in the breast frame."""
@@ -55,7 +56,12 @@ def fit(
     if wall_from is not None and scan is None:
         raise usage_error("--wall-from measures a case folder from `breastplan ingest` on an earlier case's chest "
                           f"wall; {input} is a breast-frame PLY, whose chest is not known", "--wall-from")
-    earlier = None if wall_from is None else _case_scan(wall_from)
+    earlier = None
+    if wall_from is not None:
+        from breastplan.ingest.follow_up import earlier_case
+
+        earlier = earlier_case(wall_from, scan.side)           # in a plan's folder, the case of this side
+        earlier_scan = earlier.load_scan()
     writable(out or folder, folder=True)
 
     from threadpoolctl import threadpool_limits
@@ -70,10 +76,10 @@ def fit(
 
         from breastplan.ingest.follow_up import carried_wall
 
-        with about(wall_from):
-            wall, registration = carried_wall(earlier, scan)
+        with about(earlier.folder):
+            wall, registration = carried_wall(earlier_scan, scan)
         scan = replace(scan, chest_wall=wall)
-        earlier_inputs, carried = registration.provenance(wall_from)
+        earlier_inputs, carried = registration.provenance(earlier.folder)
         inputs.update(earlier_inputs)
     with about(source), threadpool_limits(1, "blas"):   # small dense solves: threads only add overhead
         result = fit_breast(points, options) if scan is None else fit_scan(scan, options)
@@ -104,13 +110,6 @@ def fit(
             "seconds": clock.seconds}, as_json, f"fit → {paths[Case.FIT_PLY]}")
 
 
-def _case_scan(folder: Path) -> Scan:
-    """The scan of a case folder from `ingest` (INPUT, or the earlier case of `--wall-from`)."""
-    from breastplan.case import Case
-
-    return Case(require_folder(folder, "case folder")).load_scan()
-
-
 def _breast_points(input: Path) -> tuple[np.ndarray, Scan | None, Path, Path]:
     """(points mm, the case's scan (None for a PLY), the file they came from, the default output
     folder) of a case folder or a PLY. A case's breast sits on its chest wall; a PLY's on z = 0."""
@@ -119,7 +118,7 @@ def _breast_points(input: Path) -> tuple[np.ndarray, Scan | None, Path, Path]:
     from breastplan.units import breast_units_problem
 
     if input.is_dir():
-        scan = _case_scan(input)
+        scan = Case(require_folder(input, "case folder")).load_scan()
         points, source, folder = scan.points, input / Case.SCAN_PLY, input
     elif input.suffix.lower() == ".ply" or not input.exists():
         scan, points, source, folder = None, read_ply(input).points, input, input.parent

@@ -17,6 +17,8 @@ from scipy.spatial import cKDTree
 from breastplan import BadInputError, transform_points
 from breastplan.case import Case
 from breastplan.chest_wall import ChestWall
+from breastplan.errors import require_folder
+from breastplan.options import SIDES
 
 from .chest_wall import fit_chest_wall
 
@@ -60,6 +62,26 @@ class Registration:
         among the inputs, and `wall_from` (the case and this registration) among the options."""
         return ({f"earlier {Case.SCAN_NPZ}": Path(earlier_case) / Case.SCAN_NPZ},
                 {"wall_from": {"case": str(earlier_case), **self.as_dict()}})
+
+
+def earlier_cases(folder: Path) -> dict[str, Case]:
+    """The cases an earlier case folder holds, by side: a plan's `left/` and `right/`, or one side's
+    from `ingest`; BadInputError naming the folder when it is none."""
+    require_folder(folder, "case folder of an earlier scan to measure the follow-up against")
+    if Case.holds(folder):
+        return {Case(folder).load_scan().side: Case(folder)}
+    cases = {side: Case(Path(folder) / side) for side in SIDES if Case.holds(Path(folder) / side)}
+    if not cases:
+        raise BadInputError(folder, "is not a case folder: it holds no scan.npz, nor left/ or right/ cases, to "
+                                    "measure the follow-up against")
+    return cases
+
+
+def earlier_case(folder: Path, side: str) -> Case:
+    """The case of `side` in an earlier case folder; one of the other side as it is, when that is all
+    the folder holds (the registration refuses it, saying which side it holds)."""
+    cases = earlier_cases(folder)
+    return cases.get(side) or next(iter(cases.values()))
 
 
 def chest_around_breast(scan) -> np.ndarray:

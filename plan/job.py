@@ -18,19 +18,21 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 from importlib import resources
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterator
 
 import numpy as np
 
 from breastplan import BadInputError, Primitive, transform_points
 from breastplan.case import Case, Fit, Provenance, Scan, sha256
 from breastplan.clock import Clock
-from breastplan.errors import about, require_folder
-from breastplan.ingest.follow_up import Registration
+from breastplan.errors import about
 from breastplan.options import FitOptions, IngestOptions, PlanOptions
 
 from .changes import Change, combine, solve_change
 from .surface import PlannedChange
+
+if TYPE_CHECKING:
+    from breastplan.ingest.follow_up import Registration
 
 PLAN_SCHEMA = "breastplan.plan/1"
 
@@ -154,7 +156,7 @@ def _building(out: Path) -> Iterator[Path]:
 def _sides(source: Path, folder: Path, options: PlanOptions, clock: Clock, progress: Progress) -> dict[str, SidePlan]:
     """Scan and fit each side (reusing what the case folder holds; down to the earlier case's wall
     with `wall_from`), then solve its changes."""
-    earlier = {} if options.wall_from is None else earlier_cases(Path(options.wall_from), options.sides)
+    earlier = {} if options.wall_from is None else _earlier_cases(Path(options.wall_from), options.sides)
     if source.is_dir():
         cases = _cases_of(source, folder, options)
         scans, reused = {}, {}
@@ -302,20 +304,15 @@ def _fitted(scan: Scan, scan_ply: Path):
         return fit_scan(scan, FitOptions())
 
 
-def earlier_cases(folder: Path, sides: tuple[str, ...]) -> dict[str, Case]:
-    """Each side's case in an earlier case folder (a plan's `left/` and `right/`, or one side's
-    from `ingest`); BadInputError naming the folder when it holds no scan of a side."""
-    require_folder(folder, "case folder of an earlier scan to measure the follow-up against")
-    if Case.holds(folder):
-        held = Case(folder).load_scan().side
-        if set(sides) != {held}:
-            raise BadInputError(folder, f"holds a scan of the {held} breast only; plan --side {held} against it")
-        return {held: Case(folder)}
-    missing = [s for s in sides if not Case.holds(folder / s)]
-    if missing:
-        raise BadInputError(folder, f"holds no scan of the {' and '.join(missing)} breast to measure the "
-                                    "follow-up against (an earlier plan's or ingest's case folder)")
-    return {s: Case(folder / s) for s in sides}
+def _earlier_cases(folder: Path, sides: tuple[str, ...]) -> dict[str, Case]:
+    """Each planned side's case in an earlier case folder (`ingest.follow_up.earlier_cases`)."""
+    from breastplan.ingest.follow_up import earlier_cases
+
+    cases = earlier_cases(folder)
+    if set(sides) - set(cases):                          # a one-side case, of the other side or of one of two
+        held = next(iter(cases))
+        raise BadInputError(folder, f"holds a scan of the {held} breast only; plan --side {held} against it")
+    return {side: cases[side] for side in sides}
 
 
 def input_record(plan: Plan) -> dict:

@@ -189,3 +189,15 @@ def test_batch_wall_from_plans_each_input_as_a_follow_up_of_its_earlier_case(cli
     again = run(cli, "batch", tmp_path / "visit2", "--out", tmp_path / "out2", "--side", "left",
                 "--wall-from", tmp_path / "out1", "--json")
     assert json.loads(again.stdout)["summary"]["reused"] == 1
+
+
+def test_fit_wall_from_an_earlier_plan_takes_its_case_of_the_same_side(cli, cases, earlier_plan):
+    res = run(cli, "fit", cases / f"left{CUPS[1]}", "--wall-from", earlier_plan, "--out", cases / "from-plan", "--json")
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["wall_from"]["case"] == str(earlier_plan / "left")
+
+
+def test_fit_wall_from_a_folder_without_cases_is_bad_input(cli, cases, tmp_path):
+    (tmp_path / "empty").mkdir()
+    res = run(cli, "fit", cases / f"left{CUPS[1]}", "--wall-from", tmp_path / "empty", "--out", cases / "out-empty")
+    assert_bad_input(res, tmp_path / "empty", cases)
