@@ -263,8 +263,6 @@ def _ingest(source: Path, cases: dict[str, Case], options: PlanOptions, clock: C
 def _fit(case: Case, scan: Scan, earlier: Case | None) -> tuple[Fit, list[str], FollowUp | None]:
     """The side's fit (reused when the case holds one of this scan, and of the earlier scan it is
     measured against, with the default options), the stages reused, and the follow-up."""
-    from dataclasses import replace as replaced
-
     from breastplan.ingest.follow_up import carried_wall
 
     scan_ply = case.path(Case.SCAN_PLY)
@@ -273,7 +271,7 @@ def _fit(case: Case, scan: Scan, earlier: Case | None) -> tuple[Fit, list[str], 
         with about(earlier.folder):
             earlier_scan = earlier.load_scan()
             wall, registration = carried_wall(earlier_scan, scan)
-        scan = replaced(scan, chest_wall=wall)
+        scan = replace(scan, chest_wall=wall)
         more_inputs, more_options = registration.provenance(earlier.folder)
         inputs, options = {**inputs, **more_inputs}, {**options, **more_options}
         follow_up = FollowUp(earlier.folder, registration, _own_wall_volume_cc(earlier, earlier_scan))
@@ -309,7 +307,7 @@ def _earlier_cases(folder: Path, sides: tuple[str, ...]) -> dict[str, Case]:
     from breastplan.ingest.follow_up import earlier_cases
 
     cases = earlier_cases(folder)
-    if set(sides) - set(cases):                          # a one-side case, of the other side or of one of two
+    if set(sides) - set(cases):                          # only a one-side case lacks a side
         held = next(iter(cases))
         raise BadInputError(folder, f"holds a scan of the {held} breast only; plan --side {held} against it")
     return {side: cases[side] for side in sides}
