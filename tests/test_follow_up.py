@@ -201,3 +201,14 @@ def test_fit_wall_from_a_folder_without_cases_is_bad_input(cli, cases, tmp_path)
     (tmp_path / "empty").mkdir()
     res = run(cli, "fit", cases / f"left{CUPS[1]}", "--wall-from", tmp_path / "empty", "--out", cases / "out-empty")
     assert_bad_input(res, tmp_path / "empty", cases)
+
+
+def test_plan_wall_from_reuses_the_fit_that_fit_wall_from_made(cli, cases, earlier_plan, tmp_path):
+    import shutil
+
+    case = tmp_path / "case"
+    shutil.copytree(cases / f"left{CUPS[1]}", case)
+    assert run(cli, "fit", case, "--wall-from", earlier_plan).returncode == 0
+    res = run(cli, "plan", case, "--side", "left", "--wall-from", earlier_plan, "--out", tmp_path / "plan", "--json")
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["sides"]["left"]["reused"] == ["ingest", "fit"]
