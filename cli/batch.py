@@ -50,6 +50,9 @@ def batch(
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
     check_method(method)
+    if wall_from is not None and wall_from.resolve() == out.resolve():
+        raise usage_error(f"it names the output folder this batch writes ({out}); give the earlier batch's",
+                          "--wall-from")
     require_folder(input, "folder of scans and recordings")
     if wall_from is not None:
         require_folder(wall_from, "folder of earlier cases")

@@ -49,6 +49,9 @@ def plan(
         require_file(input, "recording or scan file")
     if out is None:
         out = input if input is not None and input.is_dir() else Path(f"{(input or Path('sample')).stem}-plan")
+    if wall_from is not None and out.resolve() in (wall_from.resolve(), wall_from.resolve().parent):
+        raise usage_error(f"it names the case folder this plan writes ({out}); give the earlier visit's",
+                          "--wall-from")
     writable(out, folder=True)
 
     from breastplan.plan.job import run_plan

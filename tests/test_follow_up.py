@@ -212,3 +212,12 @@ def test_plan_wall_from_reuses_the_fit_that_fit_wall_from_made(cli, cases, earli
     res = run(cli, "plan", case, "--side", "left", "--wall-from", earlier_plan, "--out", tmp_path / "plan", "--json")
     assert res.returncode == 0, res.stderr
     assert json.loads(res.stdout)["sides"]["left"]["reused"] == ["ingest", "fit"]
+
+
+def test_wall_from_the_folder_being_written_is_a_usage_error(cli, earlier_plan, tmp_path):
+    for args in (("plan", earlier_plan, "--wall-from", earlier_plan),
+                 ("plan", earlier_plan, "--wall-from", earlier_plan / "left"),
+                 ("batch", tmp_path, "--out", earlier_plan, "--wall-from", earlier_plan)):
+        res = run(cli, *args)
+        assert res.returncode == 2, (args, res.stderr)
+        assert "--wall-from" in res.stderr and "writes" in res.stderr
