@@ -42,14 +42,17 @@ def sample_recording() -> Path:
     return Path(str(resources.files("breastplan.plan") / "data" / "sample.mcap"))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class FollowUp:
     """A side measured down to an earlier case's chest wall: that case, the registration that carried
-    its wall over, and the earlier breast's volume down to its own wall (cc)."""
+    its wall over, and the earlier breast's fit down to its own wall (its surface carried into this
+    scan's input frame by the registration, mm)."""
 
     case: Path
     registration: Registration
     earlier_volume_cc: float
+    earlier_surface_input: np.ndarray       # (V, 3)
+    earlier_faces: np.ndarray               # (F, 3)
 
     def record(self, volume_cc: float) -> dict:
         """plan.json's `wall_from` of a side whose breast now measures `volume_cc` on the earlier wall."""
@@ -274,7 +277,10 @@ def _fit(case: Case, scan: Scan, earlier: Case | None) -> tuple[Fit, list[str], 
         scan = replace(scan, chest_wall=wall)
         more_inputs, more_options = registration.provenance(earlier.folder)
         inputs, options = {**inputs, **more_inputs}, {**options, **more_options}
-        follow_up = FollowUp(earlier.folder, registration, _own_wall_volume_cc(earlier, earlier_scan))
+        then = _own_wall_fit(earlier, earlier_scan)
+        later_from_earlier = np.linalg.inv(earlier_scan.camera_to_breast @ registration.earlier_from_later)
+        follow_up = FollowUp(earlier.folder, registration, then.volume_cc,
+                             transform_points(later_from_earlier, then.vertices), then.faces)
     wanted = Provenance.of(inputs, options)
     if case.is_fresh(Case.FIT_NPZ, wanted):
         return case.load_fit(), ["fit"], follow_up
@@ -283,13 +289,14 @@ def _fit(case: Case, scan: Scan, earlier: Case | None) -> tuple[Fit, list[str], 
     return fit, [], follow_up
 
 
-def _own_wall_volume_cc(case: Case, scan: Scan) -> float:
-    """An earlier breast's volume down to its own chest wall (cc): its case's fit.npz when that was
-    made with the default options, else fitted now (and not written: the earlier case is only read)."""
+def _own_wall_fit(case: Case, scan: Scan) -> Fit:
+    """An earlier breast's fit down to its own chest wall: its case's fit.npz when that was made with
+    the default options, else fitted now (and not written: the earlier case is only read)."""
     scan_ply = case.path(Case.SCAN_PLY)
-    if case.is_fresh(Case.FIT_NPZ, Provenance.of({scan_ply.name: scan_ply}, FitOptions().as_dict())):
-        return case.load_fit().volume_cc
-    return _fitted(scan, scan_ply).volume_cc
+    wanted = Provenance.of({scan_ply.name: scan_ply}, FitOptions().as_dict())
+    if case.is_fresh(Case.FIT_NPZ, wanted):
+        return case.load_fit()
+    return _fitted(scan, scan_ply).artefact(wanted)
 
 
 def _fitted(scan: Scan, scan_ply: Path):

@@ -1,11 +1,12 @@
 """report.html: a self-contained, offline page of the plan (plotly.js embedded; no request leaves it).
 
 The page draws the torso (grey points), each original breast (dark points) and the planned breast
-(a skin-coloured mesh) superimposed, the torso near the breasts coloured by how far the plan moves
-it, a degree slider per planned kind, the combination as planned, front/side/top views, the
-measures before and after with the asymmetry between sides, the fits' quality, a follow-up's volume
-change since the earlier scan, and the inputs, options and versions. Geometry travels as base64 typed arrays (`views`); a small script decodes
-it and restyles the plot when a slider moves.
+(a skin-coloured mesh) superimposed, for a follow-up the breast as fitted at the earlier visit (a
+translucent blue mesh), the torso near the breasts coloured by how far the plan moves it, a degree
+slider per planned kind, the combination as planned, front/side/top views, the measures before and
+after with the asymmetry between sides, the fits' quality, a follow-up's volume change since the
+earlier scan, and the inputs, options and versions. Geometry travels as base64 typed arrays
+(`views`); a small script decodes it and restyles the plot when a slider moves.
 
 The page opens on a poster, a front view of the first state drawn here (a PNG), above its tables:
 plain HTML, painted before any heavy script runs. plotly.js and the data wait in inert blocks
@@ -46,6 +47,10 @@ def _points(p: np.ndarray) -> dict:
     return {"n": int(len(p)), "xyz": _b64(p, "<f4")}
 
 
+def _mesh(vertices: np.ndarray, faces: np.ndarray) -> dict:
+    return {**_points(vertices), "faces": _b64(faces, "<i4"), "m": int(len(faces))}
+
+
 def page_data(plan: Plan, views: Views) -> dict:
     """The JSON the page's script reads: geometry, states, sliders and the state it opens on."""
     sides = list(plan.sides)
@@ -63,8 +68,8 @@ def page_data(plan: Plan, views: Views) -> dict:
                 "degrees": [st.degree for st in views.states if st.kind == kind]} for kind, degree in plan.options.changes]
     return {"sides": sides, "torso": _points(views.torso), "patch": _points(patch),
             "scans": {s: _points(views.scans[s]) for s in sides},
-            "meshes": {s: {**_points(views.meshes[s][0]), "faces": _b64(views.meshes[s][1], "<i4"),
-                           "m": int(len(views.meshes[s][1]))} for s in sides},
+            "meshes": {s: _mesh(*views.meshes[s]) for s in sides},
+            "earlier": {s: _mesh(*views.earlier[s]) for s in views.earlier},
             "states": states, "sliders": sliders, "cmax": cmax(views), "first": first_state(plan, views).key,
             "skin": SKIN}
 
@@ -275,6 +280,11 @@ for(const s of P.sides){
  idx[s]=traces.length;
  traces.push({type:'mesh3d',name:s+' breast (planned)',i:f[0],j:f[1],k:f[2],color:P.skin,opacity:0.8,showlegend:true,
   flatshading:false,lighting:{ambient:0.55,diffuse:0.7,specular:0.15},hoverinfo:'skip'});
+}
+for(const s of Object.keys(P.earlier)){   // a follow-up: the breast as fitted at the earlier visit
+ const m=P.earlier[s];const v=pts(m);const f=split(b64(m.faces,Int32Array),m.m,Int32Array);
+ traces.push({type:'mesh3d',name:s+' breast (earlier visit)',x:v[0],y:v[1],z:v[2],i:f[0],j:f[1],k:f[2],
+  color:'#6a7fb5',opacity:0.35,showlegend:true,hoverinfo:'skip'});
 }
 const views={front:{eye:{x:0,y:-1.9,z:0.15},up:{x:0,y:0,z:1}},side:{eye:{x:1.9,y:-0.3,z:0.1},up:{x:0,y:0,z:1}},top:{eye:{x:0,y:-0.2,z:1.9},up:{x:0,y:1,z:0}}};
 const layout={margin:{l:0,r:0,t:0,b:0},showlegend:true,legend:{x:0,y:1},hovermode:false,

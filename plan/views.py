@@ -1,4 +1,5 @@
-"""What the report draws: the torso, each side's scan and fitted breast, and every planned state.
+"""What the report draws: the torso, each side's scan and fitted breast (and a follow-up's earlier
+breast), and every planned state.
 
 All in the display frame (x to the image's right, y away from the viewer, z up; mm), from the
 scan's viewing frame (x right, y down, z away). A state is the plan at one (kind, degree) — the
@@ -42,6 +43,7 @@ class Views:
     scans: dict[str, np.ndarray]        # side → (N, 3) scan points
     meshes: dict[str, tuple[np.ndarray, np.ndarray]]   # side → fitted (V, 3), (F, 3)
     states: list[State]
+    earlier: dict[str, tuple[np.ndarray, np.ndarray]]  # side → a follow-up's earlier fitted breast (V, 3), (F, 3)
 
 
 def slider_degrees(requested: float) -> list[float]:
@@ -72,7 +74,9 @@ def build_views(plan: Plan) -> Views:
                              "combined", None, None))
     return Views(torso=show(torso_in[~near]), patch=show(patch_in),
                  scans={s: show(transform_points(sp.to_input, sp.scan.points)) for s, sp in plan.sides.items()},
-                 meshes=meshes, states=states)
+                 meshes=meshes, states=states,
+                 earlier={s: (show(sp.follow_up.earlier_surface_input), sp.follow_up.earlier_faces)
+                          for s, sp in plan.sides.items() if sp.follow_up is not None})
 
 
 def _single(side: SidePlan, plan: Plan, kind: str, degree: float) -> Change:

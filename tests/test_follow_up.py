@@ -21,6 +21,7 @@ from breastplan.ingest.realistic import CameraOptions, make_body_scene
 from breastplan.ingest.recording import DepthFrames
 from breastplan.options import IngestOptions
 
+from browser import chromium, requires_chromium
 from clitools import assert_bad_input, run
 
 BODY = BodyOptions(firmness=0.5, weight=0.5, muscle=0.5)
@@ -133,18 +134,27 @@ def earlier_plan(cli, cases):
     return cases / "plan-before"
 
 
-def test_plan_wall_from_reports_each_sides_change_since_the_earlier_plan(cli, cases, earlier_plan):
+@pytest.fixture(scope="module")
+def follow_up_plan(cli, cases, earlier_plan):
+    """The larger breasts planned against the earlier plan: (case folder, --json result)."""
     out = cases / "plan-after"
     res = run(cli, "plan", cases / f"cup{CUPS[1]}.mcap", "--wall-from", earlier_plan, "--out", out, "--json")
     assert res.returncode == 0, res.stderr
-    sides = json.loads(res.stdout)["sides"]
+    return out, json.loads(res.stdout)
+
+
+def test_plan_wall_from_reports_each_sides_change_since_the_earlier_plan(cli, cases, earlier_plan, follow_up_plan):
+    out, result = follow_up_plan
+    sides = result["sides"]
     before = json.loads((earlier_plan / "plan.json").read_text())["sides"]
     for side in ("left", "right"):
         since, true = sides[side]["wall_from"], _true_change(cases, side)
         assert since["case"] == str(earlier_plan / side)
         assert since["earlier_volume_cc"] == before[side]["fit"]["volume_cc"]      # the earlier plan's own fit
         assert abs(since["volume_change_cc"] - true) <= 0.10 * true, (side, since, true)
-    assert "Since the earlier scan" in (out / "report.html").read_text()
+    page = (out / "report.html").read_text()
+    assert "Since the earlier scan" in page and '"earlier":{"left":' in page       # its table, the earlier breasts
+    assert '"earlier":{}' in (earlier_plan / "report.html").read_text()
     again = run(cli, "plan", out, "--wall-from", earlier_plan, "--json")               # the same follow-up, in place
     assert again.returncode == 0, again.stderr
     assert all("fit" in s["reused"] for s in json.loads(again.stdout)["sides"].values())
@@ -221,3 +231,29 @@ def test_wall_from_the_folder_being_written_is_a_usage_error(cli, earlier_plan, 
         res = run(cli, *args)
         assert res.returncode == 2, (args, res.stderr)
         assert "--wall-from" in res.stderr and "writes" in res.stderr
+
+
+def test_the_earlier_breast_is_carried_into_the_follow_ups_frame(cases, earlier_plan, tmp_path):
+    """The earlier fitted surface, carried by the registration, passes by the earlier body's true
+    nipple as the true poses place it in the follow-up's camera frame."""
+    from pathlib import Path
+
+    from breastplan.options import PlanOptions
+    from breastplan.plan.job import run_plan
+
+    plan = run_plan(cases / f"cup{CUPS[1]}.mcap", tmp_path / "plan", PlanOptions(wall_from=str(earlier_plan)))
+    then, now = (np.load(cases / f"cup{cup}.npz") for cup in CUPS)
+    later_from_earlier = now["camera_from_body"] @ np.linalg.inv(then["camera_from_body"])
+    for side, sp in plan.sides.items():
+        nipple = transform_points(later_from_earlier, then[f"{side}_nipple_camera_mm"][None])[0]
+        assert sp.follow_up.case == Path(earlier_plan) / side
+        assert np.linalg.norm(sp.follow_up.earlier_surface_input - nipple, axis=1).min() < 5.0
+
+
+@requires_chromium
+def test_the_follow_ups_report_draws_the_earlier_breasts(follow_up_plan):
+    out, _ = follow_up_plan
+    with chromium(1280, 900) as b:
+        b.open(out / "report.html", wait_for_js="window.breastplanReady === true")
+        names = b.js("document.getElementById('plot').data.map(t => t.name)")
+    assert {"left breast (earlier visit)", "right breast (earlier visit)"} <= set(names), names
