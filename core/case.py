@@ -23,7 +23,7 @@ from . import __version__
 from .artefacts import load_npz, save_npz
 from .atomic import atomic_set, recover
 from .chest_wall import ChestWall
-from .errors import ArtefactError
+from .errors import ArtefactError, BadInputError
 from .frames import is_rigid
 from .options import SIDES
 from .ply import read_ply, write_ply
@@ -176,6 +176,17 @@ class Case:
         """Whether `folder` is a case folder (it holds an ingested scan)."""
         cls(folder)._recover()
         return (Path(folder) / cls.SCAN_NPZ).is_file()
+
+    @classmethod
+    def of_sides(cls, folder: str | Path) -> dict[str, "Case"]:
+        """The cases a folder holds, by side: itself when it is one side's case (from `ingest`), else its
+        `left/` and `right/` (a plan's); BadInputError naming the folder when it holds none."""
+        if cls.holds(folder):
+            return {cls(folder).load_scan().side: cls(folder)}
+        cases = {side: cls(Path(folder) / side) for side in SIDES if cls.holds(Path(folder) / side)}
+        if not cases:
+            raise BadInputError(folder, "is not a case folder: it holds no scan.npz, nor left/ or right/ cases")
+        return cases
 
     # --- scan -------------------------------------------------------------------------
     def save_scan(self, scan: Scan) -> dict[str, Path]:

@@ -18,7 +18,6 @@ from breastplan import BadInputError, transform_points
 from breastplan.case import Case
 from breastplan.chest_wall import ChestWall
 from breastplan.errors import require_folder
-from breastplan.options import SIDES
 
 from .chest_wall import fit_chest_wall
 
@@ -65,16 +64,9 @@ class Registration:
 
 
 def earlier_cases(folder: Path) -> dict[str, Case]:
-    """The cases an earlier case folder holds, by side: a plan's `left/` and `right/`, or one side's
-    from `ingest`; BadInputError naming the folder when it is none."""
-    require_folder(folder, "case folder of an earlier scan to measure the follow-up against")
-    if Case.holds(folder):
-        return {Case(folder).load_scan().side: Case(folder)}
-    cases = {side: Case(Path(folder) / side) for side in SIDES if Case.holds(Path(folder) / side)}
-    if not cases:
-        raise BadInputError(folder, "is not a case folder: it holds no scan.npz, nor left/ or right/ cases, to "
-                                    "measure the follow-up against")
-    return cases
+    """The cases an earlier case folder holds, by side (`Case.of_sides`); BadInputError naming the
+    folder when it is none."""
+    return Case.of_sides(require_folder(folder, "case folder of an earlier scan to measure the follow-up against"))
 
 
 def earlier_case(folder: Path, side: str) -> Case:

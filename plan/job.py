@@ -201,15 +201,9 @@ def _cases_of(source: Path, folder: Path, options: PlanOptions) -> dict[str, Cas
     """The side cases a case folder holds for the requested sides, copied into `folder` unless the
     plan is made in place. A one-side case from `ingest` plans its own side."""
     _check_schema(source)
-    if Case.holds(source):
-        side = Case(source).load_scan().side
-        found = {side: source} if side in options.sides else {}
-        missing = [] if found else list(options.sides)
-    else:
-        found = {s: source / s for s in options.sides if Case.holds(source / s)}
-        missing = [s for s in options.sides if s not in found]
-    if not found and not Case.holds(source) and not any(Case.holds(source / s) for s in ("left", "right")):
-        raise BadInputError(source, "is not a case folder: it holds no scan.npz, nor left/ or right/ cases")
+    held = Case.of_sides(source)
+    found = {s: case.folder for s, case in held.items() if s in options.sides}
+    missing = [] if found and Case.holds(source) else [s for s in options.sides if s not in held]
     if missing:
         raise BadInputError(source, f"holds no scan of the {' and '.join(missing)} breast; plan it from the "
                                     "recording or scan file")
