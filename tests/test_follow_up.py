@@ -257,3 +257,14 @@ def test_the_follow_ups_report_draws_the_earlier_breasts(follow_up_plan):
         b.open(out / "report.html", wait_for_js="window.breastplanReady === true")
         names = b.js("document.getElementById('plot').data.map(t => t.name)")
     assert {"left breast (earlier visit)", "right breast (earlier visit)"} <= set(names), names
+
+
+def test_plan_wall_from_an_earlier_case_with_a_corrupt_scan_is_bad_input(cli, cases, earlier_plan, tmp_path):
+    import shutil
+
+    earlier = tmp_path / "earlier"
+    shutil.copytree(earlier_plan, earlier)
+    (earlier / "left" / "scan.npz").write_bytes((earlier_plan / "left" / "scan.npz").read_bytes()[:1000])
+    res = run(cli, "plan", cases / f"cup{CUPS[1]}.mcap", "--wall-from", earlier, "--out", cases / "out-corrupt")
+    assert_bad_input(res, earlier / "left" / "scan.npz", cases)
+    assert "is not an NPZ file" in res.stderr
