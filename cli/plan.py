@@ -79,6 +79,8 @@ def _print_plan(result: dict, record: dict) -> None:
     """The plan for a person: what was planned, the measures before and after, where the report is."""
     from rich.table import Table
 
+    from breastplan.plan.measures import measure_label
+
     from .output import stdout
 
     m = record["measures"]
@@ -94,7 +96,7 @@ def _print_plan(result: dict, record: dict) -> None:
         table.add_column("left − right before", justify="right")
         table.add_column("after", justify="right")
     for name in m["before"][sides[0]]:
-        row = [name.replace("_", " ")]
+        row = [measure_label(name)]
         for s in sides:
             row += [_number(m["before"][s][name]), _number(m["after"][s][name])]
         if m["asymmetry"]:
@@ -105,7 +107,8 @@ def _print_plan(result: dict, record: dict) -> None:
         fit = record["sides"][s]["fit"]
         reused = record["sides"][s]["reused"]
         below = fit["volume_cc_below_base"]
-        stdout.print(f"{s} fit: {fit['volume_cc']:.1f} cc ({fit['volume_cc'] - below:.1f} + {below:.1f} below the base), "
+        stdout.print(f"{s} fit: {fit['volume_cc']:.1f} cc down to the chest wall ({fit['volume_cc'] - below:.1f} above "
+                     f"the base + {below:.1f} below it), "
                      f"rms {fit['rms_mm']:.2f} mm, normalised residual "
                      f"{fit['normalised_residual']:.4f}" + (f"; reused: {', '.join(reused)}" if reused else ""))
         since = record["sides"][s].get("wall_from")

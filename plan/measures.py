@@ -294,6 +294,13 @@ def breast_measures(landmarks: BodyLandmarks, nipple_mm, vertices_mm, faces, bas
     return {k: float(out[k]) for k in MEASURES}
 
 
+def measure_label(name: str) -> str:
+    """A measure's name as the terminal, the report and the summary show it: its words, with
+    volume_cc shown as the volume above the base (the fitted surface's; the fit's own volume also
+    counts the gap between that base and the chest wall)."""
+    return "volume above base cc" if name == "volume_cc" else name.replace("_", " ")
+
+
 def asymmetry(measures_by_side: dict) -> dict[str, dict[str, float]]:
     """Measure → {"left_minus_right", "abs_difference"} for the measures both sides have
     (`breast_measures` of each); empty unless both sides are given."""

@@ -27,6 +27,7 @@ from importlib import metadata
 import numpy as np
 
 from .job import Plan
+from .measures import measure_label
 from .views import State, Views, build_views, quantise
 
 SKIN_RGB = (236, 188, 160)
@@ -180,7 +181,7 @@ def tables(record: dict) -> str:
             head += ["asymmetry before", "asymmetry after"]
         rows = []
         for name in names:
-            row = [name.replace("_", " ")]
+            row = [measure_label(name)]
             for s in sides:
                 row += [measures["before"][s].get(name), measures["after"][s].get(name)]
             if len(sides) == 2:

@@ -6,6 +6,7 @@ from pathlib import Path
 from breastplan import transform_points
 
 from .job import Plan
+from .measures import measure_label
 from .views import VIEW_TO_DISPLAY
 
 DPI = 110
@@ -35,7 +36,7 @@ def summary_png(plan: Plan, record: dict, path: Path) -> Path:
             ax.legend(loc="upper right", fontsize=7, markerscale=8)
         text = [f"{side}: " + ", ".join(c["name"] for c in record["sides"][side]["changes"][-1:])]
         for name, value in record["measures"]["before"][side].items():
-            text.append(f"{name.replace('_', ' ')}: {value} → {record['measures']['after'][side][name]}")
+            text.append(f"{measure_label(name)}: {value} → {record['measures']['after'][side][name]}")
         fit = record["sides"][side]["fit"]
         text.append(f"fit residual {fit['normalised_residual']:.4f} (rule "
                     f"{'met' if fit['stopping_rule_met'] else 'not met'})")

@@ -84,6 +84,27 @@ def test_the_measures_know_her_midline_and_the_asymmetry_of_her_nipples(planned)
     assert record["measures"]["asymmetry"]["before"]["nipple_below_notch_mm"] == pytest.approx(true_drop, abs=4.0)
 
 
+def test_the_volume_measured_is_the_fitted_surface_above_its_base_and_the_terminal_says_so(cli, planned, monkeypatch):
+    """The measures' volume is what fit.ply encloses (divergence theorem, here in numpy), the fit's
+    volume down to the chest wall that and the gap below the base; the terminal names both."""
+    case, record, _ = planned
+    for side in ("left", "right"):
+        fit = read_ply(case / side / "fit.ply")
+        tri = fit.points[fit.faces]
+        enclosed_cc = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6000.0
+        measured, fitted = record["measures"]["before"][side], record["sides"][side]["fit"]
+        assert measured["volume_cc"] == pytest.approx(enclosed_cc, abs=0.01)
+        assert fitted["volume_cc"] == pytest.approx(enclosed_cc + fitted["volume_cc_below_base"], abs=0.02)
+    monkeypatch.setenv("COLUMNS", "160")                                   # one line per fit
+    res = run(cli, "plan", "--out", case, *[a for c in CHANGES for a in ("--deform", c)])
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "volume above base cc" in res.stdout
+    left = record["sides"]["left"]["fit"]
+    assert (f"left fit: {left['volume_cc']:.1f} cc down to the chest wall "
+            f"({record['measures']['before']['left']['volume_cc']:.1f} above the base + "
+            f"{left['volume_cc_below_base']:.1f} below it)") in res.stdout
+
+
 @pytest.mark.parametrize("name", NAMES[:3])
 @pytest.mark.parametrize("side", ["left", "right"])
 def test_each_planned_breast_reaches_its_degree_by_the_reference_model(planned, side, name):
