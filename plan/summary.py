@@ -38,6 +38,8 @@ def summary_png(plan: Plan, record: dict, path: Path) -> Path:
         for name, value in record["measures"]["before"][side].items():
             text.append(f"{measure_label(name)}: {value} → {record['measures']['after'][side][name]}")
         fit = record["sides"][side]["fit"]
+        text.append(f"fit: {fit['volume_cc']:.1f} cc down to the chest wall "
+                    f"({fit['volume_cc_below_base']:.1f} below the base)")
         text.append(f"fit residual {fit['normalised_residual']:.4f} (rule "
                     f"{'met' if fit['stopping_rule_met'] else 'not met'})")
         since = record["sides"][side].get("wall_from")
