@@ -23,6 +23,10 @@ volume and ptosis figures only when its side is isolated):
 3. nipple asymmetry: per scene with both sides isolated, (left − right) nipple offsets in the body
    frame (found nipples taken there by the inverse of `scene.camera_from_body`), horizontal (X) and
    vertical (Y), minus the true offsets: worst |error| ≤ 4 mm;
+3b. (no target) the breast's boundary, per isolated realistic side (`ingest.realistic.crop_against_truth`):
+   the share of the crop's points whose nearest body vertex is one of MakeHuman's breast (`breast_region`:
+   the vertices its breast targets move), worst; and the share of the body pixels the camera sees within
+   CORE_MM of the true nipple that the crop holds, median and worst;
 4. cup change: per cup pair × view × side, fitted volume change vs the true change (difference of
    `body.half_volumes_cc()` of that side); worst relative error ≤ 10 %. Baseline: the same on the
    Chen pairs (truth: `synthetic.Breast.volume_on_chest_cc`, the primitive and its base extruded to the
@@ -73,7 +77,7 @@ from breastplan.fitting.breast_fit import fit_scan, ptosis_sag_mm
 from breastplan.ingest import synthetic
 from breastplan.ingest.makehuman import BodyOptions
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import CameraOptions, make_body_scene
+from breastplan.ingest.realistic import CORE_MM, BodyScene, CameraOptions, crop_against_truth, make_body_scene
 from breastplan.ingest.recording import DepthFrames
 from breastplan.options import SIDES, IngestOptions
 
@@ -144,6 +148,8 @@ class Side:
     nipple_mm: float | None = None
     nipple_camera: np.ndarray | None = None
     points: int = 0
+    on_breast: float | None = None     # share of its points on MakeHuman's breast (realistic only)
+    core_held: float | None = None     # share of the seen skin within CORE_MM of the true nipple it holds
     fit_status: str | None = None      # None (no fit), "fitted", "rejected"
     fit_error: str | None = None
     fit_s: float | None = None
@@ -215,7 +221,8 @@ def chen_nipples_body(scene: synthetic.Scene) -> dict[str, np.ndarray]:
 
 
 # --- one scene through ingest and fit ---------------------------------------------------------
-def run_side(frames: DepthFrames, side: str, truth_camera: np.ndarray) -> Side:
+def run_side(frames: DepthFrames, side: str, truth_camera: np.ndarray, scene: BodyScene | None = None) -> Side:
+    """One side through ingest and fit; with a realistic `scene`, its crop against the body's breast."""
     out = Side()
     t0 = time.perf_counter()
     try:
@@ -228,6 +235,10 @@ def run_side(frames: DepthFrames, side: str, truth_camera: np.ndarray) -> Side:
     out.nipple_mm = float(np.linalg.norm(out.nipple_camera - truth_camera))
     out.status = "isolated" if out.nipple_mm <= ISOLATED_MM else "far"
     out.points = int(len(ingested.points))
+    if scene is not None:
+        crop = transform_points(np.linalg.inv(ingested.camera_to_breast), ingested.points)
+        shares = crop_against_truth(scene, side, crop)
+        out.on_breast, out.core_held = shares["on_breast"], shares["core_held"]
     t0 = time.perf_counter()
     try:
         fit = fit_scan(ingested)
@@ -260,7 +271,7 @@ def run_realistic(spec: dict) -> tuple[SceneResult, DepthFrames]:
     scene = make_body_scene(pair.body(member, pose), camera)
     frames = DepthFrames(scene.frames(FRAMES, view), scene.camera.K, "synthetic")
     truth_camera = scene.nipples_camera()
-    sides = {s: run_side(frames, s, truth_camera[s]) for s in SIDES}
+    sides = {s: run_side(frames, s, truth_camera[s], scene) for s in SIDES}
     volumes = scene.body.half_volumes_cc()
     result = SceneResult("realistic", f"{pair.name}/{MEMBERS[member]} v{view}",
                          {"pair": pair.name, "varies": pair.varies, "member": MEMBERS[member],
@@ -333,7 +344,11 @@ def max_or_none(values):
 def isolation_figures(scenes: list[SceneResult]) -> dict:
     nipples = [s.sides[side].nipple_mm for s in scenes for side in SIDES if s.sides[side].isolated]
     asym = [max(abs(s.asymmetry_mm["horizontal"]), abs(s.asymmetry_mm["vertical"])) for s in scenes if s.asymmetry_mm]
-    return {"scenes": len(scenes), "both_isolated": sum(s.both_isolated for s in scenes),
+    crops = [s.sides[side] for s in scenes for side in SIDES if s.sides[side].isolated and s.sides[side].on_breast is not None]
+    return {"on_breast_worst_pct": min((100 * c.on_breast for c in crops), default=None),
+            "core_held_worst_pct": min((100 * c.core_held for c in crops), default=None),
+            "core_held_median_pct": median_or_none(100 * c.core_held for c in crops), "crops": len(crops),
+            "scenes": len(scenes), "both_isolated": sum(s.both_isolated for s in scenes),
             "both_isolated_pct": 100.0 * sum(s.both_isolated for s in scenes) / len(scenes),
             "sides_isolated": len(nipples), "sides": 2 * len(scenes),
             "sides_raised": sum(s.sides[side].status == "raised" for s in scenes for side in SIDES),
@@ -624,6 +639,11 @@ def main() -> None:
         figure("nipple_asymmetry_worst", iso["asymmetry_worst_mm"], T["asymmetry_worst_mm"],
                iso_chen["asymmetry_worst_mm"], "mm",
                over=f"{iso['asymmetry_scenes']} scenes with both sides isolated (Chen {iso_chen['asymmetry_scenes']})"),
+        figure("crop_on_breast_worst", iso["on_breast_worst_pct"], None, None, "%", at_most=False,
+               core_held_worst=iso["core_held_worst_pct"], core_held_median=iso["core_held_median_pct"],
+               over=f"{iso['crops']} isolated sides: the least share of a crop's points on MakeHuman's breast; "
+               f"core_held: the share of the skin seen within {CORE_MM:g} mm of the true nipple the crop holds; "
+               "no target"),
         figure("cup_change_relative_error_worst", max_or_none(cup_errors), T["cup_change_worst_pct"],
                max_or_none(chen_cup_errors), "%", median=median_or_none(cup_errors),
                over=f"{len(cup_errors)}/{len(cup)} pair × view × side cases (Chen {len(chen_cup_errors)}/{len(chen_cup)})"),

@@ -39,6 +39,10 @@ SCAN_UNITS = {"mm": 1.0, "m": 1000.0}
 """Units of a scan file → millimetres per unit."""
 VISIBLE_TOLERANCE_MM = 1.0
 """A vertex is visible when the camera's ray towards it hits nothing nearer than this before it."""
+CORE_MM = 50.0
+"""`crop_against_truth`: the breast's core is the skin the camera sees within this of the true nipple."""
+HELD_MM = 4.0
+"""`crop_against_truth`: a pixel of the core is held when a cropped point lies within this of it."""
 
 
 @dataclass(frozen=True)
@@ -181,6 +185,23 @@ def visible_points(scene: BodyScene) -> tuple[np.ndarray, np.ndarray]:
     v, u = np.nonzero(np.isfinite(depth))
     z = depth[v, u]
     return np.column_stack([(u - K[0, 2]) * z / K[0, 0], (v - K[1, 2]) * z / K[1, 1], z]), ids[v, u]
+
+
+def crop_against_truth(scene: BodyScene, side: str, points_camera) -> dict[str, float]:
+    """How an isolated breast's points ((N, 3) camera mm) compare with the body's own breast:
+    `on_breast`, the share of them whose nearest body vertex is one of the breast's (`breast_region`),
+    and `core_held`, the share of the body pixels the camera sees within CORE_MM of the true
+    nipple that lie within HELD_MM of one of them."""
+    from scipy.spatial import cKDTree
+
+    points = np.asarray(points_camera, float)
+    body = transform_points(scene.camera_from_body, scene.body.vertices)
+    region = np.zeros(len(body), bool)
+    region[breast_region(side)] = True
+    seen, ids = visible_points(scene)
+    core = seen[(ids == 0) & (np.linalg.norm(seen - scene.nipples_camera()[side], axis=1) <= CORE_MM)]
+    return {"on_breast": float(region[cKDTree(body).query(points)[1]].mean()),
+            "core_held": float(np.mean(cKDTree(points).query(core)[0] <= HELD_MM))}
 
 
 def visible_faces(scene: BodyScene) -> np.ndarray:

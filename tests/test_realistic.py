@@ -18,8 +18,8 @@ from breastplan import BadInputError, transform_points, write_ply
 from breastplan.ingest import breast
 from breastplan.ingest.makehuman import BodyOptions, make_body
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import (BodyScene, CameraOptions, file_axes, file_from_body, load_body_truth,
-                                          make_body_scene, write_scan_file)
+from breastplan.ingest.realistic import (BodyScene, CameraOptions, crop_against_truth, file_axes, file_from_body,
+                                          load_body_truth, make_body_scene, write_scan_file)
 from breastplan.ingest.scan import ingest
 from breastplan.ingest.recording import DepthFrames, write_recording
 from breastplan.ingest.rendering import noisy_frames
@@ -104,6 +104,19 @@ def test_automatic_isolation_finds_the_nipple(name, side):
     assert np.linalg.norm(head - found, axis=1).min() > 150.0
     for hand in ("left-hand", "right-hand"):
         assert np.linalg.norm(found - body.joints[hand]) > 120.0
+
+
+@pytest.mark.parametrize("side", SIDES)
+@pytest.mark.parametrize("name", list(SCENES))
+def test_the_isolated_breast_is_the_breast_and_all_of_its_core(name, side):
+    """The breast's own boundary, against MakeHuman's: every isolated point lies on the skin its
+    breast targets move (the nearest body vertex is one of them), and the crop holds all the skin
+    the camera sees within CORE_MM of the true nipple (each such pixel within HELD_MM of a point)."""
+    scene, _ = scene_and_frames(name)
+    result = ingested(name, side)
+    shares = crop_against_truth(scene, side, transform_points(np.linalg.inv(result.camera_to_breast), result.points))
+    assert shares["on_breast"] >= 0.99, f"{name}, {side}: {100 * (1 - shares['on_breast']):.1f} % off the breast"
+    assert shares["core_held"] >= 0.98, f"{name}, {side}: the crop misses {100 * (1 - shares['core_held']):.1f} % of the core"
 
 
 def test_asymmetric_nipple_offsets_match_the_truth():
