@@ -2,7 +2,8 @@
 
 The page draws the torso (grey points), each original breast (dark points) and the planned breast
 (a skin-coloured mesh) superimposed, for a follow-up the breast as fitted at the earlier visit (a
-translucent blue mesh), the torso near the breasts coloured by how far the plan moves it, a degree
+translucent blue mesh), the landmarks the measures start from (the sternal notch, the midline and
+the nipples found, red), the torso near the breasts coloured by how far the plan moves it, a degree
 slider per planned kind, the combination as planned, front/side/top views, the measures before and
 after with the asymmetry between sides, the fits' quality, a follow-up's volume change since the
 earlier scan, and the inputs, options and versions. Geometry travels as base64 typed arrays
@@ -32,6 +33,8 @@ from .views import State, Views, build_views, quantise
 
 SKIN_RGB = (236, 188, 160)
 SKIN = "rgb({},{},{})".format(*SKIN_RGB)
+LANDMARK = "#c0392b"
+"""The colour of the landmarks the measures start from: sternal notch, midline, the nipples found."""
 TITLE = "breastplan — surgical plan"
 POSTER_PX = (760, 640)
 """The poster's width and height, px: those of the plot it stands in for."""
@@ -71,8 +74,9 @@ def page_data(plan: Plan, views: Views) -> dict:
             "scans": {s: _points(views.scans[s]) for s in sides},
             "meshes": {s: _mesh(*views.meshes[s]) for s in sides},
             "earlier": {s: _mesh(*views.earlier[s]) for s in views.earlier},
+            "landmarks": {k: v.round(2).tolist() for k, v in views.landmarks.items()},
             "states": states, "sliders": sliders, "cmax": cmax(views), "first": first_state(plan, views).key,
-            "skin": SKIN}
+            "skin": SKIN, "landmark": LANDMARK}
 
 
 def cmax(views: Views) -> float:
@@ -91,7 +95,7 @@ def first_state(plan: Plan, views: Views) -> State:
 def poster_png(views: Views, state: State, top: float) -> bytes:
     """PNG (POSTER_PX) of `state` seen from the front (x right, z up, equal mm scales): the torso grey,
     the surface the plan moves coloured by how far (viridis, 0..`top` mm), each scanned breast dark
-    and each planned breast a shaded skin-coloured surface over it."""
+    and each planned breast a shaded skin-coloured surface over it, the landmarks red."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -107,6 +111,10 @@ def poster_png(views: Views, state: State, top: float) -> bytes:
     for side, scan in views.scans.items():
         ax.scatter(scan[:, 0], scan[:, 2], s=3.0, c="#2b2b2b", linewidths=0)
         ax.add_collection(_surface(state.mesh[side], views.meshes[side][1]))
+    marks = views.landmarks
+    ax.plot(marks["midline"][:, 0], marks["midline"][:, 2], "--", color=LANDMARK, linewidth=1.5)
+    ax.scatter(*marks["sternal notch"][:, [0, 2]].T, s=30.0, c=LANDMARK)
+    ax.scatter(*marks["nipples"][:, [0, 2]].T, s=24.0, c=LANDMARK, marker="D")
     ax.set_aspect("equal")
     ax.autoscale_view()
     out = io.BytesIO()
@@ -153,7 +161,7 @@ def render(plan: Plan, record: dict) -> str:
     """The page's HTML for a plan and its plan.json record."""
     from plotly.offline import get_plotlyjs
 
-    views = build_views(plan)
+    views = build_views(plan, record["measures"]["landmarks"])
     data = page_data(plan, views)
     poster = poster_png(views, first_state(plan, views), data["cmax"])
     parts = {"TITLE": TITLE, "POSTER": base64.b64encode(poster).decode("ascii"), "TABLES": tables(record),
@@ -287,6 +295,15 @@ for(const s of Object.keys(P.earlier)){   // a follow-up: the breast as fitted a
  traces.push({type:'mesh3d',name:s+' breast (earlier visit)',x:v[0],y:v[1],z:v[2],i:f[0],j:f[1],k:f[2],
   color:'#6a7fb5',opacity:0.35,showlegend:true,hoverinfo:'skip'});
 }
+const L=P.landmarks, col=k=>[0,1,2].map(a=>L[k].map(p=>p[a]));   // what the measures start from
+const mark={color:P.landmark};
+traces.push({type:'scatter3d',mode:'lines',name:'midline',legendgroup:'landmarks',x:col('midline')[0],
+ y:col('midline')[1],z:col('midline')[2],line:{...mark,width:3,dash:'dash'},hoverinfo:'skip'});
+traces.push({type:'scatter3d',mode:'markers+text',name:'sternal notch',legendgroup:'landmarks',x:col('sternal notch')[0],
+ y:col('sternal notch')[1],z:col('sternal notch')[2],text:['sternal notch'],textposition:'top center',
+ textfont:{...mark,size:11},marker:{...mark,size:4},hoverinfo:'skip'});
+traces.push({type:'scatter3d',mode:'markers',name:'nipples (found)',legendgroup:'landmarks',x:col('nipples')[0],
+ y:col('nipples')[1],z:col('nipples')[2],marker:{...mark,size:3.5,symbol:'diamond'},hoverinfo:'skip'});
 const views={front:{eye:{x:0,y:-1.9,z:0.15},up:{x:0,y:0,z:1}},side:{eye:{x:1.9,y:-0.3,z:0.1},up:{x:0,y:0,z:1}},top:{eye:{x:0,y:-0.2,z:1.9},up:{x:0,y:1,z:0}}};
 const layout={margin:{l:0,r:0,t:0,b:0},showlegend:true,legend:{x:0,y:1},hovermode:false,
  scene:{aspectmode:'data',xaxis:{visible:false},yaxis:{visible:false},zaxis:{visible:false},camera:views.front}};

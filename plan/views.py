@@ -23,6 +23,11 @@ TORSO_POINTS = 12_000
 """At most this many torso points are drawn (a seeded subsample)."""
 VIEW_TO_DISPLAY = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])
 """Viewing frame (y down, z away) → display frame (y away, z up)."""
+MIDLINE_MM = (60.0, -350.0)
+"""The midline drawn: her skin on the mid-sagittal plane, from this far above the sternal notch to
+this far below it (along the up axis), mm."""
+MIDLINE_STEP_MM = 10.0
+"""The midline drawn takes the most anterior torso point within half this of the plane, every this along up."""
 
 
 @dataclass(frozen=True)
@@ -44,6 +49,8 @@ class Views:
     meshes: dict[str, tuple[np.ndarray, np.ndarray]]   # side → fitted (V, 3), (F, 3)
     states: list[State]
     earlier: dict[str, tuple[np.ndarray, np.ndarray]]  # side → a follow-up's earlier fitted breast (V, 3), (F, 3)
+    landmarks: dict[str, np.ndarray]    # what the measures start from: "sternal notch" (1, 3), "midline" (K, 3)
+                                        # her skin on the mid-sagittal plane, "nipples" (sides, 3) as found
 
 
 def slider_degrees(requested: float) -> list[float]:
@@ -51,8 +58,9 @@ def slider_degrees(requested: float) -> list[float]:
     return sorted({*map(float, range(1, 9)), float(requested)})
 
 
-def build_views(plan: Plan) -> Views:
-    """Every state of the plan in the display frame."""
+def build_views(plan: Plan, landmarks: dict) -> Views:
+    """Every state of the plan in the display frame; `landmarks`: plan.json's measures.landmarks
+    (the sternal notch and the up axis, input frame, mm)."""
     first = next(iter(plan.sides.values()))
     to_display = VIEW_TO_DISPLAY @ first.scan.view_from_camera        # input frame → display frame
     torso_in = first.scan.torso_camera
@@ -76,7 +84,25 @@ def build_views(plan: Plan) -> Views:
                  scans={s: show(transform_points(sp.to_input, sp.scan.points)) for s, sp in plan.sides.items()},
                  meshes=meshes, states=states,
                  earlier={s: (show(sp.follow_up.earlier_surface_input), sp.follow_up.earlier_faces)
-                          for s, sp in plan.sides.items() if sp.follow_up is not None})
+                          for s, sp in plan.sides.items() if sp.follow_up is not None},
+                 landmarks=_landmarks(plan, landmarks, show))
+
+
+def _landmarks(plan: Plan, landmarks: dict, show) -> dict[str, np.ndarray]:
+    scan = next(iter(plan.sides.values())).scan
+    notch = np.asarray(landmarks["sternal_notch_mm"], float)
+    up, left = (np.asarray(landmarks[k], float) for k in ("up_axis", "left_axis"))
+    torso = scan.torso_camera
+    height, across = (torso - notch) @ up, (torso - notch) @ left
+    near = (np.abs(across) <= MIDLINE_STEP_MM / 2) & (height <= MIDLINE_MM[0]) & (height >= MIDLINE_MM[1])
+    anterior = -(torso[near] @ scan.view_from_camera[2, :3])                 # towards the camera
+    step = np.floor(height[near] / MIDLINE_STEP_MM)
+    order = np.lexsort((-anterior, -step))                                     # top down, front first
+    first = order[np.unique(step[order], return_index=True)[1]][::-1]         # one per step, top down
+    profile = torso[near][first]
+    profile -= np.outer((profile - notch) @ left, left)                      # onto the plane
+    return {"sternal notch": show(notch[None]), "midline": show(profile),
+            "nipples": show(np.array([sp.scan.nipple_camera_mm for sp in plan.sides.values()]))}
 
 
 def _single(side: SidePlan, plan: Plan, kind: str, degree: float) -> Change:

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from hypothesis import given, settings
+from scipy.spatial import cKDTree
 from hypothesis import strategies as st
 
 import reference_model as ref
@@ -24,6 +25,7 @@ from breastplan.ingest.makehuman import BodyOptions
 from breastplan.ingest.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
 from breastplan.plan.job import sample_recording
 from breastplan.plan.surface import BAND, PlannedChange, smoothstep
+from breastplan.plan.views import VIEW_TO_DISPLAY
 from breastplan import Primitive
 
 TRUTH = sample_recording().with_name("sample_truth.npz")
@@ -382,7 +384,8 @@ def test_the_report_opens_on_a_picture_of_the_plan_and_its_measures_without_any_
 @requires_chromium
 def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(planned, tmp_path):
     """Headless Chromium opens report.html from disk, draws it without a single request leaving the
-    page, and redraws the patient when a degree slider moves and when the view changes."""
+    page, and redraws the patient when a degree slider moves and when the view changes; the landmarks
+    it draws lie where her truth says (the nipples, her mid-sagittal plane)."""
     case, record, _ = planned
     with chromium(1280, 900) as b:
         b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
@@ -407,6 +410,8 @@ def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(pl
         assert b.requests() == [] and b.console_errors() == []
         table = b.js("document.querySelector('table.measures').innerText")
         assert "volume" in table
+        drawn = b.js("Object.fromEntries(document.getElementById('plot').data.filter(t => t.legendgroup === "
+                     "'landmarks').map(t => [t.name, [Array.from(t.x), Array.from(t.y), Array.from(t.z)]]))")
         if os.environ.get("BREASTPLAN_SCREENSHOT"):                         # the README's screenshot
             b.driver.find_element("css selector", "button[data-view='front']").click()
             b.driver.find_element("css selector", "#combined").click()
@@ -415,6 +420,18 @@ def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(pl
                     break
                 time.sleep(0.05)
             b.screenshot(os.environ["BREASTPLAN_SCREENSHOT"])
+    assert set(drawn) == {"sternal notch", "midline", "nipples (found)"}
+    # against the sample's truth, taken from her camera frame to the display frame as the report takes it
+    truth = np.load(TRUTH)
+    to_display = VIEW_TO_DISPLAY @ np.load(case / "left" / "scan.npz")["view_from_camera"]
+    nipples = transform_points(to_display, np.array([truth["left_nipple_camera_mm"], truth["right_nipple_camera_mm"]]))
+    assert np.linalg.norm(np.array(drawn["nipples (found)"]).T - nipples, axis=1).max() < 8.0
+    body_from_display = np.linalg.inv(to_display @ truth["camera_from_body"])
+    midline = transform_points(body_from_display, np.array(drawn["midline"]).T)
+    assert np.abs(midline[:, 0]).max() < 10.0                            # in her mid-sagittal plane (body x = 0)
+    assert np.linalg.norm(midline[0] - midline[-1]) > 300.0               # down her sternum
+    skin = transform_points(np.linalg.inv(truth["camera_from_body"]), truth["vertices"])
+    assert np.median(cKDTree(skin).query(midline)[0]) < 10.0             # on her skin (vertices ~10 mm apart)
 
 
 def test_a_side_case_of_an_older_schema_is_named_as_such(planned, cli, tmp_path):
