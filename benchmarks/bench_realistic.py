@@ -27,6 +27,10 @@ volume and ptosis figures only when its side is isolated):
    the share of the crop's points whose nearest body vertex is one of MakeHuman's breast (`breast_region`:
    the vertices its breast targets move), worst; and the share of the body pixels the camera sees within
    CORE_MM of the true nipple that the crop holds, median and worst;
+3c. (no target) the plan's landmarks (`plan.measures.find_landmarks` on the torso ingest found and the
+   nipples found), per scene with both sides isolated, against the body's frame: the up axis's and the
+   mid-sagittal plane normal's angles from the body's Y and X axes, and the nipple-to-midline measure
+   minus the true one (|X| of the true nipple), median and worst; baseline: the same on the Chen torsos;
 4. cup change: per cup pair × view × side, fitted volume change vs the true change (difference of
    `body.half_volumes_cc()` of that side); worst relative error ≤ 10 %. Baseline: the same on the
    Chen pairs (truth: `synthetic.Breast.volume_on_chest_cc`, the primitive and its base extruded to the
@@ -80,6 +84,7 @@ from breastplan.ingest.pipeline import ingest_frames
 from breastplan.ingest.realistic import CORE_MM, BodyScene, CameraOptions, crop_against_truth, make_body_scene
 from breastplan.ingest.recording import DepthFrames
 from breastplan.options import SIDES, IngestOptions
+from breastplan.plan.measures import find_landmarks
 
 from timing import fmt, median_times, rounded
 
@@ -178,6 +183,7 @@ class SceneResult:
     sides: dict = field(default_factory=dict)
     asymmetry_mm: dict | None = None   # {"horizontal": err, "vertical": err} when both sides are isolated
     truth: dict = field(default_factory=dict)
+    landmarks: dict | None = None      # `landmark_errors` when both sides are isolated
     wall_s: float = 0.0
 
     @property
@@ -187,6 +193,7 @@ class SceneResult:
     def as_dict(self) -> dict:
         return {"kind": self.kind, "label": self.label, "meta": self.meta, "truth": self.truth,
                 "sides": {s: v.as_dict() for s, v in self.sides.items()}, "asymmetry_mm": self.asymmetry_mm,
+                "landmarks": self.landmarks,
                 "both_isolated": self.both_isolated, "wall_s": self.wall_s}
 
 
@@ -221,15 +228,16 @@ def chen_nipples_body(scene: synthetic.Scene) -> dict[str, np.ndarray]:
 
 
 # --- one scene through ingest and fit ---------------------------------------------------------
-def run_side(frames: DepthFrames, side: str, truth_camera: np.ndarray, scene: BodyScene | None = None) -> Side:
-    """One side through ingest and fit; with a realistic `scene`, its crop against the body's breast."""
-    out = Side()
+def run_side(frames: DepthFrames, side: str, truth_camera: np.ndarray, scene: BodyScene | None = None):
+    """One side through ingest and fit; with a realistic `scene`, its crop against the body's breast.
+    (Side, what ingest returned or None)."""
+    out, ingested = Side(), None
     t0 = time.perf_counter()
     try:
         ingested = ingest_frames(frames, IngestOptions(side=side))
     except BadInputError as exc:
         out.ingest_s, out.error = time.perf_counter() - t0, str(exc)
-        return out
+        return out, ingested
     out.ingest_s = time.perf_counter() - t0
     out.nipple_camera = np.asarray(ingested.nipple_camera, float)
     out.nipple_mm = float(np.linalg.norm(out.nipple_camera - truth_camera))
@@ -244,7 +252,7 @@ def run_side(frames: DepthFrames, side: str, truth_camera: np.ndarray, scene: Bo
         fit = fit_scan(ingested)
     except BadInputError as exc:
         out.fit_s, out.fit_status, out.fit_error = time.perf_counter() - t0, "rejected", str(exc)
-        return out
+        return out, ingested
     out.fit_s, out.fit_status = time.perf_counter() - t0, "fitted"
     out.volume_cc, out.residual = float(fit.volume_cc), float(fit.ffd.residual)
     out.b0, out.b1 = (float(v) for v in fit.superquadric.deformation.params("ptosis"))
@@ -252,7 +260,7 @@ def run_side(frames: DepthFrames, side: str, truth_camera: np.ndarray, scene: Bo
     out.iterations = (int(fit.superquadric.iterations), int(fit.ffd.iterations))
     out.stage_s = (float(fit.superquadric.seconds), float(fit.ffd.seconds))
     out.converged = bool(fit.ffd.converged)
-    return out
+    return out, ingested
 
 
 def asymmetry(sides: dict[str, Side], body_from_camera: np.ndarray, truth_body: dict) -> dict | None:
@@ -264,6 +272,26 @@ def asymmetry(sides: dict[str, Side], body_from_camera: np.ndarray, truth_body: 
     return {"horizontal": float(d[0]), "vertical": float(d[1])}
 
 
+def landmark_errors(runs: dict, camera_from_body: np.ndarray, truth_body: dict) -> dict | None:
+    """The plan's landmarks (`plan.measures.find_landmarks` on the torso ingest found, with both
+    nipples found) against the body's frame (X its left, Y up): the up axis's and the mid-sagittal
+    plane's normal's angles from Y and X (degrees), and each nipple's distance from the plane minus
+    the true one (|X| of the true nipple, mm). None unless both sides are isolated."""
+    if not all(side.isolated for side, _ in runs.values()):
+        return None
+    ingested = runs["left"][1]
+    nipples = {s: side.nipple_camera for s, (side, _) in runs.items()}
+    try:
+        found = find_landmarks(ingested.torso_camera, nipples, ingested.view_from_camera)
+    except BadInputError as exc:
+        return {"error": str(exc)}
+    angle = lambda a, b: float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))  # noqa: E731
+    R = camera_from_body[:3, :3]
+    midline = {s: abs((nipples[s] - found.midline_point) @ found.left_axis) - abs(truth_body[s][0]) for s in SIDES}
+    return {"up_deg": angle(found.up_axis, R[:, 1]), "normal_deg": angle(found.left_axis, R[:, 0]),
+            "nipple_to_midline_mm": midline}
+
+
 def run_realistic(spec: dict) -> tuple[SceneResult, DepthFrames]:
     start = time.perf_counter()
     pair, member, view = spec["pair"], spec["member"], spec["view"]
@@ -271,7 +299,8 @@ def run_realistic(spec: dict) -> tuple[SceneResult, DepthFrames]:
     scene = make_body_scene(pair.body(member, pose), camera)
     frames = DepthFrames(scene.frames(FRAMES, view), scene.camera.K, "synthetic")
     truth_camera = scene.nipples_camera()
-    sides = {s: run_side(frames, s, truth_camera[s], scene) for s in SIDES}
+    runs = {s: run_side(frames, s, truth_camera[s], scene) for s in SIDES}
+    sides = {s: run[0] for s, run in runs.items()}
     volumes = scene.body.half_volumes_cc()
     result = SceneResult("realistic", f"{pair.name}/{MEMBERS[member]} v{view}",
                          {"pair": pair.name, "varies": pair.varies, "member": MEMBERS[member],
@@ -280,6 +309,7 @@ def run_realistic(spec: dict) -> tuple[SceneResult, DepthFrames]:
                           "wall_mm": camera.wall_mm, "body": {**pair.body(member, pose).__dict__}},
                          sides, asymmetry(sides, np.linalg.inv(scene.camera_from_body), scene.body.nipples),
                          {"half_volume_cc": volumes})
+    result.landmarks = landmark_errors(runs, scene.camera_from_body, scene.body.nipples)
     result.wall_s = time.perf_counter() - start
     return result, frames
 
@@ -290,7 +320,8 @@ def run_chen(spec: dict) -> tuple[SceneResult, DepthFrames]:
     frames = DepthFrames(synthetic.depth_frames(scene, FRAMES, spec["seed"]), scene.K, "synthetic")
     truth_body = chen_nipples_body(scene)
     truth_camera = {s: transform_points(scene.camera_from_body, truth_body[s][None])[0] for s in SIDES}
-    sides = {s: run_side(frames, s, truth_camera[s]) for s in SIDES}
+    runs = {s: run_side(frames, s, truth_camera[s]) for s in SIDES}
+    sides = {s: run[0] for s, run in runs.items()}
     truth = {"volume_cc": {s: scene.breasts[s].volume_on_chest_cc(s) for s in SIDES},
              "b0": {s: float(scene.breasts[s].deformation.params("ptosis")[0]) for s in SIDES},
              "sag_mm": {s: ptosis_sag_mm(scene.breasts[s].primitive, scene.breasts[s].deformation.params("ptosis"))
@@ -298,6 +329,7 @@ def run_chen(spec: dict) -> tuple[SceneResult, DepthFrames]:
     result = SceneResult("chen", f"chen s{spec['seed']}{' ×' + format(CHEN_SCALE, 'g') if spec['scaled'] else ''}",
                          {**spec, "distance_mm": float(scene.meta["distance_mm"]), "resolution": "640x400"},
                          sides, asymmetry(sides, np.linalg.inv(scene.camera_from_body), truth_body), truth)
+    result.landmarks = landmark_errors(runs, scene.camera_from_body, truth_body)
     result.wall_s = time.perf_counter() - start
     return result, frames
 
@@ -344,8 +376,17 @@ def max_or_none(values):
 def isolation_figures(scenes: list[SceneResult]) -> dict:
     nipples = [s.sides[side].nipple_mm for s in scenes for side in SIDES if s.sides[side].isolated]
     asym = [max(abs(s.asymmetry_mm["horizontal"]), abs(s.asymmetry_mm["vertical"])) for s in scenes if s.asymmetry_mm]
-    crops = [s.sides[side] for s in scenes for side in SIDES if s.sides[side].isolated and s.sides[side].on_breast is not None]
-    return {"on_breast_worst_pct": min((100 * c.on_breast for c in crops), default=None),
+    crops = [s.sides[side] for s in scenes for side in SIDES
+             if s.sides[side].isolated and s.sides[side].on_breast is not None]
+    marks = [s.landmarks for s in scenes if s.landmarks and "error" not in s.landmarks]
+    midline = [abs(m["nipple_to_midline_mm"][side]) for m in marks for side in SIDES]
+    return {"landmark_scenes": len(marks), "landmark_errors": sum(bool(s.landmarks and "error" in s.landmarks)
+                                                                 for s in scenes),
+            "up_worst_deg": max_or_none(m["up_deg"] for m in marks),
+            "up_median_deg": median_or_none(m["up_deg"] for m in marks),
+            "normal_worst_deg": max_or_none(m["normal_deg"] for m in marks),
+            "midline_median_mm": median_or_none(midline), "midline_worst_mm": max_or_none(midline),
+            "on_breast_worst_pct": min((100 * c.on_breast for c in crops), default=None),
             "core_held_worst_pct": min((100 * c.core_held for c in crops), default=None),
             "core_held_median_pct": median_or_none(100 * c.core_held for c in crops), "crops": len(crops),
             "scenes": len(scenes), "both_isolated": sum(s.both_isolated for s in scenes),
@@ -644,6 +685,13 @@ def main() -> None:
                over=f"{iso['crops']} isolated sides: the least share of a crop's points on MakeHuman's breast; "
                f"core_held: the share of the skin seen within {CORE_MM:g} mm of the true nipple the crop holds; "
                "no target"),
+        figure("nipple_to_midline_error_worst", iso["midline_worst_mm"], None, iso_chen["midline_worst_mm"], "mm",
+               median=iso["midline_median_mm"], up_axis_worst_deg=iso["up_worst_deg"],
+               up_axis_median_deg=iso["up_median_deg"],
+               plane_normal_worst_deg=iso["normal_worst_deg"], baseline_up_axis_worst_deg=iso_chen["up_worst_deg"],
+               over=f"{iso['landmark_scenes']} scenes with both sides isolated ({iso['landmark_errors']} without "
+               f"landmarks; Chen {iso_chen['landmark_scenes']}): the plan's nipple-to-midline measure minus the "
+               "true one, and its up axis and mid-sagittal plane against the body's; no target"),
         figure("cup_change_relative_error_worst", max_or_none(cup_errors), T["cup_change_worst_pct"],
                max_or_none(chen_cup_errors), "%", median=median_or_none(cup_errors),
                over=f"{len(cup_errors)}/{len(cup)} pair × view × side cases (Chen {len(chen_cup_errors)}/{len(chen_cup)})"),
