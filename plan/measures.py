@@ -159,7 +159,7 @@ def _mirror_plane(P, tree, n, d, up) -> tuple[np.ndarray, float]:
     return n, d
 
 
-def _profile(P, n, d, up, origin_h) -> tuple[np.ndarray, np.ndarray]:
+def midline_profile(P, n, d, up, origin_h) -> tuple[np.ndarray, np.ndarray]:
     """The anterior midline profile: (heights, anterior coordinates) of the most anterior point
     per BIN_MM height bin of the strip within STRIP_MM of the plane (bins counted from origin_h)."""
     strip = P[np.abs(P @ n - d) < STRIP_MM]
@@ -175,7 +175,7 @@ def _profile(P, n, d, up, origin_h) -> tuple[np.ndarray, np.ndarray]:
 
 def _notch(P, n, d, up, nipple_h) -> tuple[np.ndarray, float]:
     """(the notch (3,), its height): the deepest point of the midline profile above the nipples."""
-    h, a = _profile(P, n, d, up, nipple_h)
+    h, a = midline_profile(P, n, d, up, nipple_h)
     lo, hi = NOTCH_ABOVE_NIPPLES_MM
     inside = (h > nipple_h + lo) & (h < nipple_h + hi)
     if inside.sum() < 3:
@@ -194,7 +194,7 @@ def _notch(P, n, d, up, nipple_h) -> tuple[np.ndarray, float]:
 def _sternum_slope(P, n, d, up, notch_h) -> float:
     """d(anterior)/d(height) of the midline profile over the sternum and upper abdomen (a line fit
     trimmed at 2.5σ), 0 where too little of it is seen."""
-    h, a = _profile(P, n, d, up, notch_h)
+    h, a = midline_profile(P, n, d, up, notch_h)
     lo, hi = STERNUM_BELOW_NOTCH_MM
     inside = (h > notch_h - hi) & (h < notch_h - lo)
     if inside.sum() < MIN_STERNUM_BINS:

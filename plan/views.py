@@ -18,16 +18,15 @@ from breastplan import transform_points
 
 from .changes import Change, change_name, solve_change
 from .job import Plan, SidePlan, method_for
+from .measures import midline_profile
 
 TORSO_POINTS = 12_000
 """At most this many torso points are drawn (a seeded subsample)."""
 VIEW_TO_DISPLAY = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])
 """Viewing frame (y down, z away) → display frame (y away, z up)."""
 MIDLINE_MM = (60.0, -350.0)
-"""The midline drawn: her skin on the mid-sagittal plane, from this far above the sternal notch to
-this far below it (along the up axis), mm."""
-MIDLINE_STEP_MM = 10.0
-"""The midline drawn takes the most anterior torso point within half this of the plane, every this along up."""
+"""The midline drawn: the measures' anterior midline profile (her skin on the mid-sagittal plane),
+from this far above the sternal notch to this far below it (along the up axis), mm."""
 
 
 @dataclass(frozen=True)
@@ -89,19 +88,13 @@ def build_views(plan: Plan, landmarks: dict) -> Views:
 
 
 def _landmarks(plan: Plan, landmarks: dict, show) -> dict[str, np.ndarray]:
-    scan = next(iter(plan.sides.values())).scan
     notch = np.asarray(landmarks["sternal_notch_mm"], float)
     up, left = (np.asarray(landmarks[k], float) for k in ("up_axis", "left_axis"))
-    torso = scan.torso_camera
-    height, across = (torso - notch) @ up, (torso - notch) @ left
-    near = (np.abs(across) <= MIDLINE_STEP_MM / 2) & (height <= MIDLINE_MM[0]) & (height >= MIDLINE_MM[1])
-    anterior = -(torso[near] @ scan.view_from_camera[2, :3])                 # towards the camera
-    step = np.floor(height[near] / MIDLINE_STEP_MM)
-    order = np.lexsort((-anterior, -step))                                     # top down, front first
-    first = order[np.unique(step[order], return_index=True)[1]][::-1]         # one per step, top down
-    profile = torso[near][first]
-    profile -= np.outer((profile - notch) @ left, left)                      # onto the plane
-    return {"sternal notch": show(notch[None]), "midline": show(profile),
+    offset, top = float(left @ notch), float(up @ notch)
+    height, front = midline_profile(next(iter(plan.sides.values())).scan.torso_camera, left, offset, up, top)
+    keep = (height <= top + MIDLINE_MM[0]) & (height >= top + MIDLINE_MM[1])
+    profile = offset * left + np.outer(height[keep], up) + np.outer(front[keep], np.cross(left, up))
+    return {"sternal notch": show(notch[None]), "midline": show(profile[::-1]),
             "nipples": show(np.array([sp.scan.nipple_camera_mm for sp in plan.sides.values()]))}
 
 
