@@ -31,6 +31,9 @@ volume and ptosis figures only when its side is isolated):
    nipples found), per scene with both sides isolated, against the body's frame: the up axis's and the
    mid-sagittal plane normal's angles from the body's Y and X axes, and the nipple-to-midline measure
    minus the true one (|X| of the true nipple), median and worst; baseline: the same on the Chen torsos;
+   and the found sternal notch against MakeHuman's (`Body.sternal_notch`), with the two measures taken
+   from it, notch-to-nipple and the nipple's drop below the notch, minus the true ones (no baseline:
+   the Chen torso has no neck);
 4. cup change: per cup pair × view × side, fitted volume change vs the true change (difference of
    `body.half_volumes_cc()` of that side); worst relative error ≤ 10 %. Baseline: the same on the
    Chen pairs (truth: `synthetic.Breast.volume_on_chest_cc`, the primitive and its base extruded to the
@@ -272,11 +275,14 @@ def asymmetry(sides: dict[str, Side], body_from_camera: np.ndarray, truth_body: 
     return {"horizontal": float(d[0]), "vertical": float(d[1])}
 
 
-def landmark_errors(runs: dict, camera_from_body: np.ndarray, truth_body: dict) -> dict | None:
+def landmark_errors(runs: dict, camera_from_body: np.ndarray, truth_body: dict, notch_body=None) -> dict | None:
     """The plan's landmarks (`plan.measures.find_landmarks` on the torso ingest found, with both
     nipples found) against the body's frame (X its left, Y up): the up axis's and the mid-sagittal
     plane's normal's angles from Y and X (degrees), and each nipple's distance from the plane minus
-    the true one (|X| of the true nipple, mm). None unless both sides are isolated."""
+    the true one (|X| of the true nipple, mm). With the true sternal notch (`notch_body`, body frame):
+    the found notch's distance from it, and per side the notch-to-nipple chord and the nipple's drop
+    below the notch (along the found up axis) minus the true ones (true notch and nipple, along Y),
+    mm. None unless both sides are isolated."""
     if not all(side.isolated for side, _ in runs.values()):
         return None
     ingested = runs["left"][1]
@@ -288,8 +294,16 @@ def landmark_errors(runs: dict, camera_from_body: np.ndarray, truth_body: dict) 
     angle = lambda a, b: float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))  # noqa: E731
     R = camera_from_body[:3, :3]
     midline = {s: abs((nipples[s] - found.midline_point) @ found.left_axis) - abs(truth_body[s][0]) for s in SIDES}
-    return {"up_deg": angle(found.up_axis, R[:, 1]), "normal_deg": angle(found.left_axis, R[:, 0]),
-            "nipple_to_midline_mm": midline}
+    out = {"up_deg": angle(found.up_axis, R[:, 1]), "normal_deg": angle(found.left_axis, R[:, 0]),
+           "nipple_to_midline_mm": midline}
+    if notch_body is not None:
+        notch = transform_points(camera_from_body, np.asarray(notch_body, float)[None])[0]
+        out["notch_mm"] = float(np.linalg.norm(found.sternal_notch - notch))
+        out["notch_to_nipple_mm"] = {s: float(np.linalg.norm(nipples[s] - found.sternal_notch)
+                                              - np.linalg.norm(truth_body[s] - notch_body)) for s in SIDES}
+        out["nipple_below_notch_mm"] = {s: float((found.sternal_notch - nipples[s]) @ found.up_axis
+                                                 - (notch_body[1] - truth_body[s][1])) for s in SIDES}
+    return out
 
 
 def run_realistic(spec: dict) -> tuple[SceneResult, DepthFrames]:
@@ -309,7 +323,8 @@ def run_realistic(spec: dict) -> tuple[SceneResult, DepthFrames]:
                           "wall_mm": camera.wall_mm, "body": {**pair.body(member, pose).__dict__}},
                          sides, asymmetry(sides, np.linalg.inv(scene.camera_from_body), scene.body.nipples),
                          {"half_volume_cc": volumes})
-    result.landmarks = landmark_errors(runs, scene.camera_from_body, scene.body.nipples)
+    result.landmarks = landmark_errors(runs, scene.camera_from_body, scene.body.nipples,
+                                   scene.body.sternal_notch)
     result.wall_s = time.perf_counter() - start
     return result, frames
 
@@ -373,6 +388,15 @@ def max_or_none(values):
     return max(values) if values else None
 
 
+def notch_figures(marks: list[dict]) -> dict:
+    """Median and worst |error| of the found notch and of the two measures taken from it (mm)."""
+    errors = {"notch": [m["notch_mm"] for m in marks],
+              **{key: [abs(m[f"{key}_mm"][side]) for m in marks for side in SIDES]
+                 for key in ("notch_to_nipple", "nipple_below_notch")}}
+    return {f"{key}_{name}_mm": stat(values) for key, values in errors.items()
+            for name, stat in (("median", median_or_none), ("worst", max_or_none))}
+
+
 def isolation_figures(scenes: list[SceneResult]) -> dict:
     nipples = [s.sides[side].nipple_mm for s in scenes for side in SIDES if s.sides[side].isolated]
     asym = [max(abs(s.asymmetry_mm["horizontal"]), abs(s.asymmetry_mm["vertical"])) for s in scenes if s.asymmetry_mm]
@@ -386,6 +410,7 @@ def isolation_figures(scenes: list[SceneResult]) -> dict:
             "up_median_deg": median_or_none(m["up_deg"] for m in marks),
             "normal_worst_deg": max_or_none(m["normal_deg"] for m in marks),
             "midline_median_mm": median_or_none(midline), "midline_worst_mm": max_or_none(midline),
+            **notch_figures([m for m in marks if "notch_mm" in m]),
             "on_breast_worst_pct": min((100 * c.on_breast for c in crops), default=None),
             "core_held_worst_pct": min((100 * c.core_held for c in crops), default=None),
             "core_held_median_pct": median_or_none(100 * c.core_held for c in crops), "crops": len(crops),
@@ -692,6 +717,14 @@ def main() -> None:
                over=f"{iso['landmark_scenes']} scenes with both sides isolated ({iso['landmark_errors']} without "
                f"landmarks; Chen {iso_chen['landmark_scenes']}): the plan's nipple-to-midline measure minus the "
                "true one, and its up axis and mid-sagittal plane against the body's; no target"),
+        figure("notch_to_nipple_error_worst", iso["notch_to_nipple_worst_mm"], None, None, "mm",
+               median=iso["notch_to_nipple_median_mm"], notch_median_mm=iso["notch_median_mm"],
+               notch_worst_mm=iso["notch_worst_mm"], nipple_below_notch_median_mm=iso["nipple_below_notch_median_mm"],
+               nipple_below_notch_worst_mm=iso["nipple_below_notch_worst_mm"],
+               over=f"{iso['landmark_scenes']} scenes: the plan's notch-to-nipple chord minus the one between "
+               "MakeHuman's notch and nipple; notch: the found sternal notch's distance from MakeHuman's; "
+               "nipple_below_notch: the nipple's drop below the notch minus the true one; no target, no "
+               "baseline (the Chen torso has no neck)"),
         figure("cup_change_relative_error_worst", max_or_none(cup_errors), T["cup_change_worst_pct"],
                max_or_none(chen_cup_errors), "%", median=median_or_none(cup_errors),
                over=f"{len(cup_errors)}/{len(cup)} pair × view × side cases (Chen {len(chen_cup_errors)}/{len(chen_cup)})"),

@@ -5,8 +5,8 @@ near Y = −820 mm. A body is the base mesh plus MakeHuman's macro targets, blen
 MakeHuman blends them (products of linear weights over the anchors min 0 / average 0.5 /
 max 1), plus breast, asymmetry and torso modifiers, then posed: each arm chain of the
 default rig turned about its shoulder (and the forearm about its elbow) by linear blend
-skinning. The truth it gives: both nipples (centroid of MakeHuman's nipple ring) and the
-exact volume of each half of the closed body.
+skinning. The truth it gives: both nipples (centroid of MakeHuman's nipple ring), the sternal
+notch, and the exact volume of each half of the closed body.
 """
 from __future__ import annotations
 
@@ -34,6 +34,12 @@ MODIFIERS = {
     "underbust": ("torso/measure-underbust-circ-decr", "torso/measure-underbust-circ-incr"),
 }
 """Modifier name → (target at −1, target at +1); 0 is MakeHuman's default."""
+NOTCH_VERTICES = (1522, 815)
+"""The jugular notch on the base mesh, chosen by looking at the mesh: the anterior profile of its
+midline (vertices with X = 0) slopes back from the sternum, is deepest (most posterior) between the
+chest and the chin at vertex 815 (Y ≈ 513 mm on the default body), and rises along the throat above
+it; 1522 is the next midline vertex below (Y ≈ 502 mm), where the sternum's slope ends. The notch,
+the top of the manubrium between the clavicles' heads, lies between them."""
 
 
 @dataclass(frozen=True)
@@ -112,6 +118,11 @@ class Body:
         """Side → the centroid of MakeHuman's nipple ring (mm, body frame)."""
         rings = _asset()["nipple_rings"]
         return {side: self.vertices[ring].mean(0) for side, ring in zip(SIDES, rings)}
+
+    @property
+    def sternal_notch(self) -> np.ndarray:
+        """The jugular notch: the midpoint of NOTCH_VERTICES (mm, body frame)."""
+        return self.vertices[list(NOTCH_VERTICES)].mean(0)
 
     def half_volumes_cc(self) -> dict[str, float]:
         """Side → exact volume (cc) of the closed body on that side of the mid-sagittal plane X = 0."""

@@ -3,7 +3,7 @@
 Truths: closed-form volumes and pole ratios of half superellipsoid meshes; exact changes of the
 measures under known motions of a breast; and, on realistic MakeHuman scenes run through the real
 ingest and fit, the body frame the scene was posed with (its mid-sagittal plane is x = 0, its up +y),
-MakeHuman's nipple rings and a base-mesh vertex pair at the jugular notch.
+MakeHuman's nipple rings and its jugular notch (`Body.sternal_notch`).
 """
 import numpy as np
 import pytest
@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from breastplan import BadInputError, Primitive, transform_points
 from breastplan.case import Provenance, Source
 from breastplan.fitting.breast_fit import fit_breast
-from breastplan.ingest.makehuman import BodyOptions, make_body
+from breastplan.ingest.makehuman import NOTCH_VERTICES, BodyOptions, make_body
 from breastplan.ingest.pipeline import ingest_frames
 from breastplan.ingest.realistic import CameraOptions, make_body_scene
 from breastplan.ingest.recording import DepthFrames
@@ -22,13 +22,6 @@ from breastplan.options import FitOptions, IngestOptions
 from breastplan.plan.measures import MEASURES, BodyLandmarks, asymmetry, base_ring, breast_measures, find_landmarks
 
 SIDES = ("left", "right")
-NOTCH_VERTICES = (1522, 815)
-"""The jugular notch on MakeHuman's base mesh, chosen by looking at the mesh: the anterior profile
-of its midline (vertices with x = 0) slopes back from the sternum, is deepest (most posterior)
-between the chest and the chin at vertex 815 (y ≈ 513 mm on the default body), and rises along the
-throat above it; 1522 is the next midline vertex below (y ≈ 502 mm), where the slope of the
-sternum ends. The notch, the top of the manubrium between the clavicles' heads, lies between
-them: the truth is their midpoint."""
 NOTCH_MM = 15.0
 """The suprasternal hollow is about 25 mm tall on the skin (from the sternum's slope into the
 throat); a surgeon's fingertip finds the notch in it to about this."""
@@ -98,7 +91,7 @@ def measured(name, side):
 def body_truth(scene):
     """The true landmarks in the camera frame: the notch, the body's left (normal of x = 0) and up."""
     R = scene.camera_from_body[:3, :3]
-    notch = transform_points(scene.camera_from_body, scene.body.vertices[list(NOTCH_VERTICES)].mean(0))
+    notch = transform_points(scene.camera_from_body, scene.body.sternal_notch[None])[0]
     return notch, R[:, 0], R[:, 1]
 
 
