@@ -288,13 +288,13 @@ def landmark_errors(runs: dict, camera_from_body: np.ndarray, truth_body: dict, 
     ingested = runs["left"][1]
     nipples = {s: side.nipple_camera for s, (side, _) in runs.items()}
     try:
-        found = find_landmarks(ingested.torso_camera, nipples, ingested.view_from_camera)
+        found = find_landmarks(ingested.torso_camera, nipples, ingested.view_from_camera, ingested.plumb_camera)
     except BadInputError as exc:
         return {"error": str(exc)}
     angle = lambda a, b: float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))  # noqa: E731
     R = camera_from_body[:3, :3]
     midline = {s: abs((nipples[s] - found.midline_point) @ found.left_axis) - abs(truth_body[s][0]) for s in SIDES}
-    out = {"up_deg": angle(found.up_axis, R[:, 1]), "normal_deg": angle(found.left_axis, R[:, 0]),
+    out = {"up_deg": angle(found.up_axis, R[:, 1]), "up_from": found.up_from, "normal_deg": angle(found.left_axis, R[:, 0]),
            "nipple_to_midline_mm": midline}
     if notch_body is not None:
         notch = transform_points(camera_from_body, np.asarray(notch_body, float)[None])[0]
@@ -408,6 +408,9 @@ def isolation_figures(scenes: list[SceneResult]) -> dict:
                                                                  for s in scenes),
             "up_worst_deg": max_or_none(m["up_deg"] for m in marks),
             "up_median_deg": median_or_none(m["up_deg"] for m in marks),
+            **{f"up_{key}_worst_deg": max_or_none(m["up_deg"] for m in marks if m["up_from"] == source)
+               for key, source in (("wall", "wall"), ("profile", "midline profile"))},
+            "up_from_wall": sum(m["up_from"] == "wall" for m in marks),
             "normal_worst_deg": max_or_none(m["normal_deg"] for m in marks),
             "midline_median_mm": median_or_none(midline), "midline_worst_mm": max_or_none(midline),
             **notch_figures([m for m in marks if "notch_mm" in m]),
@@ -712,7 +715,8 @@ def main() -> None:
                "no target"),
         figure("nipple_to_midline_error_worst", iso["midline_worst_mm"], None, iso_chen["midline_worst_mm"], "mm",
                median=iso["midline_median_mm"], up_axis_worst_deg=iso["up_worst_deg"],
-               up_axis_median_deg=iso["up_median_deg"],
+               up_axis_median_deg=iso["up_median_deg"], up_axis_from_wall=iso["up_from_wall"],
+               up_axis_wall_worst_deg=iso["up_wall_worst_deg"], up_axis_profile_worst_deg=iso["up_profile_worst_deg"],
                plane_normal_worst_deg=iso["normal_worst_deg"], baseline_up_axis_worst_deg=iso_chen["up_worst_deg"],
                over=f"{iso['landmark_scenes']} scenes with both sides isolated ({iso['landmark_errors']} without "
                f"landmarks; Chen {iso_chen['landmark_scenes']}): the plan's nipple-to-midline measure minus the "

@@ -99,6 +99,7 @@ class Scan:
     voxel_mm: float
     source: Source
     nipple_found: str = "apex"       # "areola" (centre of the raised disc), "apex" or "given"
+    plumb_camera: np.ndarray | None = None  # (3,) unit normal of a wall behind her, input frame; None: no wall
     timings_ms: dict = field(default_factory=dict)
     provenance: Provenance = field(default_factory=Provenance)
 
@@ -211,6 +212,8 @@ class Case:
         meta = {"timings_ms": {k: round(v, 2) for k, v in scan.timings_ms.items()}, "nipple_found": scan.nipple_found,
                 "chest_wall": "z = polynomial(x, y) in the viewing frame: [degree, x0, y0, sigma_mm, coefficients…]",
                 "camera_frame": torso_frame}
+        if scan.plumb_camera is not None:
+            meta["plumb_camera"] = [float(v) for v in scan.plumb_camera]
         plys = {self.SCAN_PLY: dict(points=scan.points, normals=scan.normals, comments=header),
                 self.CAMERA_PLY: dict(points=scan.torso_camera, comments=[
                     f"breastplan ingest: background-free torso, {torso_frame}", f"source {src.description}"])}
@@ -230,6 +233,9 @@ class Case:
             wall = ChestWall.from_array(art["chest_wall"])
         except ValueError as e:
             raise ArtefactError(npz, f"has a 'chest_wall' {e}") from None
+        plumb = art.meta.get("plumb_camera")
+        if plumb is not None and not _is_unit_vector(plumb):
+            raise ArtefactError(npz, "has a 'plumb_camera' that is not a unit vector")
         breast, torso = read_ply(self.path(self.SCAN_PLY)), read_ply(self.path(self.CAMERA_PLY))
         if breast.normals is None or len(breast.points) != int(art["points"]):
             raise ArtefactError(self.path(self.SCAN_PLY), "does not hold the points and normals scan.npz records")
@@ -243,6 +249,7 @@ class Case:
                     mound_radius_mm=float(art["crop_mound_radius_mm"]), crop_height_mm=float(art["crop_height_mm"]),
                     roi_camera_mm=None if not roi.any() else roi, voxel_mm=float(art["voxel_mm"]), source=source,
                     nipple_found=str(art.meta.get("nipple_found", "apex")),
+                    plumb_camera=None if plumb is None else np.asarray(plumb, float),
                     timings_ms=dict(art.meta.get("timings_ms", {})), provenance=Provenance.from_meta(art.meta))
 
     # --- fit --------------------------------------------------------------------------
@@ -368,6 +375,14 @@ class Case:
             if name in recorded and sha256(path) != recorded[name]:
                 raise ArtefactError(path, f"is not the file {npz} was written with (an interrupted or "
                                           f"foreign write); run the stage again")
+
+
+def _is_unit_vector(value) -> bool:
+    try:
+        v = np.asarray(value, float)
+    except (TypeError, ValueError):
+        return False
+    return v.shape == (3,) and bool(np.isfinite(v).all()) and abs(float(np.linalg.norm(v)) - 1.0) < 1e-6
 
 
 def pose_comment(pose) -> str:

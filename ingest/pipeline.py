@@ -1,7 +1,8 @@
 """The ingest pipeline: depth frames or a scan file → the breast of one side in the breast frame.
 
 fusion → depth to points (open3d) → background removal (depth range, the nearest large
-DBSCAN cluster of coarse voxels) → trunk (head, neck and arms cut off) → chest wall (robust
+DBSCAN cluster of coarse voxels) → a wall behind her, if one stands there (`ingest.background`:
+the plumb the plan's up axis takes) → trunk (head, neck and arms cut off) → chest wall (robust
 height field, mounds excluded) → the breasts among the mounds (a pair placed as breasts
 are), the requested side's → breast crop → breast frame and nipple → outlier removal →
 voxel downsampling → outward normals → breast frame. Every step is timed.
@@ -18,12 +19,15 @@ from breastplan.clock import Clock
 from breastplan.options import IngestOptions
 
 from . import breast as B
+from .background import plumb_wall
 from .chest_wall import fit_chest_wall
 from .depth import depth_range, fuse, to_points
 from .files import ScanCloud
 from .recording import DepthFrames
 from .trunk import Trunk, find_trunk
 
+BEHIND_STRIDE = 2
+"""Every this-many-th pixel row and column beyond the depth slab is looked at for a wall behind her."""
 COARSE_MM = 10.0
 """Voxel size of the coarse cloud used for background removal, chest wall and mounds."""
 DENSE_CELLS = 4_000_000
@@ -50,6 +54,7 @@ class Ingested:
     view_from_camera: np.ndarray     # (4, 4) input frame → viewing frame
     crop: dict                       # mound centre, radius, roi, thresholds
     torso_camera: np.ndarray         # (M, 3) the background-free torso, input frame
+    plumb_camera: np.ndarray | None = None   # (3,) a wall's normal behind her, input frame (ingest.background)
     timings_ms: dict = field(default_factory=dict)
 
 
@@ -95,7 +100,10 @@ def ingest_frames(frames: DepthFrames, options: IngestOptions, clock: Clock | No
     with clock("depth to points (open3d)"):
         near, far = depth_range(image)
         points = to_points(image, frames.K, near, far)
-    return isolate(points, np.eye(4), options, clock, viewer=np.zeros(3))
+        sparse = np.zeros_like(image)
+        sparse[::BEHIND_STRIDE, ::BEHIND_STRIDE] = image[::BEHIND_STRIDE, ::BEHIND_STRIDE]
+        beyond = to_points(sparse, frames.K, far, np.inf)      # beyond the slab: what stands behind her
+    return isolate(points, np.eye(4), options, clock, viewer=np.zeros(3), beyond=beyond)
 
 
 def ingest_cloud(cloud: ScanCloud, options: IngestOptions, clock: Clock | None = None) -> Ingested:
@@ -193,9 +201,9 @@ def _trunk_bulge(body: BodyInView | None) -> float:
 
 
 def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOptions, clock: Clock,
-            viewer: np.ndarray, found: BodyInView | None = None) -> Ingested:
+            viewer: np.ndarray, found: BodyInView | None = None, beyond: np.ndarray | None = None) -> Ingested:
     """The common pipeline on points in the viewing frame (`viewer`: where the camera is; `found`:
-    the body among them, if already found)."""
+    the body among them, if already found; `beyond`: more points farther away, where a wall may stand)."""
     roi, nipple, side = options.roi_camera_mm, options.nipple_camera_mm, options.side
     to_camera = np.linalg.inv(view_from_camera)
     in_roi = _roi_test(roi, to_camera)
@@ -206,6 +214,9 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
         with clock("trunk"):
             found = BodyInView(body, voxels, which, find_trunk(body))
     trunk = found.trunk
+    with clock("a wall behind her"):
+        behind = points[points[:, 2] > found.points[:, 2].max()]
+        plumb = plumb_wall(behind if beyond is None else np.vstack([behind, beyond]))
     with clock("chest wall"):
         torso = found.points[trunk.mask]
         in_trunk = np.bincount(found.which[trunk.mask], minlength=len(found.voxels)) > 0
@@ -240,7 +251,8 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
         view_from_camera=view_from_camera,
         crop={"mound_centre_view_mm": mound.centre, "mound_radius_mm": mound.radius, "mound_peak_mm": mound.peak_mm,
               "roi_camera_mm": None if roi is None else np.asarray(roi, float), "crop_height_mm": B.CROP_MM},
-        torso_camera=transform_points(to_camera, torso), timings_ms=clock.ms)
+        torso_camera=transform_points(to_camera, torso),
+        plumb_camera=None if plumb is None else view_from_camera[:3, :3].T @ plumb, timings_ms=clock.ms)
 
 
 def body_cluster(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -23,10 +23,13 @@ head, neck and arms may be in it):
    nipple: through the torso's middle, normal along the viewing frame's x).
 2. **Up axis** in that plane. The camera may look up or down but is taken as not rolled: the up
    axis lies in the viewing frame's y–z plane (a scan file's viewing frame has its y opposite the
-   declared up axis). It starts at the viewing frame's −y, and the camera's pitch is then
-   corrected by making the anterior midline profile of the sternum and the upper abdomen
-   (130–400 mm below the notch) vertical, as it is on an upright body. Plane, up axis and notch
-   are refined together (`ROUNDS` rounds).
+   declared up axis). With a wall seen behind her (`ingest.background.plumb_wall`), the wall is
+   plumb, and the up axis is the vertical it gives: ⟂ to its normal and to the viewing frame's x
+   (unless that leans over PLUMB_DEG from the viewing frame's up: a slanted backdrop, not a wall).
+   Without one, it starts at the viewing frame's −y, and the camera's pitch is corrected by making
+   the anterior midline profile of the sternum and the upper abdomen (130–400 mm below the notch)
+   vertical, as it is on an upright body of average weight (a heavy body's belly leans it); plane,
+   up axis and notch are then refined together (`ROUNDS` rounds).
 3. **Sternal (jugular) notch**: on the midline profile (the most anterior torso point in 5 mm
    height bins of the strip within 10 mm of the plane), the deepest (most posterior) point
    between 60 and 400 mm above the nipples — the hollow where the sloping upper chest meets the
@@ -67,6 +70,9 @@ MIN_STERNUM_BINS = 20
 """Fewer profile bins than this there (100 mm): the pitch is not corrected."""
 ROUNDS = 4
 """Rounds of plane → notch → pitch."""
+UP_FROM = ("midline profile", "wall")
+PLUMB_DEG = 30.0
+"""A wall's vertical farther than this from the viewing frame's up is not taken (degrees)."""
 MIRROR_ITERATIONS = 40
 """Mirror ICP iterations at most, each time it runs."""
 
@@ -83,8 +89,11 @@ class BodyLandmarks:
     midline_point: np.ndarray   # (3,)
     left_axis: np.ndarray       # (3,)
     up_axis: np.ndarray         # (3,)
+    up_from: str = "midline profile"   # or "wall": what set the up axis (module docstring, step 2)
 
     def __post_init__(self):
+        if self.up_from not in UP_FROM:
+            raise ValueError(f"up_from must be one of {', '.join(UP_FROM)}, got {self.up_from!r}")
         for name in ("sternal_notch", "midline_point", "left_axis", "up_axis"):
             value = np.array(getattr(self, name), dtype=float).reshape(-1)
             if value.shape != (3,) or not np.isfinite(value).all():
@@ -105,16 +114,17 @@ class BodyLandmarks:
         T = np.asarray(T, dtype=float)
         R, t = T[:3, :3], T[:3, 3]
         return BodyLandmarks(R @ self.sternal_notch + t, R @ self.midline_point + t, R @ self.left_axis,
-                             R @ self.up_axis)
+                             R @ self.up_axis, self.up_from)
 
 
 # --- landmarks ---------------------------------------------------------------------------------
-def find_landmarks(torso_mm, nipples: dict, view_from_input=None) -> BodyLandmarks:
+def find_landmarks(torso_mm, nipples: dict, view_from_input=None, plumb=None) -> BodyLandmarks:
     """The mid-sagittal plane, up axis and sternal notch of a frontal scan (module docstring).
 
     torso_mm: (M, 3) the body's points without background, input frame, mm; nipples: side →
     (3,) the nipples found on it (one or both); view_from_input: (4, 4) input → viewing frame
-    (`Scan.view_from_camera`; None: the input frame is the viewing frame, as for a recording).
+    (`Scan.view_from_camera`; None: the input frame is the viewing frame, as for a recording);
+    plumb: (3,) unit normal of a wall behind her, input frame (`Scan.plumb_camera`), or None.
     BadInputError when the torso shows no midline above the nipples."""
     P = _finite_points(torso_mm, "the torso")
     nips = {s: np.asarray(p, float).reshape(3) for s, p in nipples.items()}
@@ -122,6 +132,8 @@ def find_landmarks(torso_mm, nipples: dict, view_from_input=None) -> BodyLandmar
         raise ValueError(f"nipples must map left and/or right to points, got sides {sorted(nipples)}")
     R = np.eye(3) if view_from_input is None else np.asarray(view_from_input, float)[:3, :3]
     level, up = R.T @ [1.0, 0.0, 0.0], R.T @ [0.0, -1.0, 0.0]    # viewing frame: x level, y down
+    walled = None if plumb is None else _plumb_up(plumb, level, up)
+    up = up if walled is None else walled
     fine, coarse = (_voxel_centroids(P, s) for s in VOXEL_MM)
     tree = cKDTree(fine)                          # mirror images are looked up among the fine voxels
     centre = np.mean(list(nips.values()), axis=0)
@@ -133,13 +145,25 @@ def find_landmarks(torso_mm, nipples: dict, view_from_input=None) -> BodyLandmar
         offset = float(np.median(coarse @ left))
     for _ in range(ROUNDS):
         left, offset = _mirror_plane(coarse, tree, left, offset, up)
-        notch_h = _notch(fine, left, offset, up, float(centre @ up))[1]
-        slope = _sternum_slope(fine, left, offset, up, notch_h)
-        up = _unit(_perp(up + slope * np.cross(left, up), level))          # pitch only: no roll
-        left = _unit(_perp(left, up))
+        if walled is None:
+            notch_h = _notch(fine, left, offset, up, float(centre @ up))[1]
+            slope = _sternum_slope(fine, left, offset, up, notch_h)
+            up = _unit(_perp(up + slope * np.cross(left, up), level))          # pitch only: no roll
+            left = _unit(_perp(left, up))
     left, offset = _mirror_plane(coarse, tree, left, offset, up)
     notch = _notch(fine, left, offset, up, float(centre @ up))[0]
-    return BodyLandmarks(notch, centre - (centre @ left - offset) * left, left, up)
+    return BodyLandmarks(notch, centre - (centre @ left - offset) * left, left, up,
+                         "midline profile" if walled is None else "wall")
+
+
+def _plumb_up(plumb, level, view_up) -> np.ndarray | None:
+    """The up axis a plumb wall (unit normal) gives a camera that is not rolled (its `level` x axis
+    horizontal): the vertical, ⟂ to both; None when it leans over PLUMB_DEG from `view_up`."""
+    along = np.cross(np.asarray(plumb, float), level)
+    if np.linalg.norm(along) < 1e-6:
+        return None
+    up = _unit(along) * np.sign(along @ view_up)
+    return up if up @ view_up >= np.cos(np.radians(PLUMB_DEG)) else None
 
 
 def _mirror_plane(P, tree, n, d, up) -> tuple[np.ndarray, float]:

@@ -103,7 +103,7 @@ def plan_measures(plan: Plan) -> dict:
     single change), and their asymmetry (left − right); lengths mm, volumes cc, input frame."""
     first = next(iter(plan.sides.values()))
     landmarks = find_landmarks(first.scan.torso_camera, {s: sp.scan.nipple_camera_mm for s, sp in plan.sides.items()},
-                               first.scan.view_from_camera)
+                               first.scan.view_from_camera, first.scan.plumb_camera)
     before, after = {}, {}
     for side, sp in plan.sides.items():
         verts, nipple = sp.surface_input, sp.scan.nipple_camera_mm
@@ -114,7 +114,7 @@ def plan_measures(plan: Plan) -> dict:
             (("before", before), ("after", after))}
     return _finite({"before": before, "after": after, "asymmetry": asym if len(before) == 2 else {},
                     "landmarks": {"sternal_notch_mm": landmarks.sternal_notch, "up_axis": landmarks.up_axis,
-                                  "left_axis": landmarks.left_axis}})
+                                  "left_axis": landmarks.left_axis, "up_from": landmarks.up_from}})
 
 
 def _finite(x):

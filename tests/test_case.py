@@ -67,6 +67,19 @@ def test_scan_round_trip(tmp_path):
     assert back.provenance == scan.provenance
     T = scan.camera_to_breast                        # the nipple in the breast frame, by hand
     assert np.allclose(back.nipple_breast_mm, T[:3, :3] @ scan.nipple_camera_mm + T[:3, 3])
+    assert back.plumb_camera is None                 # no wall was seen behind her
+
+
+def test_a_wall_behind_her_round_trips_and_a_damaged_one_is_refused(tmp_path):
+    """Truth: the wall's normal is a unit vector; anything else in scan.npz is damage."""
+    plumb = np.array([0.0, 0.6, -0.8])
+    case = Case(tmp_path / "case")
+    case.save_scan(dataclasses.replace(a_scan(), plumb_camera=plumb))
+    assert np.array_equal(case.load_scan().plumb_camera, plumb)
+    damaged = Case(tmp_path / "damaged")
+    damaged.save_scan(dataclasses.replace(a_scan(), plumb_camera=np.array([0.0, 1.0, 1.0])))
+    with pytest.raises(ArtefactError, match="'plumb_camera' that is not a unit vector"):
+        damaged.load_scan()
 
 
 def test_fit_round_trip_and_the_primitive_and_pose_in_the_ply_header(tmp_path):

@@ -64,7 +64,7 @@ def built(name):
                                                                              np.array(scene.camera.size)),
                                       options, Provenance())
         landmarks = find_landmarks(scans["left"].torso_camera, {s: scans[s].nipple_camera_mm for s in SIDES},
-                                   scans["left"].view_from_camera)
+                                   scans["left"].view_from_camera, scans["left"].plumb_camera)
         _built[name] = scene, scans, landmarks
     return _built[name]
 

@@ -1,0 +1,52 @@
+"""A wall behind the patient: a plumb reference for her up axis.
+
+Walls stand plumb, so a wall seen behind an upright patient fixes the one direction a frontal scan
+cannot tell on its own, how far the camera looks up or down: her up axis lies in the wall's plane.
+Works on the points behind the body (viewing frame: x right, y down, z away from the viewer; mm).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+VOXEL_MM = 20.0
+"""The points behind the body are evened out on voxels of this size first."""
+HYPOTHESES = 256
+"""Planes tried (through three voxels drawn with a fixed seed: the same points give the same wall)."""
+INLIER_MM = 15.0
+"""A voxel within this of a plane lies on it."""
+WALL_AREA_MM2 = 0.25e6
+"""A wall covers at least this much (0.25 m²) of the view behind her."""
+FACING_DEG = 45.0
+"""A wall faces the viewer within this: a floor or a ceiling seen at a slant does not."""
+
+
+def plumb_wall(points: np.ndarray) -> np.ndarray | None:
+    """The unit normal (towards the viewer) of the largest plane among `points` (N, 3), the points
+    behind the body, when it covers WALL_AREA_MM2 and faces the viewer within FACING_DEG; else None."""
+    P = np.asarray(points, float)
+    if len(P) < 3:
+        return None
+    keys = np.floor(P / VOXEL_MM).astype(np.int64)
+    keys -= keys.min(axis=0)
+    span = keys.max(axis=0) + 1
+    _, first = np.unique((keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2], return_index=True)
+    Q = P[np.sort(first)]                          # one point per voxel
+    min_voxels = int(WALL_AREA_MM2 / VOXEL_MM**2)
+    if len(Q) < min_voxels:
+        return None
+    draw = np.random.default_rng(0).integers(0, len(Q), (HYPOTHESES, 3))
+    a, b, c = Q[draw[:, 0]], Q[draw[:, 1]], Q[draw[:, 2]]
+    normals = np.cross(b - a, c - a)
+    length = np.linalg.norm(normals, axis=1)
+    ok = length > 1e-6
+    normals, a = normals[ok] / length[ok, None], a[ok]
+    on = np.abs(Q @ normals.T - np.sum(a * normals, axis=1)) < INLIER_MM
+    inliers = Q[on[:, int(np.argmax(on.sum(axis=0)))]]
+    if len(inliers) < min_voxels:
+        return None
+    axes = np.linalg.eigh(np.cov((inliers - inliers.mean(0)).T))[1]      # normal first, then in-plane
+    cells = np.unique(np.floor(inliers @ axes[:, 1:] / VOXEL_MM).astype(np.int64), axis=0)
+    if len(cells) < min_voxels:                  # its area, counted on the plane (voxels count it twice
+        return None                              # where the plane crosses their layers)
+    normal = axes[:, 0] if axes[2, 0] < 0 else -axes[:, 0]
+    return normal if -normal[2] >= np.cos(np.radians(FACING_DEG)) else None
