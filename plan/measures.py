@@ -71,6 +71,7 @@ MIN_STERNUM_BINS = 20
 ROUNDS = 4
 """Rounds of plane → notch → pitch."""
 UP_FROM = ("midline profile", "wall")
+"""What may set the up axis (`BodyLandmarks.up_from`)."""
 PLUMB_DEG = 30.0
 """A wall's vertical farther than this from the viewing frame's up is not taken (degrees)."""
 MIRROR_ITERATIONS = 40
