@@ -35,6 +35,14 @@ SKIN_RGB = (236, 188, 160)
 SKIN = "rgb({},{},{})".format(*SKIN_RGB)
 LANDMARK = "#c0392b"
 """The colour of the landmarks the measures start from: sternal notch, midline, the nipples found."""
+UP_FROM_TEXT = {
+    "wall": "Up (which divides the poles and gives the drop below the notch) is the vertical of the wall "
+            "seen behind her.",
+    "midline profile": "Up (which divides the poles and gives the drop below the notch) is read off her midline "
+                       "profile: no wall was seen behind her. A full abdomen leans it, by up to 10° on a heavy "
+                       "patient; scanned in front of a wall, its vertical is taken instead.",
+}
+"""What the report says of where the up axis came from (`BodyLandmarks.up_from`)."""
 TITLE = "breastplan — surgical plan"
 POSTER_PX = (760, 640)
 """The poster's width and height, px: those of the plot it stands in for."""
@@ -195,7 +203,8 @@ def tables(record: dict) -> str:
             if len(sides) == 2:
                 row += [measures["asymmetry"]["before"].get(name), measures["asymmetry"]["after"].get(name)]
             rows.append(row)
-        parts.append("<h2>Measures (after: the combination as planned)</h2>" + _table(head, rows, "measures"))
+        parts.append("<h2>Measures (after: the combination as planned)</h2>" + _table(head, rows, "measures")
+                     + f'<p id="up-from">{UP_FROM_TEXT[measures["landmarks"].get("up_from", "midline profile")]}</p>')
     rows = [[s, r["fit"]["volume_cc"], r["fit"]["volume_cc_below_base"], r["fit"]["rms_mm"],
              r["fit"]["normalised_residual"], "met" if r["fit"]["stopping_rule_met"] else "not met", r["fit"]["points"],
              NIPPLE_FOUND[r.get("nipple_found", "apex")]]

@@ -11,8 +11,9 @@ from hypothesis import strategies as st
 from breastplan.ingest.background import FACING_DEG, WALL_AREA_MM2, plumb_wall
 from breastplan.ingest.makehuman import BodyOptions
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import CameraOptions, make_body_scene
+from breastplan.ingest.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
 from breastplan.ingest.recording import DepthFrames
+from breastplan.ingest.scan import ingest
 from breastplan.options import IngestOptions
 from breastplan.plan.measures import find_landmarks
 
@@ -80,3 +81,19 @@ def test_ingest_finds_the_wall_behind_a_heavy_patient_and_her_up_axis_from_it(wa
         return
     assert degrees(plumb, R[:, 2]) < WALL_DEG                  # the wall faces the way she does
     assert found.up_from == "wall" and degrees(found.up_axis, R[:, 1]) < 1.0
+
+
+def test_a_scan_file_with_a_wall_gives_its_normal_in_the_files_own_frame(tmp_path):
+    """A scan file in metres with z up (`write_scan_file`: the body frame turned by `file_from_body`):
+    the wall's normal and the up axis come back in the file's frame, as the body's Z and Y turned."""
+    scene = make_body_scene(BodyOptions(weight=0.9, pose="arms-down"),
+                            CameraOptions(resolution="640x400", pitch_deg=-10.0, yaw_deg=6.0, wall_mm=300.0))
+    path = tmp_path / "patient.ply"
+    write_scan_file(path, scene, units="m", up="+z")
+    scans = {side: ingest(path, IngestOptions(side=side, up="+z")) for side in ("left", "right")}
+    turn = file_from_body("+z", "m")[:3, :3] * 1000.0              # a rotation: the file is read in mm
+    plumb = scans["left"].plumb_camera
+    assert plumb is not None and degrees(plumb, turn[:, 2]) < WALL_DEG
+    found = find_landmarks(scans["left"].torso_camera, {s: scan.nipple_camera_mm for s, scan in scans.items()},
+                           scans["left"].view_from_camera, plumb)
+    assert found.up_from == "wall" and degrees(found.up_axis, turn[:, 1]) < 1.0

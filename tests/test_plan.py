@@ -1,6 +1,7 @@
 """`breastplan plan`: the main job on the bundled realistic sample (a MakeHuman patient recorded
 through depthai), checked against the sample's truth and against the reference model; the reuse
 of finished stages; the blend of a change into the chest; bad input."""
+import copy
 import json
 import os
 import re
@@ -24,6 +25,7 @@ from breastplan.deform.global_deformations import Deformation
 from breastplan.ingest.makehuman import BodyOptions
 from breastplan.ingest.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
 from breastplan.plan.job import sample_recording
+from breastplan.plan.report import tables
 from breastplan.plan.surface import BAND, PlannedChange, smoothstep
 from breastplan.plan.views import VIEW_TO_DISPLAY
 from breastplan import Primitive
@@ -85,6 +87,22 @@ def test_the_measures_know_her_midline_and_the_asymmetry_of_her_nipples(planned)
     true_drop = float((nipple["right"] - nipple["left"]) @ up)          # left nipple below the right one
     assert true_drop > 5.0
     assert record["measures"]["asymmetry"]["before"]["nipple_below_notch_mm"] == pytest.approx(true_drop, abs=4.0)
+
+
+def test_the_wall_behind_the_sample_gives_her_up_axis_and_the_report_says_so(planned):
+    """The sample was recorded with a plumb wall 400 mm behind her (its truth's meta): the up axis is
+    its vertical, the body's Y to within a degree, and the report names where up came from."""
+    case, record, _ = planned
+    truth = np.load(TRUTH)
+    assert json.loads(str(truth["meta"]))["camera"]["wall_mm"] is not None
+    landmarks = record["measures"]["landmarks"]
+    up = np.array(landmarks["up_axis"])
+    assert landmarks["up_from"] == "wall"
+    assert np.degrees(np.arccos(np.clip(up @ truth["camera_from_body"][:3, 1], -1, 1))) < 1.0
+    assert "the vertical of the wall seen behind her" in (case / "report.html").read_text()
+    unwalled = copy.deepcopy(record)                                      # a scan with no wall behind her
+    unwalled["measures"]["landmarks"]["up_from"] = "midline profile"
+    assert "no wall was seen behind her" in tables(unwalled)
 
 
 def test_the_volume_measured_is_the_fitted_surface_above_its_base_and_the_terminal_says_so(cli, planned, monkeypatch):
