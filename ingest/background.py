@@ -12,6 +12,8 @@ VOXEL_MM = 20.0
 """The points behind the body are evened out on voxels of this size first."""
 HYPOTHESES = 256
 """Planes tried (through three voxels drawn with a fixed seed: the same points give the same wall)."""
+JUDGES = 1000
+"""The planes are scored on at most this many voxels (drawn with the same seed); the best takes all of its."""
 INLIER_MM = 15.0
 """A voxel within this of a plane lies on it."""
 WALL_AREA_MM2 = 0.25e6
@@ -34,14 +36,16 @@ def plumb_wall(points: np.ndarray) -> np.ndarray | None:
     min_voxels = int(WALL_AREA_MM2 / VOXEL_MM**2)
     if len(Q) < min_voxels:
         return None
-    draw = np.random.default_rng(0).integers(0, len(Q), (HYPOTHESES, 3))
+    rng = np.random.default_rng(0)
+    draw = rng.integers(0, len(Q), (HYPOTHESES, 3))
     a, b, c = Q[draw[:, 0]], Q[draw[:, 1]], Q[draw[:, 2]]
     normals = np.cross(b - a, c - a)
     length = np.linalg.norm(normals, axis=1)
     ok = length > 1e-6
-    normals, a = normals[ok] / length[ok, None], a[ok]
-    on = np.abs(Q @ normals.T - np.sum(a * normals, axis=1)) < INLIER_MM
-    inliers = Q[on[:, int(np.argmax(on.sum(axis=0)))]]
+    normals, offsets = normals[ok] / length[ok, None], np.sum(a[ok] * normals[ok], axis=1) / length[ok]
+    judges = Q[rng.choice(len(Q), min(len(Q), JUDGES), replace=False)]
+    best = int(np.argmax((np.abs(judges @ normals.T - offsets) < INLIER_MM).sum(axis=0)))
+    inliers = Q[np.abs(Q @ normals[best] - offsets[best]) < INLIER_MM]
     if len(inliers) < min_voxels:
         return None
     axes = np.linalg.eigh(np.cov((inliers - inliers.mean(0)).T))[1]      # normal first, then in-plane
