@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from breastplan.voxels import voxel_centroids
+
 VOXEL_MM = 20.0
 """The points behind the body are evened out on voxels of this size first."""
 HYPOTHESES = 256
@@ -28,11 +30,7 @@ def plumb_wall(points: np.ndarray) -> np.ndarray | None:
     P = np.asarray(points, float)
     if len(P) < 3:
         return None
-    keys = np.floor(P / VOXEL_MM).astype(np.int64)
-    keys -= keys.min(axis=0)
-    span = keys.max(axis=0) + 1
-    _, first = np.unique((keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2], return_index=True)
-    Q = P[np.sort(first)]                          # one point per voxel
+    Q = voxel_centroids(P, VOXEL_MM)[0]
     min_voxels = int(WALL_AREA_MM2 / VOXEL_MM**2)
     if len(Q) < min_voxels:
         return None
@@ -49,8 +47,9 @@ def plumb_wall(points: np.ndarray) -> np.ndarray | None:
     if len(inliers) < min_voxels:
         return None
     axes = np.linalg.eigh(np.cov((inliers - inliers.mean(0)).T))[1]      # normal first, then in-plane
-    cells = np.unique(np.floor(inliers @ axes[:, 1:] / VOXEL_MM).astype(np.int64), axis=0)
-    if len(cells) < min_voxels:                  # its area, counted on the plane (voxels count it twice
-        return None                              # where the plane crosses their layers)
+    cells = np.floor(inliers @ axes[:, 1:] / VOXEL_MM).astype(np.int64)
+    cells -= cells.min(axis=0)
+    if len(np.unique(cells[:, 0] * (cells[:, 1].max() + 1) + cells[:, 1])) < min_voxels:
+        return None          # its area, counted on the plane (voxels count it twice where it crosses their layers)
     normal = axes[:, 0] if axes[2, 0] < 0 else -axes[:, 0]
     return normal if -normal[2] >= np.cos(np.radians(FACING_DEG)) else None

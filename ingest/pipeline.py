@@ -17,6 +17,7 @@ from breastplan import BadInputError, transform_points
 from breastplan.chest_wall import ChestWall
 from breastplan.clock import Clock
 from breastplan.options import IngestOptions
+from breastplan.voxels import voxel_centroids
 
 from . import breast as B
 from .background import plumb_wall
@@ -31,8 +32,6 @@ BEHIND_STRIDE = 4
 (a wall's 20 mm voxels, 1–2 m away, span more pixels than that)."""
 COARSE_MM = 10.0
 """Voxel size of the coarse cloud used for background removal, chest wall and mounds."""
-DENSE_CELLS = 4_000_000
-"""Voxel grids up to this many cells are indexed densely (no sort)."""
 MIN_BREAST_POINTS = 500
 REFINE_VIEW, REFINED_DEG = 4, 0.1
 """A scan file's viewing axis is refined at most this many times on the trunk it shows, until it turns
@@ -74,23 +73,6 @@ def find_body(points: np.ndarray) -> BodyInView:
     """The nearest body among viewing-frame points (`body_cluster`) and its trunk (`find_trunk`)."""
     body, voxels, which = body_cluster(points)
     return BodyInView(body, voxels, which, find_trunk(body))
-
-
-def voxel_centroids(points: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
-    """Centroids of the occupied voxels of `size` mm, and each point's voxel index."""
-    keys = np.floor(points / size).astype(np.int64)
-    keys -= keys.min(axis=0)
-    span = keys.max(axis=0) + 1
-    cell = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
-    if np.prod(span) <= DENSE_CELLS:  # count per cell without sorting
-        occupied = np.bincount(cell, minlength=int(np.prod(span))) > 0
-        rank = np.cumsum(occupied) - 1
-        inverse = rank[cell]
-        counts = np.bincount(inverse)
-    else:
-        _, inverse, counts = np.unique(cell, return_inverse=True, return_counts=True)
-    sums = np.stack([np.bincount(inverse, points[:, k], len(counts)) for k in range(3)], 1)
-    return sums / counts[:, None], inverse
 
 
 def ingest_frames(frames: DepthFrames, options: IngestOptions, clock: Clock | None = None) -> Ingested:

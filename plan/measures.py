@@ -46,6 +46,7 @@ from scipy.spatial import cKDTree
 from breastplan import BadInputError
 from breastplan.ingest.makehuman import positive_part_mean
 from breastplan.meshes import mesh_volume
+from breastplan.voxels import voxel_centroids
 
 MEASURES = ("volume_cc", "upper_pole_cc", "lower_pole_cc", "pole_ratio", "notch_to_nipple_mm",
             "nipple_below_notch_mm", "nipple_to_midline_mm", "nipple_to_fold_mm", "width_mm", "projection_mm")
@@ -135,7 +136,7 @@ def find_landmarks(torso_mm, nipples: dict, view_from_input=None, plumb=None) ->
     level, up = R.T @ [1.0, 0.0, 0.0], R.T @ [0.0, -1.0, 0.0]    # viewing frame: x level, y down
     walled = None if plumb is None else _plumb_up(plumb, level, up)
     up = up if walled is None else walled
-    fine, coarse = (_voxel_centroids(P, s) for s in VOXEL_MM)
+    fine, coarse = (voxel_centroids(P, s)[0] for s in VOXEL_MM)
     tree = cKDTree(fine)                          # mirror images are looked up among the fine voxels
     centre = np.mean(list(nips.values()), axis=0)
     if len(nips) == 2:
@@ -231,17 +232,6 @@ def _sternum_slope(P, n, d, up, notch_h) -> float:
         r = y - np.polyval(c, x)
         keep = np.abs(r) <= max(2.5 * 1.4826 * np.median(np.abs(r[keep])), 2.0)
     return float(c[0])
-
-
-def _voxel_centroids(P, size) -> np.ndarray:
-    """Centroids of the points in each occupied voxel of `size` mm."""
-    keys = np.floor(P / size).astype(np.int64)
-    keys -= keys.min(0)
-    span = keys.max(0) + 1
-    _, inverse, counts = np.unique((keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2],
-                                   return_inverse=True, return_counts=True)
-    sums = np.stack([np.bincount(inverse.ravel(), P[:, k], len(counts)) for k in range(3)], 1)
-    return sums / counts[:, None]
 
 
 def _perp(v, axis) -> np.ndarray:
