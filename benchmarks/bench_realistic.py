@@ -294,8 +294,8 @@ def landmark_errors(runs: dict, camera_from_body: np.ndarray, truth_body: dict, 
     angle = lambda a, b: float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))  # noqa: E731
     R = camera_from_body[:3, :3]
     midline = {s: abs((nipples[s] - found.midline_point) @ found.left_axis) - abs(truth_body[s][0]) for s in SIDES}
-    out = {"up_deg": angle(found.up_axis, R[:, 1]), "up_from": found.up_from, "normal_deg": angle(found.left_axis, R[:, 0]),
-           "nipple_to_midline_mm": midline}
+    out = {"up_deg": angle(found.up_axis, R[:, 1]), "up_from": found.up_from,
+           "normal_deg": angle(found.left_axis, R[:, 0]), "nipple_to_midline_mm": midline}
     if notch_body is not None:
         notch = transform_points(camera_from_body, np.asarray(notch_body, float)[None])[0]
         out["notch_mm"] = float(np.linalg.norm(found.sternal_notch - notch))
