@@ -27,8 +27,9 @@ def mu3_to_cc(volume_mu3):
 
 BREAST_EXTENT_MM = (5.0, 1000.0)
 """A breast (or its fit) in millimetres spans more than 5 mm and less than a metre."""
-BODY_EXTENT_MM = 3000.0
-"""A whole body (or a scan of one, a wall behind included) in millimetres spans less than 3 m."""
+SCAN_EXTENT_MM = 8000.0
+"""A scan of a patient in millimetres, the room around her included, spans less than 8 m (the
+range of a depth camera)."""
 FAR_EXTENT_MM = 3.0e6
 """More than a body spans even in micrometres (3 m): a point lies far from the others."""
 
@@ -52,7 +53,7 @@ def breast_units_problem(points_mm) -> str | None:
     if size > FAR_EXTENT_MM:
         return (f"spans {size:.3g} units, more than any body in millimetres or micrometres "
                 f"(a point lies far from the others?)")
-    if size > BODY_EXTENT_MM:
+    if size > SCAN_EXTENT_MM:
         return (f"spans {size:.4g} units, more than a breast or a whole body in millimetres "
                 f"(is it in micrometres?)")
     if size > BREAST_EXTENT_MM[1]:

@@ -25,6 +25,7 @@ from breastplan.errors import counted
 from breastplan.case import CAMERA_FRAME
 from breastplan.ply import MAX_ELEMENTS as MAX_POINTS
 from breastplan.units import FAR_EXTENT_MM as FAR_EXTENT
+from breastplan.units import SCAN_EXTENT_MM
 from breastplan.units import extent as extent_of
 
 SUPPORTED = (".ply", ".obj", ".stl", ".pcd", ".xyz")
@@ -32,9 +33,10 @@ POINTS_PER_MM2 = 1.0
 SAMPLE_RANGE = (20_000, 400_000)
 """Bounds on the number of points sampled from a mesh surface."""
 SAMPLE_SEED = 0
-METRE_EXTENT = (0.05, 3.0)
-MM_EXTENT = (50.0, 3000.0)
-"""Plausible extents of a torso or breast scan in metres and in millimetres."""
+METRE_EXTENT = (0.05, SCAN_EXTENT_MM / 1000.0)
+MM_EXTENT = (50.0, SCAN_EXTENT_MM)
+"""Plausible extents of a scan in metres and in millimetres: from a breast alone to a patient with
+the room around her."""
 MIN_CLOUD_POINTS = 500
 """A point cloud with fewer points cannot hold a breast (ingest keeps at least as many of one)."""
 _CHUNK = 1 << 24
@@ -167,8 +169,9 @@ def _mm_per_unit(path: Path | None, extent: float, units: str) -> tuple[float, s
     if MM_EXTENT[0] <= extent <= MM_EXTENT[1]:
         return 1.0, f"units mm (detected from extent {e})"
     how = "pass --units mm or --units m" if path is not None else "give the units, mm or m"
-    raise BadInputError(path, f"has an ambiguous extent of {e} (a body scan spans 0.05–3 in metres or "
-                              f"50–3000 in millimetres); {how}")
+    raise BadInputError(path, f"has an ambiguous extent of {e} (a body scan spans {METRE_EXTENT[0]:g}–"
+                              f"{METRE_EXTENT[1]:g} in metres or {MM_EXTENT[0]:g}–{MM_EXTENT[1]:g} in "
+                              f"millimetres); {how}")
 
 
 def _sample_surface(path: Path, points_mm: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

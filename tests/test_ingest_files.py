@@ -162,9 +162,12 @@ def test_declared_units_override_and_contradictions(tmp_path):
     np.savetxt(tmp_path / "mm.xyz", grid_points_mm())                # extent 200
     with pytest.raises(BadInputError, match=r"mm\.xyz: is declared m but its extent of 200 says millimetres"):
         read_scan_file(tmp_path / "mm.xyz", units="m")
-    np.savetxt(tmp_path / "huge.xyz", grid_points_mm() * 25.0)       # extent 5000
-    with pytest.raises(BadInputError, match="ambiguous"):
-        read_scan_file(tmp_path / "huge.xyz")
+    np.savetxt(tmp_path / "between.xyz", grid_points_mm() / 10.0)    # extent 20: 20 m or 20 mm, neither a body
+    with pytest.raises(BadInputError, match=r"ambiguous extent of 20 \(a body scan spans 0\.05–8 in metres or 50–8000"):
+        read_scan_file(tmp_path / "between.xyz")
+    np.savetxt(tmp_path / "huge.xyz", grid_points_mm() * 50.0)       # extent 10 000 in the declared mm
+    with pytest.raises(BadInputError, match=r"huge\.xyz: has an extent of 1e\+04 mm, more than any body scan spans"):
+        read_scan_file(tmp_path / "huge.xyz", units="mm")
     with pytest.raises(BadInputError, match="units must be"):
         read_scan_file(tmp_path / "mm.xyz", units="cm")
 

@@ -20,7 +20,9 @@ from breastplan.ingest.makehuman import BodyOptions, make_body
 from breastplan.ingest.pipeline import ingest_frames
 from breastplan.ingest.realistic import (BodyScene, CameraOptions, crop_against_truth, file_axes, file_from_body,
                                           load_body_truth, make_body_scene, write_scan_file)
+from breastplan.ingest.files import read_scan_file
 from breastplan.ingest.scan import ingest
+from breastplan.units import extent
 from breastplan.ingest.recording import DepthFrames, write_recording
 from breastplan.ingest.rendering import noisy_frames
 from breastplan.options import IngestOptions
@@ -269,6 +271,20 @@ def test_a_wall_behind_her_in_a_scan_file_does_not_turn_her_viewing_frame(wall_m
         nipples.append(np.linalg.norm(scan.nipple_camera_mm - truth))
     assert np.degrees(np.arccos(np.clip(np.dot(*axes), -1, 1))) < 1.0, axes
     assert max(nipples) <= NIPPLE_MM, nipples
+
+
+@pytest.mark.parametrize("wall_mm, units", [(936.0, "mm"), (3000.0, "auto")])
+def test_a_scan_file_with_the_room_behind_her_is_read(wall_mm, units, tmp_path):
+    """A scan file holds what the camera saw, a wall up to 3 m behind her included: such a file spans
+    more than 3 m, and ingest still reads it in millimetres (declared or detected) and finds her
+    nipple where the truth has it."""
+    scene = make_body_scene(BodyOptions(pose="arms-down"), CameraOptions(845.0, -5.7, 7.5, "800x600", wall_mm=wall_mm))
+    path = tmp_path / "room.ply"
+    write_scan_file(path, scene, units="mm", up="-z")
+    assert extent(read_scan_file(path, units="mm").points) > 3000.0
+    scan = ingest(path, IngestOptions("right", units=units, up="-z"))
+    truth = transform_points(file_from_body("-z", "mm"), scene.body.nipples["right"][None])[0]
+    assert np.linalg.norm(scan.nipple_camera_mm - truth) <= NIPPLE_MM
 
 
 # --- 5. the watershed of height_basins ------------------------------------------------------------
