@@ -54,6 +54,7 @@ def plan(
                           "--wall-from")
     writable(out, folder=True)
 
+    from breastplan.plan.changes import short_of
     from breastplan.plan.job import run_plan
 
     with _progress() as step:
@@ -73,6 +74,12 @@ def plan(
         if not r["fit"]["stopping_rule_met"]:
             stderr.print(f"note: the {s} breast's fit ends above the stopping rule (normalised residual "
                          f"{r['fit']['normalised_residual']:.4f}); the report says so.", markup=False, soft_wrap=True)
+    for s, r in record["sides"].items():
+        for d in (d for c in r["changes"] if c["name"] != "combined" for d in c["details"]):
+            short = short_of(d, options.method)
+            if short:
+                stderr.print(f"note: on the {s} breast, {d['kind']} {d['degree']:g} reaches {short}; the report says "
+                             "so.", markup=False, soft_wrap=True)
 
 
 def _print_plan(result: dict, record: dict) -> None:

@@ -25,8 +25,22 @@ class Change:
     name: str                              # "ptosis-3", "turn-2.5", or "combined"
     requested: tuple[tuple[str, float], ...]
     deformation: Deformation
-    details: tuple[dict, ...]              # per kind: condition, t, params, degree reached
+    details: tuple[dict, ...]              # per kind: condition, t, params, degree_reached, reached (REACH)
     fields: tuple[Lattice, ...] = ()       # a statistical model's deformations (mm, primitive frame), after it
+
+
+REACH = 0.5
+"""A change reaches the degree asked when the degree of its result lies within half a degree of it
+(rounds to it: the thesis's degrees are the rounded continuous ones)."""
+
+
+def short_of(detail: dict, method: str) -> str | None:
+    """What a change's `details` entry reaches and why, when it does not round to the degree asked
+    (`method` as planned: exact, learnt or a model file); None when it does."""
+    if detail["reached"]:
+        return None
+    why = "the end of its condition's line for this breast" if method == "exact" else "the model's prediction"
+    return f"degree {detail['degree_reached']:.2f}, not {detail['degree']:g} ({why})"
 
 
 def change_name(kind: str, degree: float) -> str:
@@ -41,7 +55,8 @@ def solve_change(local_mm: np.ndarray, kind: str, degree: float, primitive: Prim
     r = by_degree(local_mm, kind, degree, method=method, primitive=primitive)
     details = {"kind": kind, "degree": degree, "condition": r.condition.name,
                "t": float(r.t) if r.lattice is None else None, "params": [float(v) for v in r.params],
-               "degree_reached": r.degree_reached, "model": "statistical" if r.lattice is not None else "parametric"}
+               "degree_reached": r.degree_reached, "reached": bool(abs(r.degree_reached - degree) < REACH),
+               "model": "statistical" if r.lattice is not None else "parametric"}
     if r.lattice is not None:
         return Change(change_name(kind, degree), ((kind, degree),), Deformation(), (details,), (r.lattice,))
     return Change(change_name(kind, degree), ((kind, degree),), Deformation.single(kind, r.params), (details,))

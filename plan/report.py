@@ -27,6 +27,7 @@ from importlib import metadata
 
 import numpy as np
 
+from .changes import short_of
 from .job import Plan
 from .measures import measure_label
 from .views import State, Views, build_views, quantise
@@ -181,8 +182,13 @@ def render(plan: Plan, record: dict) -> str:
 def _how(detail: dict) -> str:
     """A change's condition and parameters, or the statistical model's lattice it came from."""
     if detail.get("model") == "statistical":
-        return f"statistical model, degree reached {detail['degree_reached']:.2f}"
+        return "statistical model"
     return f"{detail['condition']}, {' '.join(f'{p:.3g}' for p in detail['params'])}"
+
+
+def _reached(detail: dict, method: str) -> str:
+    """The degree a change gives the breast, and the degree asked where it does not round to it."""
+    return short_of(detail, method) or f"{detail['degree_reached']:.2f}"
 
 
 def tables(record: dict) -> str:
@@ -220,9 +226,12 @@ def tables(record: dict) -> str:
         parts.append("<h2>Since the earlier scan (measured down to its chest wall)</h2>" + _table(
             ["side", "earlier case", "volume then cc", "volume now cc", "change cc", "change %",
              "chests registered, rms mm", "chest agreeing"], rows, "since"))
-    rows = [[s, c["name"], ", ".join(f"{d['kind']} {d['degree']:g} ({_how(d)})" for d in c["details"])]
+    method = record["options"]["method"]
+    rows = [[s, c["name"], ", ".join(f"{d['kind']} {d['degree']:g} ({_how(d)})" for d in c["details"]),
+             ", ".join(_reached(d, method) for d in c["details"])]
             for s, r in record["sides"].items() for c in r["changes"]]
-    parts.append("<h2>Planned changes</h2>" + _table(["side", "change", "how (parameters in model units)"], rows))
+    parts.append("<h2>Planned changes</h2>" + _table(["side", "change", "how (parameters in model units)",
+                                                       "degree reached"], rows))
     inp = record["input"]
     rows = [["input", inp["path"]], ["input kind", inp["kind"]], ["input sha256", inp.get("sha256", "—")],
             ["options", json.dumps(record["options"])]] + [[k, v] for k, v in record["versions"].items()]

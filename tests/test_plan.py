@@ -24,11 +24,16 @@ from breastplan.case import Case
 from breastplan.deform.global_deformations import Deformation
 from breastplan.ingest.makehuman import BodyOptions
 from breastplan.ingest.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
+from breastplan.deform.by_degree import pick_condition
+from breastplan.deform.inverse import solve_degree
+from breastplan.deform.names import DD
+from breastplan.plan.changes import REACH, short_of, solve_change
 from breastplan.plan.job import sample_recording
 from breastplan.plan.report import tables
 from breastplan.plan.surface import BAND, PlannedChange, smoothstep
 from breastplan.plan.views import VIEW_TO_DISPLAY
 from breastplan import Primitive
+from breastplan.units import to_mm
 
 TRUTH = sample_recording().with_name("sample_truth.npz")
 CHANGES = ("ptosis:3", "turn:2.5", "top-shape:4")
@@ -144,6 +149,39 @@ def test_each_planned_breast_reaches_its_degree_by_the_reference_model(planned, 
     e = ref.condition_extent(CONDITION[kind], fitted, moved, a5)
     reached = ref.continuous_degree(e, ref.reference_extents(CONDITION[kind], 8))
     assert float(reached) == pytest.approx(float(degree), abs=1e-6)
+
+
+def test_a_degree_beyond_a_small_breasts_line_is_flagged_as_not_reached():
+    """ζ is in model units, so a breast 0.4 × P00 moves less along a condition's line than P00 does:
+    the inverse solver finds turn 8 beyond the line's end, and the change says so; turn 3 is reached."""
+    small = Primitive(4.0, 4.0, 4.0, 4.0, 4.0, 1.0, 1.0)
+    points = to_mm(small.sample(30, 30))
+    assert not solve_degree(small.sample(30, 30), pick_condition("turn"), DD, 8.0, small).reached
+    far, near = (solve_change(points, "turn", d, small, "exact").details[0] for d in (8.0, 3.0))
+    assert not far["reached"] and far["degree_reached"] < 8.0 - REACH
+    assert short_of(far, "exact") == (f"degree {far['degree_reached']:.2f}, not 8 "
+                                      "(the end of its condition's line for this breast)")
+    assert near["reached"] and short_of(near, "exact") is None
+
+
+def test_a_change_a_realistic_breast_cannot_reach_is_said_in_the_terminal_plan_json_and_report(cli, tmp_path):
+    """A MakeHuman body whose left breast top-shape's line ends short of degree 3 (its right one reaches it)."""
+    rec = tmp_path / "body.mcap"
+    res = run(cli, "scan-synth", "--body", "makehuman", "--cup", "0.64", "--firmness", "0.28", "--weight", "0.57",
+              "--muscle", "0.58", "--modifier", "breast_trans=0.59", "--distance", "583", "--pitch=-11.6", "--yaw=-2.7",
+              "--resolution", "640x400", "--no-wall", "--frames", "8", "--seed", "26", "--truth", tmp_path / "t.npz",
+              "--out", rec)
+    assert res.returncode == 0, res.stderr
+    res = run(cli, "plan", rec, "--deform", "top-shape:3", "--out", tmp_path / "case")
+    assert res.returncode == 0, res.stderr
+    record = json.loads((tmp_path / "case" / "plan.json").read_text())
+    short = {s: d for s, r in record["sides"].items() for c in r["changes"] if c["name"] == "top-shape-3"
+             for d in c["details"] if not d["reached"]}
+    assert set(short) == {"left"} and short["left"]["degree_reached"] < 3.0 - REACH
+    note = f"note: on the left breast, top-shape 3 reaches {short_of(short['left'], 'exact')}"
+    assert note in " ".join(res.stderr.split())
+    assert "right breast, top-shape" not in res.stderr
+    assert f"{short['left']['degree_reached']:.2f}, not 3 (the end of its condition" in tables(record)
 
 
 @pytest.mark.parametrize("side", ["left", "right"])

@@ -252,7 +252,8 @@ def test_plan_with_a_statistical_model_lowers_her_nipples(cli, trained, tmp_path
               "--out", tmp_path / "case", "--json")
     assert res.returncode == 0, res.stderr
     record = json.loads((tmp_path / "case" / "plan.json").read_text())
-    assert "statistical model, degree reached" in (tmp_path / "case" / "report.html").read_text()
+    page = (tmp_path / "case" / "report.html").read_text()
+    assert "statistical model" in page and "degree reached</th>" in page
     measures = record["measures"]
     for side, r in record["sides"].items():
         details = {d["kind"]: d for c in r["changes"] if c["name"] != "combined" for d in c["details"]}
