@@ -145,13 +145,12 @@ def find_landmarks(torso_mm, nipples: dict, view_from_input=None, plumb=None) ->
     else:
         left = _unit(_perp(level, up))
         offset = float(np.median(coarse @ left))
-    for _ in range(ROUNDS):
+    for _ in range(ROUNDS if walled is None else 0):          # a wall's up axis needs no refining
         left, offset = _mirror_plane(coarse, tree, left, offset, up)
-        if walled is None:
-            notch_h = _notch(fine, left, offset, up, float(centre @ up))[1]
-            slope = _sternum_slope(fine, left, offset, up, notch_h)
-            up = _unit(_perp(up + slope * np.cross(left, up), level))          # pitch only: no roll
-            left = _unit(_perp(left, up))
+        notch_h = _notch(fine, left, offset, up, float(centre @ up))[1]
+        slope = _sternum_slope(fine, left, offset, up, notch_h)
+        up = _unit(_perp(up + slope * np.cross(left, up), level))          # pitch only: no roll
+        left = _unit(_perp(left, up))
     left, offset = _mirror_plane(coarse, tree, left, offset, up)
     notch = _notch(fine, left, offset, up, float(centre @ up))[0]
     return BodyLandmarks(notch, centre - (centre @ left - offset) * left, left, up,
