@@ -11,6 +11,8 @@ KIND_PARAMS: dict[str, tuple[str, ...]] = {
     "turn": ("c0", "c1"),
 }
 """Parameter names of each kind, in the order the kinds are applied (docs/model.md §3)."""
+PARAM_NAMES: tuple[str, ...] = tuple(n for kind in KIND_PARAMS.values() for n in kind)
+"""The twelve deformation parameters in a deformation vector's order (s0 s1 t0 t1 h0 h1 g0 g1 b0 b1 c0 c1)."""
 NEEDS_PRIMITIVE = frozenset({"top-shape", "flatten-side", "turn-top"})
 """Kinds whose formulas need the breast's primitive."""
 
@@ -27,3 +29,9 @@ PLAUSIBLE = {"s0": (-4.0, 4.0), "s1": (-10.0, 4.0), "t0": (-8.0, 8.0), "t1": (-8
 """The range a fit may give each deformation parameter (model units): what the thesis's breast
 shapes and deformation conditions span, with a margin (docs/model.md §4, §6). t0 (β″(0), which
 barely moves the surface) is wide: free fits of database breasts put it anywhere up to 6.8."""
+
+
+def at_bounds(params: dict[str, float]) -> list[str]:
+    """The parameters of `params` (name → value, model units) at an end of their PLAUSIBLE range: the
+    fitted shape asked for more than the thesis's breasts ever do, so the model holds it only roughly."""
+    return [n for n, (lo, hi) in PLAUSIBLE.items() if n in params and min(params[n] - lo, hi - params[n]) < 1e-6]

@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 from breastplan import BadInputError, Primitive, to_mm
 from breastplan.case import Fit, Provenance
 from breastplan.deform.global_deformations import ptosis
-from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
+from breastplan.deform.names import PARAM_NAMES, at_bounds
 from breastplan.meshes import mesh_volume, volume_below_base
 from breastplan.options import FitOptions
 
@@ -78,8 +78,7 @@ class BreastFit:
     def params(self) -> dict[str, float]:
         """Primitive parameters (model units) and the fitted deformation parameters."""
         out = self.superquadric.primitive.as_dict()
-        names = [n for kind in KIND_PARAMS.values() for n in kind]
-        out.update({n: float(v) for n, v in zip(names, self.superquadric.deformation.as_vector()) if v != 0.0})
+        out.update({n: float(v) for n, v in zip(PARAM_NAMES, self.superquadric.deformation.as_vector()) if v != 0.0})
         return out
 
     @property
@@ -88,10 +87,8 @@ class BreastFit:
         return ptosis_sag_mm(self.superquadric.primitive, self.superquadric.deformation.params("ptosis"))
 
     def at_bounds(self) -> list[str]:
-        """Fitted deformation parameters at an end of their plausible range (deform.names.PLAUSIBLE):
-        the shape asked for more than the thesis's breasts ever do, so the model holds it only roughly."""
-        params = self.params()
-        return [n for n, (lo, hi) in PLAUSIBLE.items() if n in params and min(params[n] - lo, hi - params[n]) < 1e-6]
+        """Fitted deformation parameters at an end of their plausible range (deform.names.at_bounds)."""
+        return at_bounds(self.params())
 
     def artefact(self, provenance: Provenance = Provenance()) -> Fit:
         """The case's record of this fit (`Case.save_fit` writes it)."""

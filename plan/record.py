@@ -15,6 +15,7 @@ import numpy as np
 from breastplan import __version__, transform_points, write_ply
 from breastplan.atomic import atomic_set
 from breastplan.case import Case, Provenance, sha256
+from breastplan.deform.names import PARAM_NAMES, at_bounds
 from breastplan.fitting.ffd import STOP_RESIDUAL
 from breastplan.options import SIDES
 
@@ -77,7 +78,8 @@ def fit_record(sp: SidePlan) -> dict:
     return {"volume_cc": round(f.volume_cc, 2), "volume_cc_below_base": round(f.volume_cc_below_base, 2),
             "rms_mm": round(f.residuals_mm["rms"], 4),
             "normalised_residual": round(f.normalised_residual, 6), "stopping_rule_met": f.stopping_rule_met,
-            "converged": f.converged, "points": f.points, "iterations": list(f.iterations)}
+            "converged": f.converged, "at_bounds": at_bounds(dict(zip(PARAM_NAMES, map(float, f.deformation)))),
+            "points": f.points, "iterations": list(f.iterations)}
 
 
 def _save_change(sp: SidePlan, change, folder: Path) -> dict:

@@ -50,6 +50,10 @@ POSTER_PX = (760, 640)
 NIPPLE_FOUND = {"areola": "centre of the raised areola", "apex": "apex (no raised areola found)",
                 "given": "given (--nipple)"}
 """How the nipple was found, in the report's words."""
+AT_BOUNDS_TEXT = ('<p id="at-bounds">A fitted parameter at an end of its plausible range (what the breasts the model '
+                  'was built on span) means the breast asked for more: the model holds it only roughly, and its '
+                  'lattice carries the rest.</p>')
+"""Said under the fit's table when a parameter of either side is at an end of its plausible range."""
 
 
 def _b64(array: np.ndarray, dtype: str) -> str:
@@ -213,11 +217,12 @@ def tables(record: dict) -> str:
                      + f'<p id="up-from">{UP_FROM_TEXT[measures["landmarks"].get("up_from", "midline profile")]}</p>')
     rows = [[s, r["fit"]["volume_cc"], r["fit"]["volume_cc_below_base"], r["fit"]["rms_mm"],
              r["fit"]["normalised_residual"], "met" if r["fit"]["stopping_rule_met"] else "not met", r["fit"]["points"],
-             NIPPLE_FOUND[r.get("nipple_found", "apex")]]
+             NIPPLE_FOUND[r.get("nipple_found", "apex")], ", ".join(r["fit"]["at_bounds"]) or "none"]
             for s, r in record["sides"].items()]
     parts.append("<h2>Fit quality</h2>" + _table(
         ["side", "volume cc down to the chest wall", "of it below the base cc", "rms mm", "normalised residual",
-         f"stopping rule {record['stopping_rule']}", "points", "nipple found"], rows, "fit"))
+         f"stopping rule {record['stopping_rule']}", "points", "nipple found", "at an end of its plausible range"],
+        rows, "fit") + AT_BOUNDS_TEXT * any(r["fit"]["at_bounds"] for r in record["sides"].values()))
     since = {s: r["wall_from"] for s, r in record["sides"].items() if "wall_from" in r}
     if since:
         rows = [[s, f["case"], f["earlier_volume_cc"], record["sides"][s]["fit"]["volume_cc"],

@@ -42,6 +42,8 @@ def summary_png(plan: Plan, record: dict, path: Path) -> Path:
                     f"({fit['volume_cc_below_base']:.1f} below the base)")
         text.append(f"fit residual {fit['normalised_residual']:.4f} (rule "
                     f"{'met' if fit['stopping_rule_met'] else 'not met'})")
+        if fit["at_bounds"]:
+            text.append(f"at an end of the plausible range: {', '.join(fit['at_bounds'])}")
         since = record["sides"][side].get("wall_from")
         if since:
             text.append(f"since the earlier scan: {since['volume_change_cc']:+.1f} cc "

@@ -12,6 +12,7 @@ import pytest
 
 from breastplan import Primitive, read_ply, to_mm, transform_points, write_ply
 from breastplan.deform.global_deformations import Deformation
+from breastplan.deform.names import PARAM_NAMES, PLAUSIBLE, at_bounds
 from breastplan.case import Case, sha256
 from breastplan.chest_wall import ChestWall
 from breastplan.fitting.breast_fit import MESH_GRID, fit_breast
@@ -207,6 +208,30 @@ def test_fit_command_fits_top_shape_ptosis_and_turn_by_default_and_none_fits_the
         assert params[name] == pytest.approx(value, abs=0.1 if name[0] == "s" else 0.03), name
     plain = json.loads(run(cli, "fit", tmp_path / "breast.ply", "--deformations", "none", "--json").stdout)["params"]
     assert not {"s0", "s1", "b0", "b1", "c0", "c1"} & set(plain)
+
+
+def test_a_ptosis_beyond_its_plausible_range_is_fitted_at_its_end_and_said(cli, tmp_path):
+    """b0 = 4.5 asks for more than the plausible −1…3: the fit stops b0 at 3 and names it, on stderr and
+    in its JSON; b0 = 1 is inside and named nowhere."""
+    P = Primitive(10, 11, 9.5, 10.5, 9, 0.9, 1.0)
+    out = {}
+    for b0 in (4.5, 1.0):
+        write_ply(tmp_path / f"b0-{b0}.ply", to_mm(Deformation(ptosis=(b0, 0.3)).apply(P.sample(80, 80), P)))
+        res = run(cli, "fit", tmp_path / f"b0-{b0}.ply", "--deformations", "ptosis", "--lattice", "4", "--json")
+        assert res.returncode == 0, res.stderr
+        out[b0] = (json.loads(res.stdout), " ".join(res.stderr.split()))
+    beyond, inside = out[4.5][0], out[1.0][0]
+    assert beyond["params"]["b0"] == pytest.approx(PLAUSIBLE["b0"][1]) and "b0" in beyond["at_bounds"]
+    assert "the fitted b0" in out[4.5][1] and "reached the end of their plausible range" in out[4.5][1]
+    assert inside["at_bounds"] == [] and "plausible range" not in out[1.0][1]
+
+
+def test_at_bounds_names_a_parameter_at_either_end_of_its_range_only():
+    lo, hi = PLAUSIBLE["b0"]
+    assert at_bounds({"b0": lo}) == ["b0"] and at_bounds({"b0": hi, "c1": PLAUSIBLE["c1"][0]}) == ["b0", "c1"]
+    assert at_bounds({"b0": 0.5 * (lo + hi), "b1": PLAUSIBLE["b1"][1] - 1e-3}) == []
+    assert at_bounds({"a1": 1e9}) == []                                  # a primitive's parameter has no such range
+    assert PARAM_NAMES == ("s0", "s1", "t0", "t1", "h0", "h1", "g0", "g1", "b0", "b1", "c0", "c1")
 
 
 def _cloud(tmp_path, points):

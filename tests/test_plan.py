@@ -110,6 +110,20 @@ def test_the_wall_behind_the_sample_gives_her_up_axis_and_the_report_says_so(pla
     assert "no wall was seen behind her" in tables(unwalled)
 
 
+def test_the_report_names_a_fitted_parameter_at_an_end_of_its_plausible_range(planned):
+    """The fit's table has a column for it on each side, and a paragraph says what it means only when
+    either side has one."""
+    _, record, _ = planned
+    for named in ([], ["b0", "b1"]):
+        edited = copy.deepcopy(record)
+        for side in edited["sides"].values():
+            side["fit"]["at_bounds"] = named
+        html = tables(edited)
+        assert "at an end of its plausible range</th>" in html
+        assert ('id="at-bounds"' in html) == bool(named)
+        assert ("<td>b0, b1</td>" in html) == bool(named) and ("<td>none</td>" in html) == (not named)
+
+
 def test_the_volume_measured_is_the_fitted_surface_above_its_base_and_the_terminal_says_so(cli, planned, monkeypatch):
     """The measures' volume is what fit.ply encloses (divergence theorem, here in numpy), the fit's
     volume down to the chest wall that and the gap below the base; the terminal names both."""
