@@ -95,7 +95,8 @@ def ingest_cloud(cloud: ScanCloud, options: IngestOptions, clock: Clock | None =
         view, found = (np.eye(4), None) if cloud.frame_hint == "camera-opencv" else viewing_frame(cloud.points, options.up)
         points = transform_points(view, cloud.points)
         viewer = points.mean(0) - [0.0, 0.0, 2000.0]
-    return isolate(points, view, options, clock, viewer=viewer, found=found)
+    return isolate(points, view, options, clock, viewer=viewer, found=found,
+                   up=None if cloud.frame_hint == "camera-opencv" else options.up)
 
 
 def viewing_frame(points: np.ndarray, up: str) -> tuple[np.ndarray, BodyInView]:
@@ -183,9 +184,11 @@ def _trunk_bulge(body: BodyInView | None) -> float:
 
 
 def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOptions, clock: Clock,
-            viewer: np.ndarray, found: BodyInView | None = None, beyond: np.ndarray | None = None) -> Ingested:
+            viewer: np.ndarray, found: BodyInView | None = None, beyond: np.ndarray | None = None,
+            up: str | None = None) -> Ingested:
     """The common pipeline on points in the viewing frame (`viewer`: where the camera is; `found`:
-    the body among them, if already found; `beyond`: more points farther away, where a wall may stand)."""
+    the body among them, if already found; `beyond`: more points farther away, where a wall may stand;
+    `up`: the input's up axis, when the viewing frame was built on it)."""
     roi, nipple, side = options.roi_camera_mm, options.nipple_camera_mm, options.side
     to_camera = np.linalg.inv(view_from_camera)
     in_roi = _roi_test(roi, to_camera)
@@ -196,6 +199,11 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
         with clock("trunk"):
             found = BodyInView(body, voxels, which, find_trunk(body))
     trunk = found.trunk
+    if trunk.head == "below":
+        flip = f"{'-+'[up[0] == '-']}{up[1]}" if up else ""
+        raise BadInputError(None, f"shows her upside down with {up} up (her neck and head lie below her chest): is "
+                                  f"her up axis {flip} (--up {flip})?" if up else "shows her upside down (her neck and "
+                                  "head lie below her chest): was the camera upside down?")
     with clock("a wall behind her"):
         behind = points[points[:, 2] > found.points[:, 2].max()]
         plumb = plumb_wall(behind if beyond is None else np.vstack([behind, beyond]))

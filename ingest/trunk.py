@@ -34,6 +34,13 @@ UPPER_MM = 350.0
 part within UPPER_MM of its top (lower down, hips and hanging arms may be wider)."""
 MIN_TRUNK_MM2 = 200.0 * 200.0
 """A trunk covers at least this frontal area."""
+NECK_MM = 180.0
+"""A row of the body narrower than this where it crosses the midline is a neck's or a head's (a waist
+is wider; between the thighs the midline is empty)."""
+HEAD_SEEN_MM = 50.0
+"""Her head is seen at one end of the trunk when its narrow rows span this much on that side of the
+trunk's middle and twice what they span on the other (a neck cut by the view spans less, and so do
+the few narrow rows where the thighs part)."""
 
 
 @dataclass(frozen=True)
@@ -43,6 +50,7 @@ class Trunk:
     mask: np.ndarray          # (N,) bool over the body's points
     midline_x: float          # mm, x of the trunk's vertical axis at chest height
     top_y: float              # mm, the shoulders (see SHOULDER_SHARE)
+    head: str | None = None   # where her neck and head are seen: "above" or "below" her chest, None if not
 
     def chest(self, points: np.ndarray) -> np.ndarray:
         """Mask of the points (viewing frame) from above the shoulders to CHEST_MM below them."""
@@ -78,7 +86,8 @@ def find_trunk(points: np.ndarray) -> Trunk:
     trunk = ndimage.binary_dilation(labels == 1 + sizes.argmax(), iterations=REGROW_CELLS) & seen
     top, midline = _landmarks(trunk)
     x0, y0 = lo * CELL_MM
-    return Trunk(trunk[ij[:, 1], ij[:, 0]], float(x0 + midline * CELL_MM), float(y0 + top * CELL_MM))
+    return Trunk(trunk[ij[:, 1], ij[:, 0]], float(x0 + midline * CELL_MM), float(y0 + top * CELL_MM),
+                 _head(seen, trunk, int(midline)))
 
 
 def arm_edges(nearest: np.ndarray, axis: float) -> np.ndarray:
@@ -103,3 +112,18 @@ def _landmarks(trunk: np.ndarray) -> tuple[int, float]:
     top = first + int(np.argmax(upper >= SHOULDER_SHARE * upper.max()))   # a head or a chin is narrower
     xs = np.nonzero(trunk[top: top + int(250 / CELL_MM)])[1]
     return top, 0.5 * (np.percentile(xs, 5) + np.percentile(xs, 95)) + 0.5
+
+
+def _head(seen: np.ndarray, trunk: np.ndarray, midline: int) -> str | None:
+    """Where the neck and head are (see NECK_MM, HEAD_SEEN_MM) on the occupancy map `seen`, rows = y
+    downwards, with the trunk's mask and midline column."""
+    runs, _ = ndimage.label(seen, structure=[[0, 0, 0], [1, 1, 1], [0, 0, 0]])      # each row's runs of cells
+    crossing = runs[:, midline]
+    width = np.bincount(runs.ravel())[crossing] * CELL_MM
+    narrow = np.flatnonzero((crossing > 0) & (width < NECK_MM))
+    rows = np.flatnonzero(trunk.any(1))
+    middle = 0.5 * (np.percentile(rows, 5) + np.percentile(rows, 95))
+    above, below = (narrow < middle).sum() * CELL_MM, (narrow > middle).sum() * CELL_MM
+    if max(above, below) >= max(HEAD_SEEN_MM, 2.0 * min(above, below)):
+        return "above" if above > below else "below"
+    return None

@@ -17,9 +17,10 @@ from hypothesis import strategies as st
 from breastplan import BadInputError, transform_points, write_ply
 from breastplan.ingest import breast
 from breastplan.ingest.makehuman import BodyOptions, make_body
-from breastplan.ingest.pipeline import ingest_frames
+from breastplan.ingest.pipeline import find_body, ingest_frames
 from breastplan.ingest.realistic import (BodyScene, CameraOptions, crop_against_truth, file_axes, file_from_body,
-                                          load_body_truth, make_body_scene, write_scan_file)
+                                          load_body_truth, make_body_scene, visible_points,
+                                          write_scan_file)
 from breastplan.ingest.files import read_scan_file
 from breastplan.ingest.scan import ingest
 from breastplan.units import extent
@@ -142,6 +143,51 @@ def test_a_given_nipple_reports_its_side(side):
     assert result.side == side
     assert result.nipple_camera == pytest.approx(nipple, abs=1e-6)   # the given nipple overrides the apex
     assert result.nipple_found == "given"
+
+
+# --- 2b. which way up she stands ------------------------------------------------------------------
+
+def head_in_view(scene) -> bool:
+    """Whether 100 or more of her head's vertices fall inside the camera's image (occlusion aside)."""
+    head = transform_points(scene.camera_from_body, head_vertices(scene.body))
+    uv = head[:, :2] / head[:, 2:] @ scene.camera.K[:2, :2].T + scene.camera.K[:2, 2]
+    w, h = scene.camera.size
+    return int(np.all((uv >= 0) & (uv < [w, h]), axis=1).sum()) >= 100
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_her_head_is_seen_above_her_chest_and_below_it_when_the_view_is_upside_down(name):
+    """The camera image turned by 180° (x and y negated about its centre) puts her head at the bottom."""
+    scene, _ = scene_and_frames(name)
+    points, ids = visible_points(scene)
+    body = points[ids == 0]
+    upright, upside_down = (find_body(p).trunk.head for p in (body, body * [-1.0, -1.0, 1.0]))
+    if head_in_view(scene):
+        assert (upright, upside_down) == ("above", "below")
+    else:
+        assert upright != "below" and upside_down != "above"
+
+
+def test_an_upside_down_recording_says_so():
+    scene, frames = scene_and_frames("a-pose, wall, 800x600 at 650 mm")
+    w, h = scene.camera.size
+    assert frames.K[0, 2] == w / 2 and frames.K[1, 2] == h / 2        # turning the image turns about the optical axis
+    turned = DepthFrames(frames.depth[:, ::-1, ::-1].copy(), frames.K, "synthetic")
+    with pytest.raises(BadInputError, match="shows her upside down .*was the camera upside down"):
+        ingest_frames(turned, IngestOptions(side="left"))
+
+
+def test_a_scan_file_read_with_its_up_axis_reversed_exits_3_and_names_the_right_one(cli, tmp_path):
+    scan = tmp_path / "body.ply"
+    res = run(cli, "scan-synth", "--body", "makehuman", "--pose", "arms-down", "--no-wall", "--scan-file", scan,
+              "--units", "mm", "--up", "-z", "--truth", tmp_path / "t.npz")
+    assert res.returncode == 0, res.stderr
+    res = run(cli, "ingest", scan, "--units", "mm", "--up", "+z", "--side", "left", "--out", tmp_path / "case")
+    assert_bad_input(res, scan, tmp_path)
+    assert "shows her upside down with +z up" in res.stderr and "(--up -z)" in res.stderr
+    assert not (tmp_path / "case").exists()
+    res = run(cli, "ingest", scan, "--units", "mm", "--up", "-z", "--side", "left", "--out", tmp_path / "case")
+    assert res.returncode == 0, res.stderr
 
 
 # --- 3. no breast in view ------------------------------------------------------------------------
