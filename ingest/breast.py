@@ -45,6 +45,8 @@ WALL_DEGREE, WALL_REACH_MM = 3, 120.0
 SKIRT_MM = 20.0
 """The skirt of a mound, left out of the wall under it: the skin within this (x, y) distance
 of the mound's voxels, still lifted by the breast though under MOUND_MM high."""
+NIPPLE_OFF_MM = 25.0
+"""A given nipple lies within this of its mound's skin (the nearest of its 10 mm voxels' centroids)."""
 CROP_MM = 2.0
 """Breast points lie at least this far in front of the chest wall."""
 UP_VIEW = np.array([0.0, -1.0, 0.0])
@@ -181,10 +183,14 @@ def choose_mound(mounds: list[Mound], nipple: np.ndarray | None, given: tuple | 
     else the largest one (of those in a region of interest)."""
     if nipple is not None:
         near = [m for m in mounds if np.linalg.norm(m.centre - nipple[:2]) <= m.radius]
+        where = "" if given is None else " " + ",".join(format(float(v), "g") for v in given) + " (camera mm)"
         if not near:
-            where = "" if given is None else " " + ",".join(format(float(v), "g") for v in given) + " (camera mm)"
             raise BadInputError(None, f"no breast mound lies under the given nipple{where}")
-        return near[0]
+        off = [float(np.min(np.linalg.norm(m.voxels - nipple, axis=1))) for m in near]
+        if min(off) > NIPPLE_OFF_MM:
+            raise BadInputError(None, f"the given nipple{where} lies {min(off):.0f} mm off the skin of the breast mound "
+                                      f"under it (at most {NIPPLE_OFF_MM:g} mm)")
+        return near[int(np.argmin(off))]
     if not mounds:
         raise BadInputError(None, "no breast mound found in the region of interest")
     return mounds[0]

@@ -145,6 +145,24 @@ def test_a_given_nipple_reports_its_side(side):
     assert result.nipple_found == "given"
 
 
+@pytest.mark.parametrize("depth_mm", [-200.0, -60.0, 60.0, 250.0])
+def test_a_given_nipple_off_her_skin_is_refused(depth_mm):
+    """Her true nipple moved along the camera's axis, in front of her skin or behind it: above the
+    breast in the image, but no point of her."""
+    scene, frames = scene_and_frames("a-pose, wall, 800x600 at 650 mm")
+    nipple = scene.nipples_camera()["left"] + [0.0, 0.0, depth_mm]
+    with pytest.raises(BadInputError, match=r"the given nipple .* lies \d+ mm off the skin of the breast mound"):
+        ingest_frames(frames, IngestOptions(side="left", nipple_camera_mm=tuple(nipple)))
+
+
+def test_a_given_nipple_between_her_breasts_is_refused():
+    """The midpoint of her nipples lies in front of her sternum, on neither breast."""
+    scene, frames = scene_and_frames("a-pose, wall, 800x600 at 650 mm")
+    middle = 0.5 * (scene.nipples_camera()["left"] + scene.nipples_camera()["right"])
+    with pytest.raises(BadInputError, match="the given nipple"):
+        ingest_frames(frames, IngestOptions(side="left", nipple_camera_mm=tuple(middle)))
+
+
 # --- 2b. which way up she stands ------------------------------------------------------------------
 
 def head_in_view(scene) -> bool:
