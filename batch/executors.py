@@ -76,6 +76,10 @@ def run_local(tasks: list[Task], jobs: int) -> Results:
                         yield futures[future], future.result()
                     except BrokenProcessPool:
                         broken.append(futures[future])
+        except BaseException:       # interrupted (Ctrl-C) or closed: the cases being planned are dropped, unfinished
+            for process in list((pool._processes or {}).values()):      # Python < 3.14 has no public kill
+                process.kill()
+            raise
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
         suspects = {t.case for t in broken} & running or {t.case for t in broken}
@@ -92,24 +96,29 @@ def run_dask(tasks: list[Task], jobs: int, scheduler: str | None) -> Results:
     """Plan `tasks` on a Dask cluster: the scheduler at `scheduler`, or a local cluster of `jobs`
     single-threaded worker processes. The workers write the case folders: with a remote scheduler the
     output folder must be on storage they share."""
-    from distributed import Client, as_completed
+    from distributed import as_completed
     from distributed.client import FutureCancelledError
 
-    with _cluster(scheduler, jobs) as cluster:
-        try:
-            client = Client(cluster if scheduler is None else scheduler, timeout="20s")
-        except (OSError, TimeoutError) as exc:
-            raise BadInputError(None, f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
-        with client:
-            futures = {client.submit(plan_in_child, t, pure=False, key=f"plan-{t.sha256[:12]}-{os.path.basename(t.case)}"): t
-                       for t in tasks}
-            for future in as_completed(futures):
-                task = futures[future]
-                try:
-                    yield task, future.result()
-                except (FutureCancelledError, Exception) as exc:  # a worker lost (KilledWorker) or a task undeliverable
-                    yield task, {"status": "failed", "seconds": 0.0,
-                                 "error": f"{task.input}: the Dask task failed ({type(exc).__name__}: {exc})."}
+    with _cluster(scheduler, jobs) as cluster, dask_client(cluster if scheduler is None else scheduler) as client:
+        futures = {client.submit(plan_in_child, t, pure=False, key=f"plan-{t.sha256[:12]}-{os.path.basename(t.case)}"): t
+                   for t in tasks}
+        for future in as_completed(futures):
+            task = futures[future]
+            try:
+                yield task, future.result()
+            except (FutureCancelledError, Exception) as exc:  # a worker lost (KilledWorker) or a task undeliverable
+                yield task, {"status": "failed", "seconds": 0.0,
+                             "error": f"{task.input}: the Dask task failed ({type(exc).__name__}: {exc})."}
+
+
+def dask_client(cluster_or_address):
+    """A Dask client of a local cluster or of the scheduler at an address; BadInputError if it cannot be reached."""
+    from distributed import Client
+
+    try:
+        return Client(cluster_or_address, timeout="20s")
+    except (OSError, TimeoutError) as exc:
+        raise BadInputError(None, f"cannot reach the Dask scheduler at {cluster_or_address} ({exc})") from None
 
 
 @contextlib.contextmanager

@@ -16,10 +16,10 @@ from typing import Callable, Iterator
 
 from breastplan import BadInputError, __version__
 from breastplan.case import sha256
-from breastplan.errors import require_folder
+from breastplan.errors import Interrupted, require_folder
 from breastplan.options import BatchOptions
 
-from .executors import run_dask, run_local
+from .executors import dask_client, run_dask, run_local
 from .inputs import find_inputs
 from .manifest import Manifest, Row
 from .task import Task, finished, remove_leftovers
@@ -42,6 +42,8 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
     """Plan every scan and recording under `folder` into `out` (docs/cli.md, `batch`)."""
     folder, out = Path(folder), Path(out)
     require_folder(folder, "folder")
+    if options.executor == "dask" and options.scheduler is not None:
+        dask_client(options.scheduler).close()           # unreachable: said before anything is written
     out.mkdir(parents=True, exist_ok=True)
     with _locked(out):
         removed = remove_leftovers(out)
@@ -55,14 +57,22 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
                 progress(row, len(tasks))
         results = run_local(tasks, options.jobs) if options.executor == "local" else \
             run_dask(tasks, options.jobs, options.scheduler)
-        for task, result in results:
-            row = by_case[Path(task.case).relative_to(out.resolve()).as_posix()]
-            error = result["error"].replace(task.input, str(folder / row.input)).replace(task.case, str(out / row.case))
-            if options.wall_from is not None:
-                error = error.replace(task.options["wall_from"], str(Path(options.wall_from) / row.case))
-            row.status, row.seconds, row.error = result["status"], result["seconds"], error   # paths as the user gave them
-            manifest.write()
-            progress(row, len(tasks))
+        try:
+            for task, result in results:
+                row = by_case[Path(task.case).relative_to(out.resolve()).as_posix()]
+                error = result["error"].replace(task.input, str(folder / row.input)).replace(task.case, str(out / row.case))
+                if options.wall_from is not None:
+                    error = error.replace(task.options["wall_from"], str(Path(options.wall_from) / row.case))
+                row.status, row.seconds, row.error = result["status"], result["seconds"], error   # paths as given
+                manifest.write()
+                progress(row, len(tasks))
+        except KeyboardInterrupt:
+            results.close()                       # its workers killed: the cases they were planning left unfinished
+            remove_leftovers(out)
+            summary = manifest.summary()
+            raise Interrupted(f"{len(tasks) - summary['pending']} of the {len(tasks)} inputs to plan were settled "
+                              f"and {summary['pending']} left pending in {out / 'manifest.csv'}; the same command "
+                              f"resumes the batch") from None
     return Batch(manifest, tuple(removed))
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import sys
 
 from breastplan import BadInputError
+from breastplan.errors import Interrupted
 
 from . import plan, batch, synth, deform, dataset, scan_synth, ingest, fit, evaluate, train, train_statistical, filters  # noqa: F401,E501  (register the commands)
 from .app import app
@@ -25,6 +26,9 @@ def main() -> None:
         where = f"{exc.filename}: " if exc.filename else ""
         stderr.print(f"error: {where}{exc.strerror or exc}.", markup=False, soft_wrap=True)
         sys.exit(3)
+    except Interrupted as exc:
+        stderr.print(f"interrupted: {exc}", markup=False, soft_wrap=True)
+        sys.exit(130)
 
 
 if __name__ == "__main__":

@@ -25,6 +25,10 @@ class ArtefactError(BadInputError):
     """An artefact file (PLY or NPZ) that is missing, corrupt or of the wrong schema."""
 
 
+class Interrupted(BreastplanError):
+    """Work stopped by the user (Ctrl-C) after writing what was finished: CLI exit code 130, one sentence."""
+
+
 def counted(n: int, noun: str, plural: str | None = None) -> str:
     """A count and its noun for an error sentence: '1 vertex', '2 vertices', '12,034 points'."""
     return f"{n:,} {noun if n == 1 else plural or noun + 's'}"

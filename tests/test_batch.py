@@ -277,6 +277,38 @@ def test_kill_9_at_a_random_moment_loses_no_finished_case_and_leaves_none_half_w
     assert not _hidden(out)
 
 
+def test_ctrl_c_stops_the_batch_at_once_with_its_manifest_true_to_the_disk(cli, tmp_path):
+    """SIGINT to the batch and its workers (a terminal's Ctrl-C) once a case is finished: the cases being
+    planned are dropped, not finished behind the manifest's back; the sentence says what is left and the
+    same command finishes it."""
+    folder = tmp_path / "scans"
+    folder.mkdir()
+    names = [f"patient{i}" for i in range(5)]
+    for name in names:
+        shutil.copy(SAMPLE, folder / f"{name}.mcap")
+    out = tmp_path / "cases"
+    batch = subprocess.Popen([cli, "batch", folder, "--out", out, "--jobs", "2"], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True, start_new_session=True)
+    while not any(_whole(out / n) for n in names):
+        assert batch.poll() is None, "the batch ended before it could be interrupted"
+        time.sleep(0.1)
+    os.killpg(batch.pid, signal.SIGINT)
+    _, err = batch.communicate()
+    assert batch.returncode == 130, err[-2000:]
+    rows = _manifest(out)
+    settled = [n for n in names if rows[f"{n}.mcap"]["status"] == "done"]
+    assert settled and all(_whole(out / n) for n in settled)
+    for n in set(names) - set(settled):                   # pending: nothing of it on disk
+        assert rows[f"{n}.mcap"]["status"] == "pending" and not (out / n).exists()
+    assert not _hidden(out)
+    assert (f"interrupted: {len(settled)} of the 5 inputs to plan were settled and {5 - len(settled)} left pending "
+            f"in {out / 'manifest.csv'}") in " ".join(err.split())
+    res = run(cli, "batch", folder, "--out", out, "--jobs", "2")
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert {n: r["status"] for n, r in _manifest(out).items()} == {
+        f"{n}.mcap": "reused" if n in settled else "done" for n in names}
+
+
 def test_dask_local_cluster_plans_the_folder(cli, patients, tmp_path):
     out = tmp_path / "cases"
     res = run(cli, "batch", patients, "--out", out, "--executor", "dask", "--jobs", "2")
@@ -334,3 +366,4 @@ def test_an_unreachable_scheduler_exits_3(cli, tmp_path):
     res = run(cli, "batch", tmp_path / "scans", "--out", tmp_path / "cases", "--executor", "dask",
               "--scheduler", "tcp://127.0.0.1:9")
     assert res.returncode == 3 and "cannot reach the Dask scheduler" in res.stderr and "Traceback" not in res.stderr
+    assert not (tmp_path / "cases").exists()                 # nothing written
