@@ -163,13 +163,18 @@ def _breast(input: Path):
     import numpy as np
 
     from breastplan import Geometry, Primitive, read_ply
-    from breastplan.case import Case, pose_from_comments
+    from breastplan.case import Case, pose_from_comments, sha256
 
     if input.is_dir() and not (require_folder(input, "case folder") / Case.FIT_NPZ).exists():
         raise BadInputError(input, f"holds no {Case.FIT_NPZ}: deform takes a case folder once `breastplan fit` "
                                    "has fitted it, a PLY file or a fit.npz")
     if input.is_dir() or input.name == Case.FIT_NPZ:
-        fit = Case(require_folder(input if input.is_dir() else input.parent, "case folder")).load_fit()
+        case = Case(require_folder(input if input.is_dir() else input.parent, "case folder"))
+        fit, scan_ply = case.load_fit(), case.path(Case.SCAN_PLY)
+        fitted_to = fit.provenance.inputs.get(Case.SCAN_PLY)
+        if fitted_to is not None and scan_ply.is_file() and fitted_to != sha256(scan_ply):
+            raise BadInputError(case.path(Case.FIT_NPZ), f"was fitted to another scan than the {Case.SCAN_PLY} beside "
+                                                         "it (ingested since): `breastplan fit` the case again")
         return Geometry(fit.vertices, fit.faces), fit.primitive, fit.pose
     if input.suffix.lower() != ".ply" and not _starts_with(input, b"ply"):
         raise BadInputError(input, f"is neither a PLY file nor a {Case.FIT_NPZ} or case folder holding a fit, "

@@ -25,8 +25,11 @@ def mu3_to_cc(volume_mu3):
     return np.asarray(volume_mu3, dtype=float) * MM_PER_MU**3 / 1000.0
 
 
-BREAST_EXTENT_MM = (5.0, 1000.0)
-"""A breast (or its fit) in millimetres spans more than 5 mm and less than a metre."""
+BREAST_EXTENT_MM = (20.0, 600.0)
+"""A breast (or its fit) in millimetres spans more than 20 mm and less than 600 mm (the base of the
+smallest breast is some 80 mm across, of the largest some 350 mm)."""
+FLAT_RATIO = 0.05
+"""A breast rises from its base by more than this share of its width (a flat chest by some 0.1)."""
 SCAN_EXTENT_MM = 8000.0
 """A scan of a patient in millimetres, the room around her included, spans less than 8 m (the
 range of a depth camera)."""
@@ -44,12 +47,14 @@ def extent(points) -> float:
 
 
 def breast_units_problem(points_mm) -> str | None:
-    """Why (N, 3) points cannot be a breast in millimetres, judged by their extent, or None."""
+    """Why (N, 3) points cannot be a breast in millimetres in its breast frame (base on z = 0, rising
+    along +z), judged by their extent and shape, or None."""
     size = extent(points_mm)
     if size == 0.0:
         return "has all its points at one place: no surface"
     if size < BREAST_EXTENT_MM[0]:
-        return f"spans only {size:.3g} units, too little for a breast in millimetres (is it in metres?)"
+        return (f"spans only {size:.3g} units, too little for a breast in millimetres "
+                f"(is it in {'metres' if size < 2.0 else 'centimetres'}?)")
     if size > FAR_EXTENT_MM:
         return (f"spans {size:.3g} units, more than any body in millimetres or micrometres "
                 f"(a point lies far from the others?)")
@@ -59,4 +64,10 @@ def breast_units_problem(points_mm) -> str | None:
     if size > BREAST_EXTENT_MM[1]:
         return (f"spans {size:.4g} mm, far too large for one breast: if it is a whole scan, "
                 f"`breastplan ingest` (or `breastplan plan`) cuts its breast out first")
+    p = np.asarray(points_mm, dtype=float)
+    thickness = np.sqrt(max(np.linalg.eigvalsh(np.cov((p - p.mean(0)).T))[0], 0.0)) * np.sqrt(12.0)
+    if thickness < FLAT_RATIO * size:
+        return f"is flat (some {thickness:.3g} mm thick over {size:.4g} mm): no breast rises from it"
+    if np.median(p[:, 2]) < 0.0:
+        return "lies mostly below z = 0: a breast rises from its base along +z (is its z axis reversed?)"
     return None

@@ -5,6 +5,7 @@ primitives (ptosis, turn and turn-top keep it), the synthetic scanner's true bre
 """
 import functools
 import json
+import shutil
 
 import numpy as np
 import open3d as o3d
@@ -240,9 +241,11 @@ def _cloud(tmp_path, points):
 
 
 SENTENCES = {"missing": "no such file", "not a PLY": "neither a PLY file nor a case folder",
-             "few": "at least 50", "collinear": "coplanar or collinear", "metres": "is it in metres",
+             "few": "at least 50", "collinear": "is flat", "metres": "is it in metres",
              "NaN": "NaN or infinite coordinates", "no surface": "found no breast surface",
-             "one point": "all its points at one place", "micrometres": "is it in micrometres"}
+             "one point": "all its points at one place", "micrometres": "is it in micrometres",
+             "centimetres": "is it in centimetres", "board": "is flat", "reversed": "is its z axis reversed",
+             "a torso": "far too large for one breast"}
 
 
 @pytest.mark.parametrize("problem", list(SENTENCES))
@@ -268,6 +271,15 @@ def test_bad_input_exits_3_naming_the_file_and_writes_nothing(cli, tmp_path, pro
         path = _cloud(tmp_path, to_mm(P.sample(40, 40)) * 1000)
     elif problem == "one point":
         path = _cloud(tmp_path, np.full((100, 3), 7.0))
+    elif problem == "centimetres":
+        path = _cloud(tmp_path, to_mm(P.sample(40, 40)) / 10)
+    elif problem == "board":                                  # 300 × 200 mm, 0.5 mm noise
+        x, y = np.meshgrid(np.linspace(-150, 150, 60), np.linspace(-100, 100, 40))
+        path = _cloud(tmp_path, np.column_stack([x.ravel(), y.ravel(), np.random.default_rng(0).normal(0, 0.5, x.size)]))
+    elif problem == "reversed":                               # a breast hollowed into its base: z negated
+        path = _cloud(tmp_path, to_mm(P.sample(40, 40)) * [1.0, 1.0, -1.0])
+    elif problem == "a torso":                                # a box 650 mm across
+        path = _cloud(tmp_path, np.random.default_rng(0).uniform(0, 650, (3000, 3)))
     else:                                                     # a box of scattered points: no breast to fit
         path = _cloud(tmp_path, np.random.default_rng(0).uniform(0, 120, (3000, 3)))
     res = run(cli, "fit", path, *args)
@@ -294,6 +306,23 @@ def test_a_fit_that_misses_the_stopping_rule_is_written_and_says_so(cli, tmp_pat
     assert fit.residual_map_mm.shape == (len(noisy),)          # where it misses, point by point
     assert np.mean(fit.residual_map_mm) == pytest.approx(out["residuals_mm"]["mean"], abs=1e-3)
     assert 0.5 < np.sqrt(np.mean(np.square(fit.residual_map_mm))) < 3.0   # the 1 mm noise, not a failed fit
+
+
+def test_deform_refuses_a_case_whose_fit_is_of_an_earlier_scan(cli, case, tmp_path):
+    """The case ingested again (the other breast) after its fit: the fit beside the new scan.ply is
+    another breast's, so deform says so instead of deforming it; fitted again, it deforms."""
+    folder = tmp_path / "case"
+    shutil.copytree(case, folder)
+    assert run(cli, "fit", folder).returncode == 0
+    res = run(cli, "ingest", "examples/sample.mcap", "--side", "right", "--out", folder)
+    assert res.returncode == 0, res.stderr
+    deform = ("deform", folder, "--kind", "ptosis", "--degree", "2", "--out", tmp_path / "sag.ply")
+    res = run(cli, *deform)
+    assert_bad_input(res, folder / "fit.npz", tmp_path)
+    assert "was fitted to another scan than the scan.ply beside it" in res.stderr
+    assert not (tmp_path / "sag.ply").exists()
+    assert run(cli, "fit", folder).returncode == 0
+    assert run(cli, *deform).returncode == 0
 
 
 def test_deform_of_a_fit_uses_its_primitive_and_pose(cli, tmp_path):
