@@ -57,9 +57,13 @@ def _matrix(values, dtype, what: str) -> np.ndarray:
 def read_mesh(path: str | Path) -> Mesh:
     """A scan or mesh file (PLY, OBJ, STL, PCD, XYZ) as it is, in its own units and frame, read with the
     readers of `ingest`; BadInputError naming the file for any defect."""
+    from breastplan import BadInputError
     from breastplan.errors import about
-    from breastplan.ingest.files import read_scan_arrays
+    from breastplan.ingest.files import SUPPORTED, read_scan_arrays
 
+    if Path(path).suffix.lower() == ".mcap":
+        raise BadInputError(path, f"is a depthai recording; filters take a scan or mesh file ({', '.join(SUPPORTED)}), "
+                                  "and `breastplan ingest` or `breastplan plan` reads recordings")
     points, faces, _, _ = read_scan_arrays(path)
     with about(path):
         return Mesh(points, faces)

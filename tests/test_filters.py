@@ -21,6 +21,7 @@ from breastplan.filters import (Filter, Mesh, ParameterError, UnknownFilterError
                                 registry)
 from breastplan.ingest.makehuman import BodyOptions, make_body
 from breastplan.ingest.realistic import CameraOptions, make_body_scene, write_scan_file
+from breastplan.plan.job import sample_recording
 
 from clitools import assert_bad_input, run
 
@@ -246,10 +247,12 @@ def test_a_scan_without_a_breast_exits_3_naming_the_file(cli, tmp_path):
     assert_bad_input(res, board, tmp_path)
 
 
-@pytest.mark.parametrize("content, words", [(b"ply\nformat ascii 1.0\nelement vertex 3\n", "no 'end_header'"),
-                                           (None, "no such file")])
-def test_a_bad_file_exits_3_naming_it(cli, tmp_path, content, words):
-    path = tmp_path / "scan.ply"
+@pytest.mark.parametrize("name, content, words", [
+    ("scan.ply", b"ply\nformat ascii 1.0\nelement vertex 3\n", "no 'end_header'"),
+    ("scan.ply", None, "no such file"),
+    ("sample.mcap", sample_recording().read_bytes(), "is a depthai recording; filters take a scan or mesh file")])
+def test_a_bad_file_exits_3_naming_it(cli, tmp_path, name, content, words):
+    path = tmp_path / name
     if content is not None:
         path.write_bytes(content)
     res = run(cli, "filter", "get_breast_measures", path)
