@@ -239,20 +239,26 @@ def _alive(pid: int) -> bool:
         return False
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the workers' parent-death signal is Linux's")
-def test_kill_9_at_a_random_moment_loses_no_finished_case_and_leaves_none_half_written(cli, tmp_path):
+def _five_patients_batched_until_one_is_finished(cli, tmp_path, **popen):
+    """(input folder, output folder, names, the running batch) once one of five cases is whole."""
     folder = tmp_path / "scans"
     folder.mkdir()
     names = [f"patient{i}" for i in range(5)]
     for name in names:
         shutil.copy(SAMPLE, folder / f"{name}.mcap")
     out = tmp_path / "cases"
-    delay = random.uniform(0.0, 4.0)
-    batch = subprocess.Popen([cli, "batch", folder, "--out", out, "--jobs", "2"],
-                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    while not any(_whole(out / n) for n in names):        # at least one case finished
-        assert batch.poll() is None, "the batch ended before it could be killed"
+    batch = subprocess.Popen([cli, "batch", folder, "--out", out, "--jobs", "2"], **popen)
+    while not any(_whole(out / n) for n in names):
+        assert batch.poll() is None, "the batch ended before it could be stopped"
         time.sleep(0.1)
+    return folder, out, names, batch
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the workers' parent-death signal is Linux's")
+def test_kill_9_at_a_random_moment_loses_no_finished_case_and_leaves_none_half_written(cli, tmp_path):
+    folder, out, names, batch = _five_patients_batched_until_one_is_finished(
+        cli, tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    delay = random.uniform(0.0, 4.0)
     time.sleep(delay)
     workers = _children(batch.pid)
     batch.send_signal(signal.SIGKILL)
@@ -281,17 +287,8 @@ def test_ctrl_c_stops_the_batch_at_once_with_its_manifest_true_to_the_disk(cli, 
     """SIGINT to the batch and its workers (a terminal's Ctrl-C) once a case is finished: the cases being
     planned are dropped, not finished behind the manifest's back; the sentence says what is left and the
     same command finishes it."""
-    folder = tmp_path / "scans"
-    folder.mkdir()
-    names = [f"patient{i}" for i in range(5)]
-    for name in names:
-        shutil.copy(SAMPLE, folder / f"{name}.mcap")
-    out = tmp_path / "cases"
-    batch = subprocess.Popen([cli, "batch", folder, "--out", out, "--jobs", "2"], stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True, start_new_session=True)
-    while not any(_whole(out / n) for n in names):
-        assert batch.poll() is None, "the batch ended before it could be interrupted"
-        time.sleep(0.1)
+    folder, out, names, batch = _five_patients_batched_until_one_is_finished(
+        cli, tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     os.killpg(batch.pid, signal.SIGINT)
     _, err = batch.communicate()
     assert batch.returncode == 130, err[-2000:]
