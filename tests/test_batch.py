@@ -287,8 +287,9 @@ def test_ctrl_c_stops_the_batch_at_once_with_its_manifest_true_to_the_disk(cli, 
     """SIGINT to the batch and its workers (a terminal's Ctrl-C) once a case is finished: the cases being
     planned are dropped, not finished behind the manifest's back; the sentence says what is left and the
     same command finishes it."""
-    folder, out, names, batch = _five_patients_batched_until_one_is_finished(
-        cli, tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    folder, out, names, batch = _five_patients_batched_until_one_is_finished(   # SIGINT heard, as at a terminal,
+        cli, tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,  # even
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))   # when the tests run in the background
     os.killpg(batch.pid, signal.SIGINT)
     _, err = batch.communicate()
     assert batch.returncode == 130, err[-2000:]
