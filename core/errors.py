@@ -18,7 +18,7 @@ class BadInputError(BreastplanError):
         self.path = None if path is None else Path(path)
         self.problem = problem.rstrip(".")
         where = f"{self.path}: " if self.path is not None else ""
-        super().__init__(f"{where}{self.problem}.")
+        super().__init__(f"{where}{self.problem}{'' if self.problem.endswith('?') else '.'}")
 
 
 class ArtefactError(BadInputError):

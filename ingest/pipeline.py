@@ -200,10 +200,7 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
             found = BodyInView(body, voxels, which, find_trunk(body))
     trunk = found.trunk
     if trunk.head == "below":
-        flip = f"{'-+'[up[0] == '-']}{up[1]}" if up else ""
-        raise BadInputError(None, f"shows her upside down with {up} up (her neck and head lie below her chest): is "
-                                  f"her up axis {flip} (--up {flip})?" if up else "shows her upside down (her neck and "
-                                  "head lie below her chest): was the camera upside down?")
+        raise BadInputError(None, _upside_down(up))
     with clock("a wall behind her"):
         behind = points[points[:, 2] > found.points[:, 2].max()]
         plumb = plumb_wall(behind if beyond is None else np.vstack([behind, beyond]))
@@ -243,6 +240,16 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
               "roi_camera_mm": None if roi is None else np.asarray(roi, float), "crop_height_mm": B.CROP_MM},
         torso_camera=transform_points(to_camera, torso),
         plumb_camera=None if plumb is None else view_from_camera[:3, :3].T @ plumb, timings_ms=clock.ms)
+
+
+def _upside_down(up: str | None) -> str:
+    """Why a view with her head below her chest is refused: read with `up` (a scan file's axis), or
+    from a camera (None)."""
+    if up is None:
+        return "shows her upside down (her neck and head lie below her chest): was the camera upside down?"
+    flip = ("+" if up[0] == "-" else "-") + up[1]
+    return (f"shows her upside down with {up} up (her neck and head lie below her chest): is her up axis {flip} "
+            f"(--up {flip})?")
 
 
 def body_cluster(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
