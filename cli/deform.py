@@ -51,7 +51,7 @@ def deform(
 
     from breastplan import to_mm, to_model_units, transform_points, write_ply
     from breastplan.case import pose_comment
-    from breastplan.units import BREAST_EXTENT_MM, breast_units_problem
+    from breastplan.units import BREAST_EXTENT_MM, breast_points_problem
 
     given = _parse_primitive(primitive)
     params = parse_pairs(param, f"parameters of {kind}", "--param")
@@ -78,7 +78,7 @@ def deform(
             raise usage_error(str(exc), "--condition" if kind in DEFAULT_CONDITION else "--kind") from None
     fields = None if model is None else _statistical_model(model, kind)
     geometry, carried, pose = _breast(input)
-    problem = breast_units_problem(geometry.points)
+    problem = breast_points_problem(geometry.points)
     if problem:
         raise BadInputError(input, problem)
     writable(out)

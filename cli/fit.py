@@ -115,7 +115,7 @@ def _breast_points(input: Path) -> tuple[np.ndarray, Scan | None, Path, Path]:
     folder) of a case folder or a PLY. A case's breast sits on its chest wall; a PLY's on z = 0."""
     from breastplan import read_ply
     from breastplan.case import Case
-    from breastplan.units import breast_units_problem
+    from breastplan.units import breast_points_problem
 
     if input.is_dir():
         scan = Case(require_folder(input, "case folder")).load_scan()
@@ -124,7 +124,7 @@ def _breast_points(input: Path) -> tuple[np.ndarray, Scan | None, Path, Path]:
         scan, points, source, folder = None, read_ply(input).points, input, input.parent
     else:
         raise BadInputError(input, "is neither a PLY file nor a case folder from `breastplan ingest`")
-    problem = breast_units_problem(points)
+    problem = breast_points_problem(points)
     if problem:
         raise BadInputError(source, problem)
     return points, scan, source, folder

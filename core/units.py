@@ -46,7 +46,7 @@ def extent(points) -> float:
         return float(np.max(p.max(axis=0) - p.min(axis=0)))
 
 
-def breast_units_problem(points_mm) -> str | None:
+def breast_points_problem(points_mm) -> str | None:
     """Why (N, 3) points cannot be a breast in millimetres in its breast frame (base on z = 0, rising
     along +z), judged by their extent and shape, or None."""
     size = extent(points_mm)

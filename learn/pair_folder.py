@@ -29,7 +29,7 @@ from breastplan.deform.by_degree import slug
 from breastplan.deform.conditions import CONDITIONS, find_condition
 from breastplan.deform.names import DD
 from breastplan.errors import counted, require_file
-from breastplan.units import breast_units_problem
+from breastplan.units import breast_points_problem
 
 PAIRS_CSV = "pairs.csv"
 COLUMNS = ("before", "after", "type", "degree", "split", "condition")
@@ -203,7 +203,7 @@ def breast_cloud(path: str | Path) -> np.ndarray:
         raise BadInputError(path, f"has {counted(int((~finite).sum()), 'point')} with NaN or infinite coordinates")
     if len(points) < MIN_POINTS:
         raise BadInputError(path, f"has {counted(len(points), 'point')}, fewer than the {MIN_POINTS} a breast needs")
-    problem = breast_units_problem(points)
+    problem = breast_points_problem(points)
     if problem is not None:
         raise BadInputError(path, problem)
     return points
