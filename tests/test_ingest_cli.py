@@ -93,6 +93,8 @@ def bad_inputs(recording, tmp_path_factory):
     write_ply(folder / "far.ply", far)
     cases["one coordinate 1e30 in mm"] = (folder / "far.ply", ["--units", "mm"])
     cases["no mound under the given nipple"] = (rec, ["--nipple", "-900.25,12.5,640"])
+    in_front = nipple - [0.0, 0.0, 150.0]                   # over her breast in the image, 150 mm before her skin
+    cases["a given nipple off her skin"] = (rec, ["--nipple", ",".join(f"{v:.1f}" for v in in_front)])
     return folder, cases
 
 
@@ -104,7 +106,8 @@ SENTENCES = {
     "no mound on the requested side": "no breast mound found on the right side",
     "one coordinate 1e30 in mm": "more than any body scan spans",
     "no mound under the given nipple":              # echoed as typed, not in the pipeline's viewing frame
-        "no breast mound lies under the given nipple -900.25,12.5,640 (camera mm)"}
+        "no breast mound lies under the given nipple -900.25,12.5,640 (camera mm)",
+    "a given nipple off her skin": "mm off the skin of the breast mound under it (at most 25 mm)"}
 
 
 @pytest.mark.parametrize("case", list(SENTENCES))
