@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from breastplan.atomic import atomic_set
+from breastplan.json_text import to_json
 
 MANIFEST_SCHEMA = "breastplan.batch/1"
 CSV_NAME, JSON_NAME = "manifest.csv", "manifest.json"
@@ -60,4 +60,4 @@ class Manifest:
         writer.writerows(asdict(r) for r in self.rows)
         with atomic_set() as stage:
             Path(stage(self.out / CSV_NAME)).write_text(text.getvalue(), encoding="utf-8")
-            Path(stage(self.out / JSON_NAME)).write_text(json.dumps(self.as_dict(), indent=1), encoding="utf-8")
+            Path(stage(self.out / JSON_NAME)).write_text(to_json(self.as_dict(), indent=1), encoding="utf-8")

@@ -164,6 +164,7 @@ def _breast(input: Path):
 
     from breastplan import Geometry, Primitive, read_ply
     from breastplan.case import Case, pose_from_comments, sha256
+    from breastplan.frames import is_rigid
 
     if input.is_dir() and not (require_folder(input, "case folder") / Case.FIT_NPZ).exists():
         raise BadInputError(input, f"holds no {Case.FIT_NPZ}: deform takes a case folder once `breastplan fit` "
@@ -184,6 +185,11 @@ def _breast(input: Path):
         carried, pose = Primitive.from_comments(geometry.comments), pose_from_comments(geometry.comments)
     except ValueError as exc:
         raise BadInputError(input, str(exc)) from None
+    problem = carried and carried.breast_problem()
+    if problem:
+        raise BadInputError(input, f"carries a primitive that {problem}")
+    if pose is not None and not is_rigid(pose):
+        raise BadInputError(input, "carries a pose that is not a rigid transform")
     return geometry, carried, np.eye(4) if pose is None or carried is None else pose
 
 
@@ -212,10 +218,7 @@ def _parse_primitive(text: Optional[str]) -> Optional[Primitive]:
         prim = Primitive(**values)
     except ValueError as exc:
         raise usage_error(str(exc), "--primitive") from None
-    from breastplan.units import BREAST_EXTENT_MM, MM_PER_MU
-
-    largest = max(values[n] for n in PARAM_NAMES[:5])
-    if largest > BREAST_EXTENT_MM[1] / (2 * MM_PER_MU):
-        raise usage_error(f"a semi-axis of {largest:.3g} model units ({MM_PER_MU:g} mm each) makes the primitive "
-                          f"larger than any breast ({BREAST_EXTENT_MM[1]:g} mm across)", "--primitive")
+    problem = prim.breast_problem()
+    if problem:
+        raise usage_error(f"the primitive {problem}", "--primitive")
     return prim

@@ -7,13 +7,14 @@ progress bar and table are imported when used: every command's start-up imports 
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 from pathlib import Path
 from typing import Any, Iterator
 
 import typer
 from rich.console import Console
+
+from breastplan.json_text import to_json
 
 stdout = Console(highlight=False)
 stderr = Console(stderr=True, highlight=False)
@@ -70,7 +71,7 @@ def progress(label: str, total: int) -> Iterator[Any]:
 def report(result: dict, as_json: bool, title: str) -> None:
     """Print the result: one JSON object on stdout, or a two-column table."""
     if as_json:
-        print(json.dumps(result, default=_plain))
+        print(to_json(result))
         return
     from rich.table import Table
 
@@ -80,14 +81,8 @@ def report(result: dict, as_json: bool, title: str) -> None:
     stdout.print(table)
 
 
-def _plain(value):
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    return str(value)
-
-
 def _human(value) -> str:
-    value = _plain(value) if hasattr(value, "tolist") else value
+    value = value.tolist() if hasattr(value, "tolist") else value
     if isinstance(value, float):
         return f"{value:.4g}"
     if isinstance(value, (list, tuple)):

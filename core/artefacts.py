@@ -2,8 +2,9 @@
 
 Every artefact holds `schema` ("breastplan.<name>/<version>"), `units`, `frame`,
 `version` (of the producing breastplan), `meta` (a JSON string) and plain numeric or
-string arrays. `load_npz` checks the schema and, given a spec, each array's dtype kind
-and shape; any defect raises ArtefactError naming the file.
+string arrays. `load_npz` checks the schema, that `meta` is a JSON object and, given specs, each
+array's dtype kind and shape and the JSON type of each metadata entry present; any defect raises
+ArtefactError naming the file.
 """
 from __future__ import annotations
 
@@ -15,12 +16,18 @@ from typing import Mapping
 import numpy as np
 
 from .atomic import atomic_open
-from .errors import ArtefactError, require_file
+from .errors import ArtefactError, NewerArtefactError, require_file
 
 RESERVED = ("schema", "units", "frame", "version", "meta")
 
 Spec = Mapping[str, tuple[str, tuple]]
 """name → (dtype kinds, shape); shape entries are ints, or names bound to one size across arrays."""
+MetaSpec = Mapping[str, object]
+"""metadata key → the JSON type of its value: `str`, `int`, `float` (an int too), `bool`, `list`,
+`dict`, a tuple of these, `[T]` for a list of T, or a MetaSpec for an object (key "*": every value
+of it). Absent keys pass."""
+_JSON_NAMES = {str: "a string", int: "an integer", float: "a number", bool: "a boolean",
+               list: "a list", dict: "an object", type(None): "null"}
 
 
 def save_npz(path: str | Path, schema: str, arrays: Mapping[str, np.ndarray], *,
@@ -54,7 +61,7 @@ class Artefact(dict):
     meta: dict
 
 
-def load_npz(path: str | Path, schema: str, spec: Spec | None = None) -> Artefact:
+def load_npz(path: str | Path, schema: str, spec: Spec | None = None, meta_spec: MetaSpec | None = None) -> Artefact:
     """Load and validate an artefact of `schema` ("breastplan.<name>/<version>")."""
     path = require_file(path, f"{schema} artefact", ArtefactError)
     if not zipfile.is_zipfile(path):
@@ -74,7 +81,7 @@ def load_npz(path: str | Path, schema: str, spec: Spec | None = None) -> Artefac
     if name != want_name:
         raise ArtefactError(path, f"has schema {found}, expected {schema}")
     if ver is None or ver > want_ver:
-        raise ArtefactError(path, f"has schema {found}, newer than this breastplan reads ({schema})")
+        raise NewerArtefactError(path, f"has schema {found}, newer than this breastplan reads ({schema})")
     art = Artefact({k: v for k, v in raw.items() if k not in RESERVED})
     art.schema, art.units = found, str(raw.get("units", ""))
     art.frame, art.version = str(raw.get("frame", "")), str(raw.get("version", ""))
@@ -82,8 +89,12 @@ def load_npz(path: str | Path, schema: str, spec: Spec | None = None) -> Artefac
         art.meta = json.loads(str(raw.get("meta", "{}")))
     except json.JSONDecodeError:
         raise ArtefactError(path, "has metadata that is not valid JSON") from None
+    if not isinstance(art.meta, dict):
+        raise ArtefactError(path, f"has metadata that is {_json_name(art.meta)}, not a JSON object")
     if spec:
         _check_spec(path, art, spec)
+    if meta_spec:
+        _check_meta(path, art.meta, meta_spec)
     return art
 
 
@@ -125,3 +136,31 @@ def _check_spec(path: Path, art: Artefact, spec: Spec) -> None:
                 raise ArtefactError(path, f"has array '{key}' of shape {a.shape}, inconsistent with the rest")
         if a.dtype.kind == "f" and not np.isfinite(a).all():
             raise ArtefactError(path, f"has NaN or infinite values in '{key}'")
+
+
+def _check_meta(path: Path, meta: dict, spec: MetaSpec, where: str = "") -> None:
+    for key, want in spec.items():
+        items = meta.items() if key == "*" else [(key, meta[key])] if key in meta else []
+        for name, value in items:
+            if isinstance(want, Mapping):
+                if not isinstance(value, dict):
+                    raise ArtefactError(path, f"has metadata '{where}{name}' that is {_json_name(value)}, "
+                                              f"not an object")
+                _check_meta(path, value, want, f"{where}{name}.")
+            elif isinstance(want, list):
+                if not isinstance(value, list):
+                    raise ArtefactError(path, f"has metadata '{where}{name}' that is {_json_name(value)}, not a list")
+                _check_meta(path, dict(enumerate(value)), {"*": want[0]}, f"{where}{name}.")
+            elif not _is_json(value, want if isinstance(want, tuple) else (want,)):
+                kinds = " or ".join(_JSON_NAMES[t] for t in (want if isinstance(want, tuple) else (want,)))
+                raise ArtefactError(path, f"has metadata '{where}{name}' that is {_json_name(value)}, not {kinds}")
+
+
+def _is_json(value, types: tuple) -> bool:
+    if isinstance(value, bool):
+        return bool in types
+    return isinstance(value, types) or (float in types and isinstance(value, int))
+
+
+def _json_name(value) -> str:
+    return _JSON_NAMES.get(type(value), type(value).__name__)

@@ -23,11 +23,13 @@ from . import __version__
 from .artefacts import load_npz, save_npz
 from .atomic import atomic_set, recover
 from .chest_wall import ChestWall
-from .errors import ArtefactError, BadInputError
+from .errors import ArtefactError, BadInputError, NewerArtefactError
 from .frames import is_rigid
+from .meshes import mesh_volume
 from .options import SIDES
 from .ply import read_ply, write_ply
 from .primitive import Primitive
+from .units import BREAST_EXTENT_MM
 
 SCAN_SCHEMA, FIT_SCHEMA, CHANGE_SCHEMA = "breastplan.scan/1", "breastplan.fit/2", "breastplan.deformation/1"
 CAMERA_FRAME = "frame camera-opencv"
@@ -154,6 +156,13 @@ _FIT_SPEC = {"primitive": ("f", (7,)), "pose": ("f", (4, 4)), "deformation": ("f
              "volume_cc_primitive": ("f", ()), "volume_cc_mesh": ("f", ()),
              "volume_cc_below_base": ("f", ()),
              "iterations": ("iu", (2,)), "seconds": ("f", (2,)), "residual_map_mm": ("f", ("n",))}
+
+
+_PROVENANCE_META = {"inputs": {"*": str}, "options": dict, "version": str}
+_SET_META = {"set": {"*": str}, "provenance": _PROVENANCE_META}
+_SCAN_META = {**_SET_META, "timings_ms": {"*": float}, "nipple_found": str, "plumb_camera": [float]}
+_FIT_META = {**_SET_META, "points": int, "converged": bool, "stopping_rule_met": bool}
+_META = {SCAN_SCHEMA: _SCAN_META, FIT_SCHEMA: _FIT_META, CHANGE_SCHEMA: _SET_META}
 
 
 class Case:
@@ -290,6 +299,9 @@ class Case:
         mesh = read_ply(self.path(self.FIT_PLY))
         if mesh.faces is None:
             raise ArtefactError(self.path(self.FIT_PLY), "holds no faces; a fitted surface is a closed mesh")
+        problem = _fit_problem(art, primitive, mesh)
+        if problem:
+            raise ArtefactError(npz, problem)
         meta = art.meta
         return Fit(vertices=mesh.points, faces=mesh.faces, primitive=primitive, pose=art["pose"],
                    deformation=art["deformation"], lattice_shape=shape, lattice_box_mm=art["lattice_box_mm"],
@@ -328,11 +340,14 @@ class Case:
         if not self.path(npz_name).is_file():
             return False
         try:
-            meta = load_npz(self.path(npz_name), _schema_of(npz_name)).meta
+            schema = _schema_of(npz_name)
+            meta = load_npz(self.path(npz_name), schema, meta_spec=_META[schema]).meta
             found = Provenance.from_meta(meta)
             if (found.inputs, found.options) != (wanted.inputs, wanted.options):
                 return False
             self._check_set(npz_name, meta)
+        except NewerArtefactError:
+            raise
         except ArtefactError:
             return False
         return True
@@ -358,7 +373,7 @@ class Case:
 
     def _load_set(self, npz: str, schema: str, spec: dict, siblings: tuple[str, ...]):
         self._recover()
-        art = load_npz(self.path(npz), schema, spec)
+        art = load_npz(self.path(npz), schema, spec, _META[schema])
         if art.schema != schema:             # a case's sets have one layout each: an older one is not read
             raise ArtefactError(self.path(npz), f"has schema {art.schema}, an older schema than this breastplan "
                                                 f"reads ({schema}); run the stage again")
@@ -375,6 +390,23 @@ class Case:
             if name in recorded and sha256(path) != recorded[name]:
                 raise ArtefactError(path, f"is not the file {npz} was written with (an interrupted or "
                                           f"foreign write); run the stage again")
+
+
+def _fit_problem(art, primitive: Primitive, mesh) -> str | None:
+    """Why a fit.npz's numbers cannot describe the closed surface of fit.ply beside it, or None."""
+    problem = primitive.breast_problem()
+    if problem:
+        return f"has a primitive that {problem}"
+    if not is_rigid(art["pose"]) or np.abs(art["pose"][:3, 3]).max() > BREAST_EXTENT_MM[1]:
+        return "has a 'pose' that is not a rigid transform near the breast"
+    if (art["residuals_mm"] < 0).any() or art["normalised_residual"] < 0 or (art["residual_map_mm"] < 0).any():
+        return "has negative residuals"
+    enclosed = mesh_volume(mesh.points, mesh.faces) / 1000.0
+    if not abs(float(art["volume_cc_mesh"]) - enclosed) <= 1e-3 * abs(enclosed) + 0.01:
+        return f"records a volume of {float(art['volume_cc_mesh']):.6g} cc where fit.ply encloses {enclosed:.6g} cc"
+    if not 0.0 < float(art["volume_cc_mesh"]) + float(art["volume_cc_below_base"]) < np.inf:
+        return "records a volume down to the chest wall that is not positive"
+    return None
 
 
 def _is_unit_vector(value) -> bool:

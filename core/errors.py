@@ -25,6 +25,10 @@ class ArtefactError(BadInputError):
     """An artefact file (PLY or NPZ) that is missing, corrupt or of the wrong schema."""
 
 
+class NewerArtefactError(ArtefactError):
+    """An artefact written by a newer breastplan: refused, never overwritten."""
+
+
 class Interrupted(BreastplanError):
     """Work stopped by the user (Ctrl-C) after writing what was finished: CLI exit code 130, one sentence."""
 

@@ -149,7 +149,8 @@ class ModelFile:
 
 def load_model(path: str | Path) -> ModelFile:
     """Load and validate a breastplan.model/1 NPZ; any defect raises ArtefactError naming the file."""
-    art = load_npz(path, SCHEMA)
+    art = load_npz(path, SCHEMA, meta_spec={"model": str, "kind": str, "kinds": [str], "condition": str,
+                                            "lattice": int, "feature_set": str, "estimator": dict})
     arrays = {k: v for k, v in art.items() if not k.startswith(EXTRA)}
     _check(Path(path), arrays)
     extra = {k[len(EXTRA):]: v for k, v in art.items() if k.startswith(EXTRA)}

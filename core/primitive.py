@@ -11,9 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .units import mu3_to_cc
+from .units import BREAST_EXTENT_MM, MM_PER_MU, mu3_to_cc
 
 PARAM_NAMES = ("a1", "a2", "a3", "a4", "a5", "eps1", "eps2")
+EPS_BOUNDS = (0.3, 2.0)
+"""A breast's shape exponents eps1, eps2: from a boxy (0.3) to a pinched (2.0) superellipsoid."""
 COMMENT = "primitive (model units)"
 """Start of the PLY header comment that carries a primitive."""
 
@@ -81,6 +83,18 @@ class Primitive:
                     return cls(**{k: float(v) for k, v in values.items()})
                 except (TypeError, ValueError) as exc:
                     raise ValueError(f"its primitive comment '{line}' is malformed ({exc})") from None
+        return None
+
+    def breast_problem(self) -> str | None:
+        """Why this primitive cannot be a breast's (its largest span outside BREAST_EXTENT_MM, a shape
+        exponent outside EPS_BOUNDS), or None."""
+        span = max(self.a1 + self.a2, self.a3 + self.a4, self.a5) * MM_PER_MU
+        if not BREAST_EXTENT_MM[0] <= span <= BREAST_EXTENT_MM[1]:
+            return (f"spans {span:.3g} mm, no breast's size ({BREAST_EXTENT_MM[0]:.0f}–{BREAST_EXTENT_MM[1]:.0f} mm; "
+                    f"its semi-axes are in model units of {MM_PER_MU:.0f} mm)")
+        if not all(EPS_BOUNDS[0] <= e <= EPS_BOUNDS[1] for e in (self.eps1, self.eps2)):
+            return (f"has shape exponents eps1 = {self.eps1:.3g}, eps2 = {self.eps2:.3g}, outside a breast's "
+                    f"{EPS_BOUNDS[0]}–{EPS_BOUNDS[1]}")
         return None
 
     # --- surface -------------------------------------------------------------

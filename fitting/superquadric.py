@@ -20,10 +20,10 @@ from breastplan.deform.global_deformations import (REFERENCE_AXIS, TABLE_SIZE, T
                                                    apply_kind, beta, top_shape_table)
 from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
 from breastplan.errors import counted
+from breastplan.primitive import EPS_BOUNDS
 
 from .sampling import seeded_subset
 
-EPS_BOUNDS = (0.3, 2.0)
 FIT_POINTS = 3000
 """Larger clouds are fitted on a seeded random subset of this size (the residuals of all
 points are reported): 3000 surface points pin 7 shape and 6 pose parameters to ≈ 0.1 %."""

@@ -111,7 +111,7 @@ class Database:
         except OSError as exc:
             raise ArtefactError(path, f"was left by an interrupted write that cannot be completed here "
                                       f"({exc.strerror or exc}); run synth again") from None
-        art = load_npz(path, SCHEMA, _SPEC)
+        art = load_npz(path, SCHEMA, _SPEC, {"name": str, "seed": int})
         if art["points"].shape[1] != int(np.prod(art["grid"])):
             raise ArtefactError(path, "has a point count that does not match its sampling grid")
         return cls.from_arrays(art, art.meta)

@@ -89,7 +89,7 @@ class Dataset:
 
     @classmethod
     def load(cls, path: str | Path) -> "Dataset":
-        art = load_npz(path, SCHEMA, _SPEC)
+        art = load_npz(path, SCHEMA, _SPEC, {"condition": str, "kind": str, "dd": int, "database": str, "seed": int})
         try:
             condition = find_condition(art.meta["condition"])
             dd = int(art.meta["dd"])

@@ -10,6 +10,7 @@ import numpy as np
 from breastplan.atomic import atomic_open
 from breastplan.deform.by_degree import slug
 from breastplan.deform.conditions import find_condition
+from breastplan.json_text import to_json
 
 from .figures import six_plot
 from .metrics import summary, ttest
@@ -128,7 +129,7 @@ def write_report(out: Path, results: list[Result], meta: dict) -> dict:
         summary_rows.append(_headline(study, cond, mine, best))
     report = {"meta": meta, "rows": json_rows(results), "best": summary_rows, "t_tests": tests,
               "figures": figures}
-    _write_text(out / "report.json", json.dumps(report, indent=1, default=_plain))
+    _write_text(out / "report.json", to_json(report, indent=1))
     _write_text(out / "report.md", markdown(report, results))
     return report
 

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from breastplan.json_text import to_json
+
 from .metrics import summary, ttest
 from .report import DIRECTIONS, _f, _plain, _write_text, hyper_text, ttest_cells
 from .statistical_study import CONTINUOUS_ROW, SPIKE, THESIS_CONDITION, THESIS_HAUSDORFF, StatResult
@@ -78,7 +80,7 @@ def write_report(out: Path, results: list[StatResult], meta: dict) -> dict:
         (a, ra), (b, rb) = sorted(by_lattice.items())
         tests[f"{THESIS_ROW}: {a ** 3} vs {b ** 3} CP"] = ttest(ra.distances[key], rb.distances[key])
     report = {"meta": meta, "rows": json_rows(results), "best": best, "t_tests": tests, "figures": {}}
-    _write_text(out / "report.json", json.dumps(report, indent=1, default=_plain))
+    _write_text(out / "report.json", to_json(report, indent=1))
     _write_text(out / "report.md", markdown(report, results))
     return report
 

@@ -6,7 +6,6 @@ all or nothing, plan.json last, so that a plan.json always describes the report 
 """
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
@@ -15,6 +14,7 @@ import numpy as np
 from breastplan import __version__, transform_points, write_ply
 from breastplan.atomic import atomic_set
 from breastplan.case import Case, Provenance, sha256
+from breastplan.json_text import to_json
 from breastplan.deform.names import PARAM_NAMES, at_bounds
 from breastplan.fitting.ffd import STOP_RESIDUAL
 from breastplan.options import SIDES
@@ -57,7 +57,7 @@ def write_plan(plan: Plan, folder: Path) -> dict:
             torso_files[change.name] = name
         Path(stage(folder / Case.REPORT)).write_text(render(plan, record), encoding="utf-8")
         summary_png(plan, record, stage(folder / SUMMARY))
-        Path(stage(folder / Case.PLAN_JSON)).write_text(json.dumps(record, indent=1), encoding="utf-8")
+        Path(stage(folder / Case.PLAN_JSON)).write_text(to_json(record, indent=1), encoding="utf-8")
     _remove_earlier_plans(folder, record)
     return record
 

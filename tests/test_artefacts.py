@@ -1,7 +1,9 @@
 """PLY and NPZ artefacts: round trips, validation, atomic writes (docs/artefacts.md)."""
 import io
+import json
 import os
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,6 +12,7 @@ from hypothesis import strategies as st
 
 from breastplan import ArtefactError, load_npz, read_ply, save_npz, write_ply
 from breastplan.atomic import atomic_open
+from breastplan.json_text import to_json
 
 SPEC = {"points": ("f", ("n", 3)), "label": ("U", ("n",))}
 
@@ -213,3 +216,35 @@ def test_a_foreign_file_is_refused_from_its_first_bytes(tmp_path):
     path.write_bytes(b"\x89PNG\r\n\x1a\n" + b"\0" * (1 << 20))
     with pytest.raises(ArtefactError, match="is not a PLY file"):
         read_ply(path)
+
+
+def test_npz_metadata_types(tmp_path):
+    """Truth: metadata is one JSON object; an entry of another JSON type than the spec names is
+    refused by its dotted name, an absent one passes, and an integer is a number."""
+    meta_spec = {"n": int, "x": float, "tags": [str], "who": {"name": str, "*": (str, int)}}
+    good = {"n": 3, "x": 2, "tags": ["a"], "who": {"name": "b", "age": 4}}
+    path = save_npz(tmp_path / "a.npz", "breastplan.test/1", {"v": np.zeros(2)}, meta=good)
+    assert load_npz(path, "breastplan.test/1", meta_spec=meta_spec).meta == good
+    assert load_npz(save_npz(tmp_path / "b.npz", "breastplan.test/1", {"v": np.zeros(2)}), "breastplan.test/1",
+                    meta_spec=meta_spec).meta == {}
+    for meta, problem in [({"n": True}, "'n' that is a boolean, not an integer"),
+                          ({"n": 1.5}, "'n' that is a number, not an integer"),
+                          ({"x": "1"}, "'x' that is a string, not a number"),
+                          ({"tags": "a"}, "'tags' that is a string, not a list"),
+                          ({"tags": ["a", 2]}, "'tags.1' that is an integer, not a string"),
+                          ({"who": {"name": None}}, "'who.name' that is null, not a string"),
+                          ({"who": {"age": [4]}}, "'who.age' that is a list, not a string or an integer")]:
+        bad = save_npz(tmp_path / "c.npz", "breastplan.test/1", {"v": np.zeros(2)}, meta=meta)
+        with pytest.raises(ArtefactError, match=problem):
+            load_npz(bad, "breastplan.test/1", meta_spec=meta_spec)
+    np.savez(tmp_path / "d.npz", schema=np.str_("breastplan.test/1"), meta=np.str_("[1, 2]"))
+    with pytest.raises(ArtefactError, match="metadata that is a list, not a JSON object"):
+        load_npz(tmp_path / "d.npz", "breastplan.test/1")
+
+
+def test_json_text_is_strict_json():
+    """Truth: JSON has no NaN or Infinity (RFC 8259), so a strict parser reads all breastplan writes."""
+    text = to_json({"v": float("nan"), "w": [np.float64("inf"), np.int64(3)], "a": np.array([1.5, -np.inf]),
+                    "t": (1, "x"), "p": Path("/x")})
+    assert json.loads(text, parse_constant=lambda name: pytest.fail(f"{name} in {text}")) == \
+        {"v": None, "w": [None, 3], "a": [1.5, None], "t": [1, "x"], "p": "/x"}

@@ -186,12 +186,17 @@ def test_usage_errors_exit_2_naming_the_option_and_write_nothing(cli, tmp_path, 
     assert list(tmp_path.iterdir()) == []
 
 
-def test_a_primitive_larger_than_any_breast_is_a_usage_error(cli, tmp_path):
+@pytest.mark.parametrize("primitive, problem", [
+    ("a1=1e308,a2=10,a3=10,a4=10,a5=10", "no breast's size"),              # wider than any breast
+    ("a1=1e-300,a2=1e-300,a3=1e-300,a4=1e-300,a5=1e-300", "no breast's size"),   # a point
+    ("a1=10,a2=10,a3=10,a4=10,a5=10,eps1=1e9", "shape exponents"),        # no superellipsoid a breast has
+])
+def test_a_primitive_no_breast_has_is_a_usage_error(cli, tmp_path, primitive, problem):
     write_ply(tmp_path / "breast.ply", breast_mm())
     res = run(cli, "deform", tmp_path / "breast.ply", "--kind", "ptosis", "--param", "b0=1",
-              "--primitive", "a1=1e308,a2=10,a3=10,a4=10,a5=10", "--out", tmp_path / "out.ply")
+              "--primitive", primitive, "--out", tmp_path / "out.ply")
     assert res.returncode == 2, res.stderr
-    assert "--primitive" in res.stderr and "larger than any breast" in res.stderr
+    assert "--primitive" in res.stderr and problem in " ".join(res.stderr.replace("│", " ").split())
     assert "Traceback" not in res.stderr and "Warning" not in res.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["breast.ply"]
 
@@ -237,3 +242,19 @@ def test_deform_options_that_do_not_apply_are_usage_errors_never_ignored(cli, tm
     assert res.returncode == 2, res.stderr
     assert f"Invalid value for {option}" in res.stderr and "Traceback" not in res.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["breast.ply"]
+
+
+@pytest.mark.parametrize("comments, problem", [
+    (["primitive (model units) a1=10 a2=10 a3=10 a4=10 a5=10 eps1=1 eps2=1",
+      "pose (primitive frame to breast frame, mm) " + " ".join(["0"] * 16)], "a pose that is not a rigid transform"),
+    (["primitive (model units) a1=1e300 a2=1e300 a3=1e300 a4=1e300 a5=1e300 eps1=1 eps2=1"],
+     "a primitive that spans"),
+])
+def test_a_ply_carrying_a_primitive_or_pose_no_breast_has_is_refused(cli, tmp_path, comments, problem):
+    """Truth: a breast's pose is rigid (its inverse takes the points to the primitive's frame) and its
+    primitive spans 20–600 mm; a PLY header that says otherwise is a damaged file, not a breast."""
+    write_ply(tmp_path / "breast.ply", breast_mm(), comments=comments)
+    res = run(cli, "deform", tmp_path / "breast.ply", "--kind", "top-shape", "--degree", "3",
+              "--out", tmp_path / "out.ply")
+    assert_bad_input(res, tmp_path / "breast.ply", tmp_path)
+    assert problem in res.stderr

@@ -16,6 +16,7 @@ from breastplan.case import Case, Fit, Provenance, Scan, Source, sha256
 from breastplan.chest_wall import ChestWall
 from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.global_deformations import Deformation
+from breastplan.meshes import mesh_volume
 from breastplan.errors import ArtefactError, about
 from breastplan.options import FitOptions, IngestOptions
 
@@ -44,7 +45,7 @@ def a_fit(model=BreastModel(Primitive(10, 11, 9, 10, 8, 0.9, 1.1), Deformation(p
                   lattice_box_mm=np.array([[-90.0] * 3, [90.0] * 3]), control_rest_mm=lattice,
                   control_fitted_mm=lattice + 1.0, residuals_mm={"mean": 0.1, "rms": 0.2, "p95": 0.3, "max": 0.9},
                   normalised_residual=0.001, volume_cc_primitive=model.primitive.volume_cc,
-                  volume_cc_mesh=model.volume_cc(20), volume_cc_below_base=12.5, iterations=(40, 3),
+                  volume_cc_mesh=mesh_volume(V, F) / 1000.0, volume_cc_below_base=12.5, iterations=(40, 3),
                   seconds=(0.2, 0.05), points=3000,
                   residual_map_mm=np.linspace(0.0, 0.9, 3000),
                   converged=True, stopping_rule_met=True, provenance=Provenance({"scan.ply": "ab" * 32}, {"lattice": 3}))
@@ -265,3 +266,53 @@ def test_a_scan_whose_frames_or_chest_wall_cannot_be_used_is_refused_by_name(tmp
     with pytest.raises(ArtefactError, match=problem) as err:
         case.load_scan()
     assert err.value.path == case.path(Case.SCAN_NPZ)
+
+
+def _rewrite_npz(path, **changes):
+    """The NPZ at `path` with some entries replaced (`meta` as JSON text), as a foreign tool would."""
+    with np.load(path, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays.update({k: np.str_(v) if isinstance(v, str) else v for k, v in changes.items()})
+    np.savez(path, **arrays)
+
+
+@pytest.mark.parametrize("change, problem", [
+    ({"volume_cc_mesh": np.float64(-5000.0)}, "records a volume of -5000 cc where fit.ply encloses"),
+    ({"volume_cc_mesh": np.float64(1e308)}, "records a volume of 1e\\+308 cc"),
+    ({"volume_cc_below_base": np.float64(-1e6)}, "down to the chest wall that is not positive"),
+    ({"pose": np.diag([1000.0, 1000.0, 1000.0, 1.0])}, "'pose' that is not a rigid transform"),
+    ({"pose": np.zeros((4, 4))}, "'pose' that is not a rigid transform"),
+    ({"primitive": np.array([1e7, 1e7, 1e7, 1e7, 1e7, 1.0, 1.0])}, "a primitive that spans 1.2e\\+08 mm"),
+    ({"primitive": np.array([10.0, 10, 10, 10, 10, 9.0, 1.0])}, "shape exponents eps1 = 9"),
+    ({"normalised_residual": np.float64(-1.0)}, "negative residuals"),
+    ({"meta": "[]"}, "metadata that is a list, not a JSON object"),
+    ({"meta": '{"points": "abc"}'}, "metadata 'points' that is a string, not an integer"),
+    ({"meta": '{"provenance": "x"}'}, "metadata 'provenance' that is a string, not an object"),
+    ({"meta": '{"set": ["fit.ply"]}'}, "metadata 'set' that is a list, not an object"),
+    ({"meta": '{"provenance": {"inputs": {"scan.ply": 5}}}'}, "'provenance.inputs.scan.ply' that is an integer"),
+])
+def test_a_fit_npz_whose_numbers_cannot_be_its_surface_s_is_refused_by_name(tmp_path, change, problem):
+    """Truth: a fit's recorded volume is the volume its own fit.ply encloses (divergence theorem),
+    its pose is rigid, a breast's primitive spans 20–600 mm with eps in 0.3–2, residuals are
+    distances and metadata has the types the fit writes; an edited fit.npz that breaks one is
+    damaged, named, and never read as a breast."""
+    case = Case(tmp_path / "case")
+    case.save_fit(a_fit())
+    _rewrite_npz(case.path(Case.FIT_NPZ), **change)
+    with pytest.raises(ArtefactError, match=problem) as err:
+        case.load_fit()
+    assert err.value.path == case.path(Case.FIT_NPZ)
+
+
+def test_a_fit_from_a_newer_breastplan_is_refused_not_refitted_over(tmp_path):
+    """Truth: a stage that is merely stale is redone, but an artefact this breastplan cannot read
+    because a newer one wrote it must not be overwritten by an older tool."""
+    (tmp_path / "scan.ply").write_bytes(b"a scan")
+    made = Provenance.of({"scan.ply": tmp_path / "scan.ply"}, FitOptions().as_dict())
+    case = Case(tmp_path / "case")
+    case.save_fit(a_fit(provenance=made))
+    _rewrite_npz(case.path(Case.FIT_NPZ), schema="breastplan.fit/99")
+    with pytest.raises(ArtefactError, match="newer than this breastplan reads"):
+        case.is_fresh(Case.FIT_NPZ, made)
+    _rewrite_npz(case.path(Case.FIT_NPZ), schema="breastplan.fit/2", meta="[]")
+    assert not case.is_fresh(Case.FIT_NPZ, made)                # damaged: redone

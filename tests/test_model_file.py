@@ -88,7 +88,7 @@ def test_file_loads_without_pickle_and_holds_plain_arrays(tmp_path):
 
 
 def test_meta_and_extra_round_trip(tmp_path):
-    meta = {"training_set": "V", "cv_score": 0.93, "features": ["a", "b", "c", "d"], "condition": {"k": 5}}
+    meta = {"training_set": "V", "cv_score": 0.93, "features": ["a", "b", "c", "d"], "grid": {"k": 5}}
     extra = {"pca_components": RNG.normal(size=(3, 4)), "pca_mean": np.arange(4.0), "labels": np.array(["x", "y"])}
     est = fit(model(LinearRegression(), 2), Y_TRAIN)
     m = load_model(save_model(tmp_path / "m.npz", est, meta=meta, extra=extra))
