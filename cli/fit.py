@@ -43,7 +43,11 @@ def fit(
 ):
     """Fit the breast primitive, its pose and an FFD lattice to a breast in the breast frame."""
     clock = Clock()
-    kinds = tuple(k.strip() for k in deformations.split(",") if k.strip() not in ("", "none"))
+    names = [k.strip() for k in deformations.split(",")]
+    if "" in names or ("none" in names and len(names) > 1):
+        raise usage_error(f"'{deformations}' is no list of deformations: name them, comma-separated, or 'none'",
+                          "--deformations")
+    kinds = tuple(k for k in names if k != "none")
     unknown = sorted(set(kinds) - set(KIND_PARAMS))
     if unknown:
         raise usage_error(f"unknown deformations {unknown}; choose from {', '.join(KIND_PARAMS)}", "--deformations")

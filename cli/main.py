@@ -17,6 +17,11 @@ from .output import stderr
 
 def main() -> None:
     """Entry point: run the app, mapping deliberate errors to exit codes (docs/cli.md)."""
+    empty = _empty_argument(sys.argv[1:])
+    if empty:
+        stderr.print(f"error: {empty} is empty: give it a value or leave it out (see `breastplan --help`).",
+                     markup=False, soft_wrap=True)
+        sys.exit(2)
     try:
         app()
     except BadInputError as exc:
@@ -29,6 +34,18 @@ def main() -> None:
     except Interrupted as exc:
         stderr.print(f"interrupted: {exc}", markup=False, soft_wrap=True)
         sys.exit(130)
+
+
+def _empty_argument(args: list[str]) -> str | None:
+    """What an empty (or blank) argument was given for: `--out ""` or `--out=` would otherwise name the
+    current folder, `--deformations ""` no deformation. None when every argument has a value."""
+    for i, arg in enumerate(args):
+        option, equals, value = arg.partition("=")
+        if arg.startswith("--") and equals and not value.strip():
+            return f"the value of {option}"
+        if not arg.strip():
+            return f"the value of {args[i - 1]}" if i and args[i - 1].startswith("-") else f"argument {i + 1}"
+    return None
 
 
 if __name__ == "__main__":

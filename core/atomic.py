@@ -12,6 +12,7 @@ the same file, and the folders a failed set created are removed with its tempora
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import re
@@ -21,6 +22,8 @@ from pathlib import Path
 from typing import BinaryIO, Callable, Iterator
 
 
+Stage = Callable[[str | Path], Path]
+"""An `atomic_set`'s `stage`: the path to write a target's content to."""
 NAME_KEPT = 200
 """Bytes of the target's name kept in a temporary name, which must fit in 255 bytes."""
 JOURNAL = ".commit"
@@ -28,7 +31,8 @@ JOURNAL = ".commit"
 JOURNAL_SCHEMA = "breastplan.commit/1"
 
 
-def _short(name: str) -> str:
+def short_name(name: str) -> str:
+    """`name` cut to NAME_KEPT bytes (whole characters), to fit in a temporary's name."""
     return name.encode()[:NAME_KEPT].decode(errors="ignore")
 
 
@@ -55,7 +59,7 @@ def atomic_open(path: str | Path) -> Iterator[BinaryIO]:
     recover(path.parent)                          # a set committed by a killed write lands first
     _remove_stale(path)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{_short(path.name)}.", suffix=".part", dir=path.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{short_name(path.name)}.", suffix=".part", dir=path.parent)
     except OSError as exc:                        # name the file the user asked for, not our temporary
         raise OSError(exc.errno, exc.strerror, str(path)) from None
     try:
@@ -74,7 +78,7 @@ def atomic_open(path: str | Path) -> Iterator[BinaryIO]:
 
 
 @contextlib.contextmanager
-def atomic_set() -> Iterator[Callable[[str | Path], Path]]:
+def atomic_set() -> Iterator[Stage]:
     """Write a set of files all or nothing; yields `stage(path)`, the path to write `path`'s content to.
 
     On leaving without an exception the set is committed (its journal written) and every staged file
@@ -90,15 +94,18 @@ def atomic_set() -> Iterator[Callable[[str | Path], Path]]:
         made.extend(_make_folders(path.parent))
         recover(path.parent)                      # a set committed by a killed write lands first
         _remove_stale(path)
-        tmp = path.with_name(f".{_short(path.name)}.{secrets.token_hex(4)}.part")
+        tmp = path.with_name(f".{short_name(path.name)}.{secrets.token_hex(4)}.part")
         staged.append((tmp, path))
         return tmp
 
     committed = False
     try:
         yield stage
+        for _, path in staged:                    # a rename onto a folder would fail after the commit point
+            if path.is_dir():
+                raise IsADirectoryError(errno.EISDIR, "is a folder where a file is to be written", str(path))
         if staged:
-            journal.append(staged[-1][1].with_name(f".{_short(staged[-1][1].name)}{JOURNAL}"))
+            journal.append(staged[-1][1].with_name(f".{short_name(staged[-1][1].name)}{JOURNAL}"))
             for tmp, _ in staged:
                 _sync(tmp)                        # every staged file whole on disk before the commit point
             _write_journal(journal[0], staged)
@@ -155,7 +162,7 @@ def _read_journal(journal: Path) -> list[tuple[Path, Path]] | None:
     for (tmp, path), (src, dst) in zip(renames, pairs):
         parts = Path(src).parts + Path(dst).parts
         if Path(src).is_absolute() or Path(dst).is_absolute() or ".." in parts or tmp.parent != path.parent \
-                or not re.fullmatch(rf"\.{re.escape(_short(path.name))}\.[0-9a-f]{{8}}\.part", tmp.name):
+                or not re.fullmatch(rf"\.{re.escape(short_name(path.name))}\.[0-9a-f]{{8}}\.part", tmp.name):
             return None
     return renames
 
@@ -187,7 +194,7 @@ def _remove_stale(path: Path) -> None:
     """Remove the temporaries of `path` a killed write left (call `recover` first): `.NAME.XXXXXXXX.part`
     (its own or a staged copy), `..NAME.<hex8>.part.XXXXXXXX.part` (a staged copy's) and
     `..NAME.commit.XXXXXXXX.part` (a journal's). A concurrent writer of the same file is not supported."""
-    name = re.escape(_short(path.name))
+    name = re.escape(short_name(path.name))
     stale = re.compile(rf"(\.{name}|\.\.{name}\.[0-9a-f]{{8}}\.part|\.\.{name}{re.escape(JOURNAL)})"
                        rf"\.[a-z0-9_]{{8}}\.part")
     with contextlib.suppress(OSError):
@@ -203,6 +210,8 @@ def _make_folders(folder: Path) -> list[Path]:
     while not folder.exists() and folder != folder.parent:
         missing.append(folder)
         folder = folder.parent
+    if not folder.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "is a file where a folder is needed", str(folder))
     for made in reversed(missing):
         made.mkdir(exist_ok=True)
     return missing

@@ -13,6 +13,7 @@ Every NPZ records its provenance: the content hashes of its inputs and the optio
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,10 +22,10 @@ import numpy as np
 
 from . import __version__
 from .artefacts import load_npz, save_npz
-from .atomic import atomic_set, recover
+from .atomic import Stage, atomic_set, recover
 from .chest_wall import ChestWall
 from .errors import ArtefactError, BadInputError, NewerArtefactError
-from .frames import is_rigid
+from .frames import is_rigid, transform_points
 from .meshes import mesh_volume
 from .options import SIDES
 from .ply import read_ply, write_ply
@@ -248,6 +249,11 @@ class Case:
         breast, torso = read_ply(self.path(self.SCAN_PLY)), read_ply(self.path(self.CAMERA_PLY))
         if breast.normals is None or len(breast.points) != int(art["points"]):
             raise ArtefactError(self.path(self.SCAN_PLY), "does not hold the points and normals scan.npz records")
+        nipple = transform_points(art["transform_camera_to_breast"], art["nipple_camera_mm"])
+        if not np.allclose(nipple, art["nipple_breast_mm"], atol=0.01) or \
+                np.abs(nipple - breast.points.mean(axis=0)).max() > BREAST_EXTENT_MM[1]:
+            raise ArtefactError(npz, "has a nipple that is not on its breast (its two frames disagree, or it lies "
+                                     "far from the breast's points)")
         roi = art["crop_roi_camera_mm"]
         source = Source(str(art["source_kind"]), str(art["source"]), int(art["frames"]), art["intrinsics"],
                         art["image_size"])
@@ -318,11 +324,11 @@ class Case:
 
     # --- planned changes --------------------------------------------------------------
     def save_change(self, name: str, model: tuple[np.ndarray, np.ndarray], scan_points: np.ndarray,
-                    record: dict, provenance: Provenance) -> dict[str, Path]:
+                    record: dict, provenance: Provenance, stage: Stage | None = None) -> dict[str, Path]:
         """Write plan/NAME.ply (the planned breast model: vertices, faces; mm, breast frame),
         plan/NAME-scan.ply (the scan's points with the change applied, breast frame) and
         plan/NAME.npz (the change's kinds, degrees and parameters in its metadata; the scan
-        points' displacements, mm, breast frame), all or nothing."""
+        points' displacements, mm, breast frame), all or nothing, or staged in a larger set's `stage`."""
         stem = f"{self.PLAN}/{name}"
         plys = {f"{stem}.ply": dict(points=model[0], faces=model[1], comments=[
                     f"breastplan plan: {name}, planned breast model, mm, breast frame"]),
@@ -330,7 +336,7 @@ class Case:
                     f"breastplan plan: {name}, the scan's points changed, mm, breast frame"])}
         record = dict(record)
         arrays = {"displacement_mm": np.asarray(record.pop("displacement_mm"), float)}
-        return self._write_set(plys, f"{stem}.npz", CHANGE_SCHEMA, arrays, record, provenance)
+        return self._write_set(plys, f"{stem}.npz", CHANGE_SCHEMA, arrays, record, provenance, stage=stage)
 
     # --- provenance -------------------------------------------------------------------
     def is_fresh(self, npz_name: str, wanted: Provenance) -> bool:
@@ -354,8 +360,8 @@ class Case:
 
     # --- sets -------------------------------------------------------------------------
     def _write_set(self, plys: dict[str, dict], npz: str, schema: str, arrays: dict, meta: dict,
-                   provenance: Provenance, frame: str = "breast") -> dict[str, Path]:
-        with atomic_set() as stage:
+                   provenance: Provenance, frame: str = "breast", stage: Stage | None = None) -> dict[str, Path]:
+        with contextlib.nullcontext(stage) if stage else atomic_set() as stage:
             hashes = {}
             for name, ply in plys.items():
                 hashes[name] = sha256(write_ply(stage(self.path(name)), **ply))

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Callable, Iterator
 import numpy as np
 
 from breastplan import BadInputError, Primitive, transform_points
+from breastplan.atomic import short_name
 from breastplan.case import Case, Fit, Provenance, Scan, sha256
 from breastplan.clock import Clock
 from breastplan.errors import about
@@ -146,12 +147,16 @@ def _building(out: Path) -> Iterator[Path]:
     if out.exists():
         yield out
         return
-    out.parent.mkdir(parents=True, exist_ok=True)
-    work = out.parent / f".{out.name}.plan-{secrets.token_hex(4)}"
+    work = out.parent / f".{short_name(out.name)}.plan-{secrets.token_hex(4)}"
     try:
+        out.parent.mkdir(parents=True, exist_ok=True)
         work.mkdir()
         yield work
         os.rename(work, out)
+    except OSError as exc:                   # name the folder the user asked for, not the one being built
+        where = str(exc.filename or out)
+        raise OSError(exc.errno, exc.strerror, str(out) + where[len(str(work)):] if where.startswith(str(work))
+                      else where) from None
     finally:
         shutil.rmtree(work, ignore_errors=True)
 

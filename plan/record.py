@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from breastplan import __version__, transform_points, write_ply
-from breastplan.atomic import atomic_set
+from breastplan.atomic import Stage, atomic_set
 from breastplan.case import Case, Provenance, sha256
 from breastplan.json_text import to_json
 from breastplan.deform.names import PARAM_NAMES, at_bounds
@@ -31,21 +31,21 @@ def write_plan(plan: Plan, folder: Path) -> dict:
     from .report import render, versions
     from .summary import summary_png
 
-    sides = {}
-    for side, sp in plan.sides.items():
-        sides[side] = {"nipple_input_mm": [round(float(v), 2) for v in sp.scan.nipple_camera_mm],
-                       "nipple_found": sp.scan.nipple_found,
-                       "fit": fit_record(sp), "reused": list(sp.reused),
-                       "changes": [_save_change(sp, c, folder) for c in sp.changes]}
-        if sp.follow_up is not None:
-            sides[side]["wall_from"] = sp.follow_up.record(sp.fit.volume_cc)
-    torso_files = {}
-    record = {"schema": PLAN_SCHEMA, "version": __version__, "input": input_record(plan),
-              "options": plan.options.as_dict(), "stopping_rule": STOP_RESIDUAL, "sides": sides,
-              "measures": plan_measures(plan), "versions": versions(),
-              "files": {"report": Case.REPORT, "summary": SUMMARY, "torso": torso_files},
-              "timings_ms": {k: round(v, 1) for k, v in plan.timings_ms.items()}}
-    with atomic_set() as stage:
+    with atomic_set() as stage:             # the changes, the torso, the report and plan.json: all or nothing
+        sides = {}
+        for side, sp in plan.sides.items():
+            sides[side] = {"nipple_input_mm": [round(float(v), 2) for v in sp.scan.nipple_camera_mm],
+                           "nipple_found": sp.scan.nipple_found,
+                           "fit": fit_record(sp), "reused": list(sp.reused),
+                           "changes": [_save_change(sp, c, folder, stage) for c in sp.changes]}
+            if sp.follow_up is not None:
+                sides[side]["wall_from"] = sp.follow_up.record(sp.fit.volume_cc)
+        torso_files = {}
+        record = {"schema": PLAN_SCHEMA, "version": __version__, "input": input_record(plan),
+                  "options": plan.options.as_dict(), "stopping_rule": STOP_RESIDUAL, "sides": sides,
+                  "measures": plan_measures(plan), "versions": versions(),
+                  "files": {"report": Case.REPORT, "summary": SUMMARY, "torso": torso_files},
+                  "timings_ms": {k: round(v, 1) for k, v in plan.timings_ms.items()}}
         first = next(iter(plan.sides.values()))
         for i, change in enumerate(first.changes):
             name = f"{Case.PLAN}/{change.name}-torso.ply"
@@ -82,7 +82,7 @@ def fit_record(sp: SidePlan) -> dict:
             "points": f.points, "iterations": list(f.iterations)}
 
 
-def _save_change(sp: SidePlan, change, folder: Path) -> dict:
+def _save_change(sp: SidePlan, change, folder: Path, stage: Stage) -> dict:
     """Write one change of one side (model and scan points in the breast frame); its plan.json entry."""
     planned = sp.planned(change)
     to_breast = sp.scan.camera_to_breast
@@ -93,7 +93,7 @@ def _save_change(sp: SidePlan, change, folder: Path) -> dict:
               "displacement_mm": shift}
     fit_npz = sp.case.path(Case.FIT_NPZ)
     provenance = Provenance({Case.FIT_NPZ: sha256(fit_npz)}, {"requested": record["requested"]})
-    paths = sp.case.save_change(change.name, (model, sp.fit.faces), sp.scan.points + shift, record, provenance)
+    paths = sp.case.save_change(change.name, (model, sp.fit.faces), sp.scan.points + shift, record, provenance, stage)
     moved = np.linalg.norm(shift, axis=1)
     return {"name": change.name, "requested": record["requested"], "details": details,
             "scan_displacement_mm": {"mean": round(float(moved.mean()), 3), "max": round(float(moved.max()), 3)},

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from breastplan import ArtefactError, load_npz, read_ply, save_npz, write_ply
-from breastplan.atomic import atomic_open
+from breastplan.atomic import atomic_open, atomic_set
 from breastplan.json_text import to_json
 
 SPEC = {"points": ("f", ("n", 3)), "label": ("U", ("n",))}
@@ -248,3 +248,22 @@ def test_json_text_is_strict_json():
                     "t": (1, "x"), "p": Path("/x")})
     assert json.loads(text, parse_constant=lambda name: pytest.fail(f"{name} in {text}")) == \
         {"v": None, "w": [None, 3], "a": [1.5, None], "t": [1, "x"], "p": "/x"}
+
+
+def test_a_set_with_a_folder_where_a_file_goes_is_refused_before_its_commit(tmp_path):
+    """Truth: all or nothing — a set that could not rename every file is not begun: no file of it
+    replaced, no journal left for every later write to trip on, the target named."""
+    (tmp_path / "a.txt").write_text("old a")
+    (tmp_path / "b.txt").mkdir()
+    with pytest.raises(IsADirectoryError) as err:
+        with atomic_set() as stage:
+            Path(stage(tmp_path / "a.txt")).write_text("new a")
+            Path(stage(tmp_path / "b.txt")).write_text("new b")
+    assert err.value.filename == str(tmp_path / "b.txt")
+    assert (tmp_path / "a.txt").read_text() == "old a" and sorted(os.listdir(tmp_path)) == ["a.txt", "b.txt"]
+    (tmp_path / "sub").write_text("a file")
+    with pytest.raises(NotADirectoryError) as err:
+        with atomic_set() as stage:
+            Path(stage(tmp_path / "sub" / "c.txt")).write_text("c")
+    assert err.value.filename == str(tmp_path / "sub")
+    assert sorted(os.listdir(tmp_path)) == ["a.txt", "b.txt", "sub"]

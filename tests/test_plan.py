@@ -288,6 +288,19 @@ def test_plan_again_reuses_ingest_and_fit(planned, cli, tmp_path):
         "plan/ptosis-5-torso.ply"}
 
 
+def test_plan_again_that_cannot_write_its_report_leaves_the_earlier_plan_whole(planned, cli, tmp_path):
+    """Truth: a case's plan is written all or nothing: its changes, torso, report and plan.json."""
+    case = tmp_path / "case"
+    shutil.copytree(planned[0], case)
+    (case / "summary.png").unlink()
+    (case / "summary.png").mkdir()                            # where the new plan's picture goes
+    before = {p.relative_to(case): p.read_bytes() for p in case.rglob("*") if p.is_file()}
+    res = run(cli, "plan", case, "--deform", "ptosis:5")
+    assert res.returncode == 3, res.stderr[-2000:]
+    assert res.stderr.strip() == f"error: {case / 'summary.png'}: is a folder where a file is to be written."
+    assert {p.relative_to(case): p.read_bytes() for p in case.rglob("*") if p.is_file()} == before
+
+
 def test_plan_of_one_sides_case_from_ingest(cli, tmp_path):
     case = tmp_path / "right"
     assert run(cli, "ingest", sample_recording(), "--side", "right", "--out", case).returncode == 0
@@ -359,6 +372,9 @@ def test_a_planned_change_is_continuous_across_the_rim_and_the_band(angle, z):
     (["--method", "guess"], "not a method"),
     (["--up", "z"], "up axis"),
     (["--units", "cm"], "units"),
+    (["--units", ""], "the value of --units is empty"),
+    (["--out", " "], "the value of --out is empty"),        # pathlib would read it as the current folder
+    (["--out="], "the value of --out is empty"),
 ])
 def test_plan_usage_errors_exit_2_before_any_work(cli, tmp_path, args, message):
     res = run(cli, "plan", "--out", tmp_path / "case", *args)
