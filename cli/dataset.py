@@ -32,6 +32,8 @@ def dataset(
         raise usage_error(str(exc), "--condition") from None
     if not 2 <= dd <= MAX_DD:
         raise usage_error(f"--dd must be 2..{MAX_DD}, got {dd}", "--dd")
+    if out.resolve() == db.resolve():
+        raise usage_error(f"it names the database read ({db}), which the dataset would replace", "--out")
 
     import numpy as np
 

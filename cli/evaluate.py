@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Optional
 
 import typer
 
@@ -9,14 +10,15 @@ from breastplan.clock import Clock
 from breastplan.learn.studies import STUDIES
 
 from .app import JSON, command
-from .output import progress, report, usage_error
+from .output import progress, report, usage_error, writable
 
 
 @command()
 def evaluate(
     study: str = typer.Option(..., "--study", help=f"{' | '.join(STUDIES)} | all | statistical (FFD models "
                                                    "learnt from before/after pairs)."),
-    dd: int = typer.Option(8, "--dd", help="Number of degrees of deformation: 4 or 8 (thesis)."),
+    dd: Optional[int] = typer.Option(None, "--dd", help="Number of degrees of deformation of a regression study: "
+                                                        "4 or 8 (thesis; default 8)."),
     quick: bool = typer.Option(False, "--quick", help="Small grid, FS5 only, 4 breasts per shape and split, 2500 points (CI)."),
     out: Path = typer.Option(..., "--out", help="Folder for report.md, report.json and figures/."),
     cache: Path = typer.Option(None, "--cache", help="Folder of cached FFD fits (statistical study; default: "
@@ -25,13 +27,21 @@ def evaluate(
 ):
     """Run the thesis study of deformation-parameter regressions, or of statistical models; write its report."""
     clock = Clock()
-    if study == "statistical":
-        return _statistical(quick, out, cache, as_json, clock)
     names = list(STUDIES) if study == "all" else [study]
-    if any(n not in STUDIES for n in names):
-        raise usage_error(f"'{study}' is not a study; choose one of {', '.join(STUDIES)} or all", "--study")
+    if study == "statistical" and dd is not None:
+        raise usage_error("the statistical study learns from pairs of every degree; --dd is for the "
+                          "regression studies", "--dd")
+    if study != "statistical" and any(n not in STUDIES for n in names):
+        raise usage_error(f"'{study}' is not a study; choose one of {', '.join(STUDIES)}, all or statistical",
+                          "--study")
+    dd = 8 if dd is None else dd
     if dd not in (4, 8):
         raise usage_error(f"--dd must be 4 or 8 (thesis), got {dd}", "--dd")
+    writable(out, folder=True)
+    if cache is not None:
+        writable(cache, folder=True, option="--cache")
+    if study == "statistical":
+        return _statistical(quick, out, cache, as_json, clock)
 
     from breastplan.learn.report import write_report
     from breastplan.learn.study import configurations, run_studies, study_datasets

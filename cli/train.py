@@ -8,7 +8,7 @@ import typer
 from breastplan.clock import Clock
 
 from .app import JSON, command
-from .output import progress, report
+from .output import progress, report, writable
 
 
 @command()
@@ -19,6 +19,7 @@ def train(
 ):
     """Train the best model of each condition on database S's training split."""
     clock = Clock()
+    writable(out, folder=True)
     from breastplan.learn.train import DEPLOYED, train_all
 
     with progress("training", len(DEPLOYED)) as advance:

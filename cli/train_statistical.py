@@ -37,6 +37,8 @@ def train_statistical(
     if out.suffix != ".npz":
         raise usage_error(f"the model file must end in .npz, got {out.name}", "--out")
     writable(out)
+    if cache is not None:
+        writable(cache, folder=True, option="--cache")
     from threadpoolctl import threadpool_limits
 
     from breastplan.learn.displacements import FitCache, PairOptions, default_cache

@@ -16,6 +16,7 @@ from scipy.special import ndtr, ndtri
 
 from breastplan import ArtefactError, Primitive, load_npz, save_npz, to_model_units, write_ply
 from breastplan.atomic import recover
+from breastplan.units import breast_points_problem
 from breastplan.deform.degree import GENERIC_SHAPE
 from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.global_deformations import Deformation, changing
@@ -112,8 +113,9 @@ class Database:
             raise ArtefactError(path, f"was left by an interrupted write that cannot be completed here "
                                       f"({exc.strerror or exc}); run synth again") from None
         art = load_npz(path, SCHEMA, _SPEC, {"name": str, "seed": int})
-        if art["points"].shape[1] != int(np.prod(art["grid"])):
-            raise ArtefactError(path, "has a point count that does not match its sampling grid")
+        problem = _problem(art)
+        if problem:
+            raise ArtefactError(path, problem)
         return cls.from_arrays(art, art.meta)
 
     def write_plys(self, folder: str | Path, progress=None, stage=Path) -> list[Path]:
@@ -146,6 +148,27 @@ def draw_volumes(rng: np.random.Generator, n: int) -> np.ndarray:
     lo, hi = (ndtr((v - VOLUME_MEAN_CC) / VOLUME_SD_CC) for v in VOLUME_RANGE_CC)
     q = (rng.permutation(n) + rng.uniform(size=n)) / n
     return VOLUME_MEAN_CC + VOLUME_SD_CC * ndtri(lo + q * (hi - lo))  # truncated-normal quantiles
+
+
+def _problem(art) -> str | None:
+    """Why a database's arrays cannot be breasts sampled on their grid, or None."""
+    if not len(art["names"]):
+        return "holds no breasts"
+    if art["grid"][0] < 2 or art["grid"][1] < 3 or art["points"].shape[1] != int(np.prod(art["grid"])):
+        return "has a point count that does not match its sampling grid"
+    for i, name in enumerate(art["names"]):
+        try:
+            problem = Primitive.from_array(np.r_[art["semi_axes"][i], art["eps"][i]]).breast_problem()
+        except ValueError as exc:
+            return f"has a breast {name} whose {exc}"
+        if problem:
+            return f"has a breast {name} whose primitive {problem}"
+        problem = breast_points_problem(art["points"][i])
+        if problem:
+            return f"has a breast {name} that {problem}"
+        if not art["volume_cc"][i] > 0:
+            return f"has a breast {name} whose volume is not positive"
+    return None
 
 
 def build_database(name: str, seed: int = 0, n_points: int = 10_000) -> Database:

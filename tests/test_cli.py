@@ -129,11 +129,25 @@ def test_missing_and_nan_inputs_exit_3(cli, tmp_path):
     ["synth", "--db", "S", "--points", str(10**8), "--out", "o"],                        # 10⁴ × 10⁴ grid
     ["dataset", "--db", "x.npz", "--condition", "ptosis b0", "--dd", "100000", "--out", "o.npz"],
     ["dataset", "--db", "x.npz", "--condition", "ptosis sideways", "--out", "o.npz"],
+    ["dataset", "--db", "x.npz", "--condition", "ptosis b0", "--out", "./x.npz"],          # would replace its input
+    ["evaluate", "--study", "statistical", "--dd", "4", "--out", "o"],                    # no degrees to count
+    ["evaluate", "--study", "ptosis-V", "--dd", "5", "--out", "o"],
+    ["deform", "x.ply", "--kind", "ptosis", "--param", "b0=1", "--out", ""],            # the current folder
 ])
 def test_usage_errors_exit_2(cli, tmp_path, args):
     res = subprocess.run([cli, *args], capture_output=True, text=True, cwd=tmp_path)
     assert res.returncode == 2, res.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("args", [["train", "--quick"], ["evaluate", "--study", "ptosis-V", "--quick"],
+                                  ["evaluate", "--study", "statistical", "--quick"]])
+def test_a_report_folder_that_is_a_file_is_refused_before_any_work(cli, tmp_path, args):
+    """Truth: an output that cannot be written is said before the work, not after it (minutes)."""
+    (tmp_path / "taken").write_text("a file")
+    res = run(cli, *args, "--out", tmp_path / "taken")
+    assert_bad_input(res, tmp_path / "taken", tmp_path)
+    assert "is a file, not a folder" in res.stderr and (tmp_path / "taken").read_text() == "a file"
 
 
 def test_help_lists_the_commands(cli):

@@ -112,6 +112,29 @@ def test_loading_the_wrong_artefact_is_refused(tmp_path, db_s):
         Dataset.load(tmp_path / "missing.npz")
 
 
+@pytest.mark.parametrize("change, problem", [
+    ({"semi_axes": lambda a: -a}, "whose primitive parameters must be finite and positive"),
+    ({"semi_axes": lambda a: a * 1e3}, "whose primitive spans"),
+    ({"eps": lambda a: a * 1e9}, "shape exponents"),
+    ({"grid": lambda a: np.array([-20, -20])}, "does not match its sampling grid"),
+    ({"points": lambda a: a * 1e300}, "spans 1.*e\\+30. units"),
+    ({"points": lambda a: a * np.array([1.0, 1.0, 0.0])}, "is flat"),
+    ({"volume_cc": lambda a: -a}, "whose volume is not positive"),
+    ({k: (lambda a: a[:0]) for k in ("names", "shape", "split", "semi_axes", "eps", "deformation", "volume_cc",
+                                     "primitive_volume_cc", "points")}, "holds no breasts"),
+])
+def test_a_database_whose_breasts_are_no_breasts_is_refused(tmp_path, change, problem):
+    """Truth: a database holds breasts — primitives 20–600 mm across with eps 0.3–2, sampled on its
+    (n_u ≥ 2, n_v ≥ 3) grid into clouds that rise from their base, of positive volume."""
+    path = build_database("V", n_points=100).save(tmp_path / "db.npz")
+    with np.load(path, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays.update({k: f(arrays[k]) for k, f in change.items()})
+    np.savez(path, **arrays)
+    with pytest.raises(ArtefactError, match=problem):
+        Database.load(path)
+
+
 def test_drawn_volumes_follow_the_truncated_normal():
     from scipy.stats import kstest, truncnorm
 
