@@ -132,15 +132,19 @@ def _number(v) -> str:
 
 def check_method(method: str) -> None:
     """--method: exact, learnt, or a model file (.npz) that plans one of the plannable kinds; a usage
-    error otherwise, bad input (exit 3) for a model file that is missing or unreadable."""
+    error otherwise, bad input (exit 3) for a model file that is missing, unreadable or inconsistent, said
+    before any work."""
     if method in ("exact", "learnt"):
         return
     path = Path(method)
     if path.suffix.lower() != ".npz":
         raise usage_error(f"'{method}' is not a method; choose exact, learnt or a model file (.npz)", "--method")
+    from breastplan.deform.by_degree import degree_model
+    from breastplan.learn.field_file import field_file, is_field_model
     from breastplan.model_file import load_model
 
-    kinds = load_model(require_file(path, "model file")).kinds
+    model = load_model(require_file(path, "model file"))
+    kinds = field_file(model, path).kinds if is_field_model(model) else degree_model(path).kinds
     if not set(kinds) & set(DEGREE_KINDS):
         raise usage_error(f"{path} models {', '.join(map(str, kinds))}, which has no degrees to plan", "--method")
 

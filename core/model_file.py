@@ -154,6 +154,9 @@ def load_model(path: str | Path) -> ModelFile:
     arrays = {k: v for k, v in art.items() if not k.startswith(EXTRA)}
     _check(Path(path), arrays)
     extra = {k[len(EXTRA):]: v for k, v in art.items() if k.startswith(EXTRA)}
+    for key, v in extra.items():
+        if v.dtype.kind == "f" and not np.isfinite(v).all():
+            raise ArtefactError(Path(path), f"has NaN or infinite values in '{EXTRA}{key}'")
     return ModelFile(meta=art.meta, extra=extra, n_features=arrays["x_min"].size,
                      n_outputs=arrays["y_min"].size, arrays=arrays)
 

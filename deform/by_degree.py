@@ -12,12 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
-from breastplan import Primitive, to_mm, to_model_units
+from breastplan import ArtefactError, Primitive, to_mm, to_model_units
 from breastplan.model_file import ModelFile, load_model
 
 from .conditions import CONDITIONS, Condition, find_condition
 from .degree import condition_extent, continuous_degree, reference_extents
-from .descriptors import breast_scalars
+from .descriptors import breast_scalars, scalar_names
 from .lattice import Lattice
 from .global_deformations import apply_kind
 from .inverse import solve_degree
@@ -60,6 +60,23 @@ def pick_condition(kind: str, condition: str | None = None) -> Condition:
     return cond
 
 
+def degree_model(path: Path) -> ModelFile:
+    """A regression model file of one condition (`breastplan train`); ArtefactError naming it unless its
+    condition is known and its inputs are the degree and its feature set's scalars, its output one."""
+    model = load_model(path)
+    try:
+        cond = find_condition(str(model.meta.get("condition")))
+    except ValueError:
+        raise ArtefactError(path, f"names no known condition ({model.meta.get('condition')})") from None
+    if model.meta.get("kind", cond.kind) != cond.kind:
+        raise ArtefactError(path, f"is a model of {model.meta['kind']}, but its condition '{cond.name}' is of {cond.kind}")
+    names = scalar_names(str(model.meta.get("feature_set")), cond.kind)
+    if model.n_features != len(names) or model.n_outputs != 1:
+        raise ArtefactError(path, f"takes {model.n_features} features and gives {model.n_outputs} outputs, where its "
+                                  f"feature set takes {len(names)} and a position on the condition is one")
+    return model
+
+
 def learnt_position(model: ModelFile, points_mm, kind: str, degree: float) -> float:
     """The model's position t on its condition's line for this breast and degree, clipped to [0, 1]."""
     features = np.concatenate([[degree], breast_scalars(points_mm, kind, model.meta["feature_set"])])
@@ -76,14 +93,14 @@ def deform_by_degree(points_mm, kind: str, degree: float, *, condition: str | No
     (`learn.field_file.by_degree` also takes statistical model files.)"""
     if method not in METHODS and not str(method).endswith(".npz"):
         raise ValueError(f"unknown method '{method}'; choose one of {', '.join(METHODS)} or a model file")
-    given = None if method in METHODS else load_model(Path(method))
+    given = None if method in METHODS else degree_model(Path(method))
     cond = pick_condition(kind, condition or (given.meta.get("condition") if given else None))
     check_degree(degree)
     p_mu = to_model_units(np.asarray(points_mm, dtype=float))
     if method == "exact":
         t = solve_degree(p_mu, cond, DD, degree, primitive).t
     else:
-        t = learnt_position(given or load_model(models / f"{slug(cond)}.npz"), points_mm, kind, degree)
+        t = learnt_position(given or degree_model(models / f"{slug(cond)}.npz"), points_mm, kind, degree)
     params = cond.at(t)
     moved = apply_kind(p_mu, kind, params, primitive)
     return ByDegree(to_mm(moved), cond, method, t, params, degree_reached(cond, p_mu, moved, primitive))

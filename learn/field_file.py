@@ -87,6 +87,10 @@ def field_file(model: ModelFile, path: Path) -> FieldFile:
             or components.shape != (model.n_outputs, mean.size) or not set(model.meta.get("kinds", ())) <= set(KINDS)
             or not model.meta.get("kinds")):
         raise ArtefactError(path, "holds an inconsistent statistical model (its modes, lattice or types)")
+    k = len(model.meta["kinds"])
+    features = len(FEATURES) if k < 2 else k * (1 + len(FEATURES))      # `pair_features`' columns
+    if model.n_features != features:
+        raise ArtefactError(path, f"takes {model.n_features} features, where a model of {k} type(s) takes {features}")
     return FieldFile(model, path)
 
 

@@ -169,7 +169,13 @@ def test_deform_with_the_model_comes_close_to_the_true_after_breast(cli, trained
 
 
 def test_a_model_of_another_type_or_a_parametric_file_is_refused(cli, trained, tmp_path):
+    from sklearn.compose import TransformedTargetRegressor
+    from sklearn.linear_model import Ridge
+    from sklearn.pipeline import Pipeline
+    from sklearn.preprocessing import MinMaxScaler
+
     from breastplan.deform.by_degree import MODELS
+    from breastplan.model_file import load_model, save_model
 
     tmp, _ = trained
     before = next((tmp / "pairs" / "before").glob("*.ply"))
@@ -289,3 +295,46 @@ def test_one_model_of_all_types_tells_the_types_apart(tmp_path):
         unchanged = indirect_metrics(truth, np.stack([p.dataset.original_points(k) for k in p.test]))[key]
         learnt = [r for r in results if r.condition == p.dataset.condition.name and "ridge," in r.method][0]
         assert np.mean(learnt.distances[key]) < np.mean(unchanged) / 3
+
+
+def _edited(src, dst, **changes):
+    """A copy of the model file `src` at `dst` with arrays (or `meta`, as JSON text) replaced."""
+    with np.load(src, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    meta = json.loads(str(arrays["meta"]))
+    meta.update(changes.pop("meta", {}))
+    arrays.update(changes, meta=np.str_(json.dumps(meta)))
+    np.savez(dst, **arrays)
+    return dst
+
+
+def test_a_model_file_whose_parts_disagree_is_refused_before_any_plan(cli, trained, tmp_path):
+    """Truth: a model's inputs are what its own file says it takes (a statistical model of one type:
+    degree, volume and three extents; a regression: the degree and its feature set's scalars), its
+    condition one breastplan knows, its numbers finite. A file that breaks one is named, exit 3,
+    before any ingest or fit."""
+    from sklearn.compose import TransformedTargetRegressor
+    from sklearn.linear_model import Ridge
+    from sklearn.pipeline import Pipeline
+    from sklearn.preprocessing import MinMaxScaler
+
+    from breastplan.deform.by_degree import MODELS
+    from breastplan.model_file import load_model, save_model
+
+    tmp, _ = trained
+    shipped = MODELS / "ptosis-b0-gt-b1.npz"
+    learnt = load_model(tmp / "model.npz")                    # the same model's modes, regressed on 4 features
+    four = TransformedTargetRegressor(Pipeline([("scale", MinMaxScaler()), ("reg", Ridge())]), transformer=MinMaxScaler())
+    four.fit(np.random.default_rng(0).random((12, 4)), np.random.default_rng(1).random((12, learnt.n_outputs)))
+    save_model(tmp_path / "feat.npz", four, meta={k: v for k, v in learnt.meta.items() if k != "estimator"},
+               extra=learnt.extra)
+    cases = [
+        (_edited(tmp / "model.npz", tmp_path / "nan.npz", extra_mean=np.full(3 * 5 ** 3, np.nan)), "'extra_mean'"),
+        (tmp_path / "feat.npz", "takes 4 features, where a model of 1 type(s) takes 5"),
+        (_edited(shipped, tmp_path / "cond.npz", meta={"condition": "ptosis sideways"}), "names no known condition"),
+        (_edited(shipped, tmp_path / "kind.npz", meta={"kind": "turn"}), "is a model of turn"),
+    ]
+    for path, problem in cases:
+        res = run(cli, "plan", "--method", path, "--deform", "ptosis:3", "--out", tmp_path / "case")
+        assert_bad_input(res, path, tmp_path)
+        assert problem in res.stderr and not (tmp_path / "case").exists()
