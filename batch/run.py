@@ -52,6 +52,7 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
         manifest = Manifest(out, about, rows)
         manifest.write()
         by_case = {r.case: r for r in rows if r.status == "pending"}   # case names unique among the planned
+        row_of = lambda task: by_case[Path(task.case).relative_to(out.resolve()).as_posix()]  # noqa: E731
         for row in rows:
             if row.status != "pending":
                 progress(row, len(tasks))
@@ -59,7 +60,7 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
             run_dask(tasks, options.jobs, options.scheduler)
         try:
             for task, result in results:
-                row = by_case[Path(task.case).relative_to(out.resolve()).as_posix()]
+                row = row_of(task)
                 error = result["error"].replace(task.input, str(folder / row.input)).replace(task.case, str(out / row.case))
                 if options.wall_from is not None:
                     error = error.replace(task.options["wall_from"], str(Path(options.wall_from) / row.case))
@@ -69,6 +70,10 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
         except KeyboardInterrupt:
             results.close()                       # its workers killed: the cases they were planning left unfinished
             remove_leftovers(out)
+            for task in tasks:                    # finished on disk before its result reached the batch
+                if row_of(task).status == "pending" and finished(Path(task.case), task.sha256, task.options):
+                    row_of(task).status = "done"
+            manifest.write()
             summary = manifest.summary()
             raise Interrupted(f"{len(tasks) - summary['pending']} of the {len(tasks)} inputs to plan were settled "
                               f"and {summary['pending']} left pending in {out / 'manifest.csv'}; the same command "

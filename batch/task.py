@@ -81,13 +81,21 @@ def _sibling(case: Path, kind: str) -> Path:
 
 
 def finished(case: Path, sha256: str, options: dict) -> bool:
-    """Whether `case` holds a whole plan of the input of this SHA-256 with these options."""
+    """Whether `case` holds a whole plan of the input of this SHA-256 with these options: its plan.json
+    says so, and every file it names is there, with each side's scan and fit."""
+    from breastplan.case import Case
     from breastplan.plan.job import PLAN_SCHEMA
 
     record = _record(case)
     try:
-        return (record.get("schema") == PLAN_SCHEMA and record["input"].get("sha256") == sha256
-                and record["options"] == options)
+        if not (record.get("schema") == PLAN_SCHEMA and record["input"].get("sha256") == sha256
+                and record["options"] == options):
+            return False
+        files = [record["files"]["report"], record["files"]["summary"], *record["files"]["torso"].values()]
+        for side, planned in record["sides"].items():
+            files += [f"{side}/{Case.SCAN_NPZ}", f"{side}/{Case.FIT_NPZ}"]
+            files += [f for change in planned["changes"] for f in change["files"].values()]
+        return all(isinstance(f, str) and (case / f).is_file() for f in files)
     except (KeyError, TypeError, AttributeError):
         return False
 

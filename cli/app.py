@@ -20,6 +20,8 @@ from typer.core import TyperCommand, TyperGroup
 from .output import usage_error
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     import numpy as np
 
 
@@ -87,15 +89,33 @@ def parse_pairs(items: List[str], what: str, option: str) -> dict[str, float]:
     pairs = {}
     for item in (p for chunk in items for p in chunk.split(",") if p.strip()):
         name, sep, value = item.partition("=")
+        name = name.strip()
+        if name in pairs:
+            raise usage_error(f"{name} is given twice ({what})", option)
         try:
-            if not sep:
+            if not sep or not name:
                 raise ValueError
-            pairs[name.strip()] = float(value)
+            pairs[name] = float(value)
         except ValueError:
             raise usage_error(f"'{item}' is not NAME=VALUE with a number VALUE ({what})", option) from None
-        if not math.isfinite(pairs[name.strip()]):
+        if not math.isfinite(pairs[name]):
             raise usage_error(f"'{item}' is not a finite number ({what})", option)
     return pairs
+
+
+def scan_file_options(input: Path | None, units: str, up: str) -> None:
+    """Usage error for --units or --up (given other than their defaults) with an input that is no scan
+    file: they describe a scan file's own units and axes, and a recording, a camera or a case has its own."""
+    from breastplan.ingest.scan import is_recording
+
+    if input is not None and not input.is_dir() and not is_recording(input):
+        return
+    given = [name for name, value, default in (("--units", units, "auto"), ("--up", up, "+y")) if value != default]
+    if given:
+        what = ("a case folder, ingested already" if input is not None and input.is_dir() else
+                "a depth recording, whose frame is its camera's (mm)")
+        verb = "describes" if len(given) == 1 else "describe"
+        raise usage_error(f"{' and '.join(given)} {verb} a scan file; {input or 'the input'} is {what}", given[0])
 
 
 def parse_numbers(text: str | None, count: int, option: str) -> np.ndarray | None:

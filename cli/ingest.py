@@ -10,7 +10,7 @@ from breastplan.clock import Clock
 from breastplan.errors import about
 from breastplan.options import IngestOptions, OptionError
 
-from .app import JSON, UNITS_HELP, UP_HELP, command, parse_numbers
+from .app import JSON, UNITS_HELP, UP_HELP, command, parse_numbers, scan_file_options
 from .output import report, usage_error, writable
 
 FLAGS = {"side": "--side", "voxel_mm": "--voxel", "frames": "--frames", "roi_camera_mm": "--roi",
@@ -42,7 +42,7 @@ def ingest(
                                 units, up, device_id)
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
-
+    scan_file_options(input, units, up)
     writable(out, folder=True)
     from threadpoolctl import threadpool_limits
 

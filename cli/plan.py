@@ -10,7 +10,7 @@ from breastplan.clock import Clock
 from breastplan.errors import require_file
 from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, OptionError, PlanOptions
 
-from .app import JSON, UNITS_HELP, UP_HELP, command
+from .app import JSON, UNITS_HELP, UP_HELP, command, scan_file_options
 from .output import report, stderr, usage_error, writable
 
 FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method", "units": "--units", "up": "--up"}
@@ -47,6 +47,7 @@ def plan(
     check_method(method)
     if input is not None and not input.is_dir():
         require_file(input, "recording or scan file")
+    scan_file_options(input, units, up)
     if out is None:
         out = input if input is not None and input.is_dir() else Path(f"{(input or Path('sample')).stem}-plan")
     if wall_from is not None and out.resolve() in (wall_from.resolve(), wall_from.resolve().parent):

@@ -128,7 +128,7 @@ class PlanOptions:
                 raise OptionError("changes", f"'{kind}' has no degrees to plan; choose {', '.join(DEGREE_KINDS)}")
             if not PLAN_DEGREES[0] <= degree <= PLAN_DEGREES[1]:   # NaN fails too
                 raise OptionError("changes", f"the degree of {kind} must lie in {PLAN_DEGREES[0]:g}..{PLAN_DEGREES[1]:g}, "
-                                             f"got {degree:g}")
+                                             f"got {float(degree)!r}")
         kinds = [k for k, _ in changes]
         if len(set(kinds)) != len(kinds):
             raise OptionError("changes", "each kind is planned once; give one --deform per kind")

@@ -109,7 +109,7 @@ def deform_by_degree(points_mm, kind: str, degree: float, *, condition: str | No
 def check_degree(degree: float) -> None:
     """ValueError unless the degree lies in [1, DD]."""
     if not 1.0 <= degree <= DD:
-        raise ValueError(f"the degree must lie in [1, {DD}], got {degree:g}")
+        raise ValueError(f"the degree must lie in [1, {DD}], got {float(degree)!r}")
 
 
 def degree_reached(cond: Condition, p_mu, moved_mu, primitive) -> float:

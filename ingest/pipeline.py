@@ -164,7 +164,9 @@ def _frame(anterior: np.ndarray, up: str) -> np.ndarray:
     up_vec["xyz".index(up[1])] = -1.0 if up.startswith("-") else 1.0     # up: one of options.UP_AXES
     up_vec -= np.dot(up_vec, anterior) * anterior
     if np.linalg.norm(up_vec) < 0.3:
-        raise BadInputError(None, f"its up axis {up} is nearly its viewing direction; pass another --up")
+        raise BadInputError(None, f"its up axis {up} lies nearly along the direction it is seen from (as found from "
+                                  "its points): give another up axis (--up, or a filter's up=), unless it is no "
+                                  "frontal scan of an upper body at all (a whole closed body, a lone breast)")
     y = -up_vec / np.linalg.norm(up_vec)
     z = -anterior
     T = np.eye(4)

@@ -140,6 +140,23 @@ def test_a_batch_again_reuses_every_finished_case_and_retries_the_failed(batched
     assert {p: p.stat().st_mtime_ns for p in out.rglob("plan.json")} == stamps     # untouched
 
 
+def test_a_case_missing_a_file_its_plan_names_is_planned_again(cli, tmp_path):
+    """Truth: reused means whole — a case whose report or side folder was deleted is no finished plan."""
+    folder = tmp_path / "one"
+    folder.mkdir()
+    shutil.copy(SAMPLE, folder / "anna.mcap")
+    out = tmp_path / "cases"
+    assert run(cli, "batch", folder, "--out", out, "--deform", "ptosis:2").returncode == 0
+    (out / "anna" / "report.html").unlink()
+    shutil.rmtree(out / "anna" / "left")
+    res = run(cli, "batch", folder, "--out", out, "--deform", "ptosis:2")
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert _manifest(out)["anna.mcap"]["status"] == "done"
+    record = json.loads((out / "anna" / "plan.json").read_text())
+    assert (out / "anna" / "report.html").is_file()
+    assert all((out / "anna" / f).is_file() for c in record["sides"]["left"]["changes"] for f in c["files"].values())
+
+
 def test_other_options_replan_a_case_in_place(patients, cli, tmp_path):
     """A case planned before with other changes is planned again, its ingest and fit reused, and
     swapped in whole."""

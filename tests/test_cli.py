@@ -123,6 +123,8 @@ def test_missing_and_nan_inputs_exit_3(cli, tmp_path):
     ["deform", "x.ply", "--kind", "sag", "--out", "o.ply"],                                # unknown kind
     ["deform", "x.ply", "--kind", "ptosis", "--param", "c0=1", "--out", "o.ply"],          # wrong parameter
     ["deform", "x.ply", "--kind", "ptosis", "--param", "b0=lots", "--out", "o.ply"],       # not a number
+    ["deform", "x.ply", "--kind", "ptosis", "--param", "b0=1,b0=2", "--out", "o.ply"],     # which b0?
+    ["deform", "x.ply", "--kind", "ptosis", "--param", "=1", "--out", "o.ply"],            # no name
     ["synth", "--db", "Q", "--out", "o"],
     ["synth", "--db", "S", "--points", "1000", "--out", "o"],
     ["synth", "--db", "S", "--seed", "-1", "--out", "o"],

@@ -373,6 +373,8 @@ def test_a_planned_change_is_continuous_across_the_rim_and_the_band(angle, z):
     (["--up", "z"], "up axis"),
     (["--units", "cm"], "units"),
     (["--units", ""], "the value of --units is empty"),
+    (["--units", "m"], "--units describes a scan file"),      # the sample is a recording: the camera's mm
+    (["--up", "-z"], "--up describes a scan file"),
     (["--out", " "], "the value of --out is empty"),        # pathlib would read it as the current folder
     (["--out="], "the value of --out is empty"),
 ])
