@@ -6,6 +6,7 @@ from pathlib import Path
 import typer
 
 from breastplan.clock import Clock
+from breastplan.errors import about
 
 from .app import JSON, command
 from .output import progress, report, usage_error, writable
@@ -48,7 +49,8 @@ def train_statistical(
     rows = read_pairs(pairs)
     options = PairOptions(lattice=lattice, corresponding=corresponding)
     with progress("fitting before scans", sum(r.split != "test" for r in rows)) as advance, threadpool_limits(1, "blas"):
-        estimator, meta = train_from_pairs(rows, options, FitCache(cache or default_cache()), regressor, advance)
+        with about(pairs / "pairs.csv"):
+            estimator, meta = train_from_pairs(rows, options, FitCache(cache or default_cache()), regressor, advance)
     save_field_model(out, estimator, meta)
     report({"model": str(out), "kinds": meta["kinds"], "pairs": meta["training"]["pairs"],
             "befores": meta["training"]["befores"], "regressor": regressor, "hyper": meta["hyper"],

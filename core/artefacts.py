@@ -139,6 +139,7 @@ def _check_spec(path: Path, art: Artefact, spec: Spec) -> None:
 
 
 def _check_meta(path: Path, meta: dict, spec: MetaSpec, where: str = "") -> None:
+    """ArtefactError naming `where`+key for the first entry of `meta` that is not of its MetaSpec type."""
     for key, want in spec.items():
         items = meta.items() if key == "*" else [(key, meta[key])] if key in meta else []
         for name, value in items:

@@ -69,7 +69,8 @@ def degree_model(path: Path) -> ModelFile:
     except ValueError:
         raise ArtefactError(path, f"names no known condition ({model.meta.get('condition')})") from None
     if model.meta.get("kind", cond.kind) != cond.kind:
-        raise ArtefactError(path, f"is a model of {model.meta['kind']}, but its condition '{cond.name}' is of {cond.kind}")
+        raise ArtefactError(path, f"is a model of {model.meta['kind']}, but its condition '{cond.name}' is of "
+                                  f"{cond.kind}")
     names = scalar_names(str(model.meta.get("feature_set")), cond.kind)
     if model.n_features != len(names) or model.n_outputs != 1:
         raise ArtefactError(path, f"takes {model.n_features} features and gives {model.n_outputs} outputs, where its "

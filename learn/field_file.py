@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from breastplan import ArtefactError, to_model_units
+from breastplan import ArtefactError, BadInputError, to_model_units
 from breastplan.deform.by_degree import ByDegree, check_degree, deform_by_degree, degree_reached, pick_condition
 from breastplan.deform.lattice import Lattice
 from breastplan.model_file import ModelFile, load_model
@@ -105,14 +105,25 @@ def train_from_pairs(rows, options: PairOptions = PairOptions(), cache: FitCache
     from .statistical import FieldModel
 
     train = [r for r in rows if r.split != "test"]
+    for kind in {r.kind for r in train}:
+        degrees = {r.degree for r in train if r.kind == kind}
+        if len(degrees) < 2:
+            raise BadInputError(None, f"holds training pairs of {kind} at one degree only ({min(degrees):g}): a model "
+                                      "of degrees learns from pairs at two degrees at least")
     clouds, befores = {}, {}
     for r in train:
         if r.before not in befores:
             clouds[r.before] = breast_cloud(r.before)
             befores[r.before] = fit_before(clouds[r.before], options.lattice, cache)
         advance()
-    fields = np.stack([fit_pair(befores[r.before], clouds[r.before], breast_cloud(r.after), options, cache, r.kind)
-                       for r in train])
+    def after(r):
+        cloud = breast_cloud(r.after)
+        if options.corresponding and cloud.shape != clouds[r.before].shape:
+            raise BadInputError(r.after, f"holds {len(cloud):,} points where its before scan holds "
+                                         f"{len(clouds[r.before]):,}; --corresponding pairs correspond point for point")
+        return cloud
+
+    fields = np.stack([fit_pair(befores[r.before], clouds[r.before], after(r), options, cache, r.kind) for r in train])
     kinds = sorted({r.kind for r in train}, key=KINDS.index)
     X = pair_features([befores[r.before] for r in train], [r.degree for r in train], [r.kind for r in train], kinds)
     groups = np.array([str(r.before) for r in train])

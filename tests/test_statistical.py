@@ -324,7 +324,8 @@ def test_a_model_file_whose_parts_disagree_is_refused_before_any_plan(cli, train
     tmp, _ = trained
     shipped = MODELS / "ptosis-b0-gt-b1.npz"
     learnt = load_model(tmp / "model.npz")                    # the same model's modes, regressed on 4 features
-    four = TransformedTargetRegressor(Pipeline([("scale", MinMaxScaler()), ("reg", Ridge())]), transformer=MinMaxScaler())
+    four = TransformedTargetRegressor(Pipeline([("scale", MinMaxScaler()), ("reg", Ridge())]),
+                                      transformer=MinMaxScaler())
     four.fit(np.random.default_rng(0).random((12, 4)), np.random.default_rng(1).random((12, learnt.n_outputs)))
     save_model(tmp_path / "feat.npz", four, meta={k: v for k, v in learnt.meta.items() if k != "estimator"},
                extra=learnt.extra)
@@ -338,3 +339,29 @@ def test_a_model_file_whose_parts_disagree_is_refused_before_any_plan(cli, train
         res = run(cli, "plan", "--method", path, "--deform", "ptosis:3", "--out", tmp_path / "case")
         assert_bad_input(res, path, tmp_path)
         assert problem in res.stderr and not (tmp_path / "case").exists()
+
+
+def test_a_training_set_a_model_of_degrees_cannot_learn_from_is_refused(cli, trained, tmp_path):
+    """Truths: a field that grows with the degree is not learnt from pairs of one degree; pairs said to
+    correspond point for point hold as many points after as before."""
+    import shutil
+
+    from breastplan import write_ply
+
+    tmp, _ = trained
+    pairs = tmp_path / "pairs"
+    shutil.copytree(tmp / "pairs", pairs)
+    header, *rows = (pairs / "pairs.csv").read_text().splitlines()
+    one_degree = [r for r in rows if r.split(",")[3] == "3"]
+    (pairs / "pairs.csv").write_text("\n".join([header, *one_degree]) + "\n")
+    res = run(cli, "train-statistical", "--pairs", pairs, "--out", tmp_path / "m.npz", "--corresponding",
+              "--cache", tmp / "cache")
+    assert_bad_input(res, pairs / "pairs.csv", tmp_path)
+    assert "at one degree only (3)" in res.stderr
+    (pairs / "pairs.csv").write_text("\n".join([header, *rows]) + "\n")
+    after = pairs / rows[0].split(",")[1]
+    write_ply(after, read_ply(after).points[:200])
+    res = run(cli, "train-statistical", "--pairs", pairs, "--out", tmp_path / "m.npz", "--corresponding",
+              "--cache", tmp / "cache")
+    assert_bad_input(res, after, tmp_path)
+    assert "holds 200 points where its before scan holds" in res.stderr
