@@ -28,6 +28,10 @@ import warnings
 from dataclasses import dataclass
 from typing import Any, Callable, Literal, Mapping
 
+import numpy as np
+
+from breastplan.errors import BadInputError, BreastplanError
+
 from .mesh import Mesh
 
 GROUP = "breastplan.filters"
@@ -169,12 +173,29 @@ class Filter:
         return bound
 
     def __call__(self, geometry, /, **parameters):
-        """Run the filter on `geometry` (a Mesh, or (N, 3) points); a new Mesh or a dict."""
+        """Run the filter on `geometry` (a Mesh, or (N, 3) points); a new Mesh or a dict. A plugin's filter
+        that fails, or returns anything else than it declares or a mesh with NaN or infinite vertices, raises
+        BadInputError saying so (a built-in's failure is a bug, and raises as it is)."""
         mesh = geometry if isinstance(geometry, Mesh) else Mesh(geometry)
-        result = self.function(mesh, **self.bind(parameters))
-        if not isinstance(result, (Mesh, dict)):
-            raise TypeError(f"filter {self.name} returned a {type(result).__name__}; a filter returns a Mesh or a dict")
+        bound = self.bind(parameters)
+        try:
+            result = self.function(mesh, **bound)
+        except (BreastplanError, ParameterError):
+            raise
+        except Exception as exc:
+            if self.source == BUILTIN:
+                raise
+            raise BadInputError(None, f"{self._who()} failed ({type(exc).__name__}: {exc})") from None
+        wanted = {"mesh": Mesh, "measures": dict}.get(self.returns, (Mesh, dict))
+        if not isinstance(result, wanted):
+            raise BadInputError(None, f"{self._who()} returned {type(result).__name__}, not the "
+                                      f"{'Mesh or dict' if isinstance(wanted, tuple) else wanted.__name__} it declares")
+        if isinstance(result, Mesh) and not np.isfinite(result.vertices).all():
+            raise BadInputError(None, f"{self._who()} returned a mesh with NaN or infinite vertices")
         return result
+
+    def _who(self) -> str:
+        return f"filter {self.name}" + ("" if self.source == BUILTIN else f" (from {self.source})")
 
     def as_dict(self) -> dict:
         return {"name": self.name, "description": self.description, "source": self.source,

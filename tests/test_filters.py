@@ -9,6 +9,7 @@ import inspect
 import json
 import os
 import subprocess
+import re
 import sys
 import textwrap
 from typing import Literal
@@ -430,3 +431,26 @@ def test_the_meshlab_bridge_offers_plugin_filters(plugin_site):
     out = json.loads(res.stdout.strip().splitlines()[-1])
     assert out == {"listed": True, "meshes": 2, "current": "scale_mesh", "vertices": (4 * np.eye(3)).tolist(),
                    "count": {"points": 3}}
+
+
+def test_a_plugin_filter_that_fails_or_lies_about_its_result_is_said_not_written():
+    """Truth: a filter's result is what it declares (a Mesh or a dict), with finite vertices; a plugin
+    that breaks this or raises is named with its source in one sentence — a built-in's bug still raises."""
+    def nan_mesh(mesh: Mesh) -> Mesh:
+        return Mesh(mesh.vertices * np.nan)
+
+    def liar(mesh: Mesh) -> Mesh:
+        return {"points": len(mesh.vertices)}
+
+    def raiser(mesh: Mesh) -> dict:
+        raise ValueError("k must be even")
+
+    points = np.random.default_rng(0).normal(size=(50, 3))
+    for function, problem in ((nan_mesh, "returned a mesh with NaN or infinite vertices"),
+                              (liar, "returned dict, not the Mesh it declares"),
+                              (raiser, "failed (ValueError: k must be even)")):
+        with pytest.raises(BadInputError, match=f"filter {function.__name__} \\(from clinic 1.0\\) "
+                                                + re.escape(problem)):
+            Filter(function.__name__, function, source="clinic 1.0")(points)
+    with pytest.raises(ValueError, match="k must be even"):
+        Filter("raiser", raiser)(points)
