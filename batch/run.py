@@ -71,8 +71,9 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
             results.close()                       # its workers killed: the cases they were planning left unfinished
             remove_leftovers(out)
             for task in tasks:                    # finished on disk before its result reached the batch
-                if row_of(task).status == "pending" and finished(Path(task.case), task.sha256, task.options):
-                    row_of(task).status = "done"
+                row = row_of(task)
+                if row.status == "pending" and finished(Path(task.case), task.sha256, task.options):
+                    row.status = "done"
             manifest.write()
             summary = manifest.summary()
             raise Interrupted(f"{len(tasks) - summary['pending']} of the {len(tasks)} inputs to plan were settled "

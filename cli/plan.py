@@ -145,7 +145,7 @@ def check_method(method: str) -> None:
     from breastplan.model_file import load_model
 
     model = load_model(require_file(path, "model file"))
-    kinds = field_file(model, path).kinds if is_field_model(model) else degree_model(path).kinds
+    kinds = field_file(model, path).kinds if is_field_model(model) else degree_model(model, path).kinds
     if not set(kinds) & set(DEGREE_KINDS):
         raise usage_error(f"{path} models {', '.join(map(str, kinds))}, which has no degrees to plan", "--method")
 

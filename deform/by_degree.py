@@ -60,10 +60,15 @@ def pick_condition(kind: str, condition: str | None = None) -> Condition:
     return cond
 
 
-def degree_model(path: Path) -> ModelFile:
-    """A regression model file of one condition (`breastplan train`); ArtefactError naming it unless its
-    condition is known and its inputs are the degree and its feature set's scalars, its output one."""
-    model = load_model(path)
+def load_degree_model(path: Path) -> ModelFile:
+    """Load a regression model file of one condition (`degree_model`)."""
+    return degree_model(load_model(path), path)
+
+
+def degree_model(model: ModelFile, path: Path) -> ModelFile:
+    """A loaded regression model file of one condition (`breastplan train`, from `path`); ArtefactError
+    naming it unless its condition is known and its inputs are the degree and its feature set's scalars,
+    its output one."""
     try:
         cond = find_condition(str(model.meta.get("condition")))
     except ValueError:
@@ -94,14 +99,14 @@ def deform_by_degree(points_mm, kind: str, degree: float, *, condition: str | No
     (`learn.field_file.by_degree` also takes statistical model files.)"""
     if method not in METHODS and not str(method).endswith(".npz"):
         raise ValueError(f"unknown method '{method}'; choose one of {', '.join(METHODS)} or a model file")
-    given = None if method in METHODS else degree_model(Path(method))
+    given = None if method in METHODS else load_degree_model(Path(method))
     cond = pick_condition(kind, condition or (given.meta.get("condition") if given else None))
     check_degree(degree)
     p_mu = to_model_units(np.asarray(points_mm, dtype=float))
     if method == "exact":
         t = solve_degree(p_mu, cond, DD, degree, primitive).t
     else:
-        t = learnt_position(given or degree_model(models / f"{slug(cond)}.npz"), points_mm, kind, degree)
+        t = learnt_position(given or load_degree_model(models / f"{slug(cond)}.npz"), points_mm, kind, degree)
     params = cond.at(t)
     moved = apply_kind(p_mu, kind, params, primitive)
     return ByDegree(to_mm(moved), cond, method, t, params, degree_reached(cond, p_mu, moved, primitive))

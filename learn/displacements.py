@@ -200,6 +200,13 @@ KINDS = ("ptosis", "turn", "top-shape")
 FEATURES = ("degree", "volume_cc", "width_mm", "height_mm", "projection_mm")
 
 
+def feature_names(types) -> list[str]:
+    """The names of `pair_features`' columns (ours) for a model of `types`."""
+    if len(types) < 2:
+        return list(FEATURES)
+    return [f"type={k}" for k in types] + [f"{f} if type={k}" for k in types for f in FEATURES]
+
+
 def pair_features(befores: list[Before], degree, kinds=None, types=(), *, thesis: bool = False) -> np.ndarray:
     """One row of features per pair, from its before breast, degree and type.
 

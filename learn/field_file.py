@@ -18,7 +18,8 @@ from breastplan.deform.by_degree import ByDegree, check_degree, deform_by_degree
 from breastplan.deform.lattice import Lattice
 from breastplan.model_file import ModelFile, load_model
 
-from .displacements import FEATURES, KINDS, FitCache, PairOptions, field_lattice, fit_before, fit_pair, pair_features
+from .displacements import (KINDS, FitCache, PairOptions, feature_names, field_lattice, fit_before, fit_pair,
+                            pair_features)
 
 STATISTICAL = "statistical"
 
@@ -87,8 +88,7 @@ def field_file(model: ModelFile, path: Path) -> FieldFile:
             or components.shape != (model.n_outputs, mean.size) or not set(model.meta.get("kinds", ())) <= set(KINDS)
             or not model.meta.get("kinds")):
         raise ArtefactError(path, "holds an inconsistent statistical model (its modes, lattice or types)")
-    k = len(model.meta["kinds"])
-    features = len(FEATURES) if k < 2 else k * (1 + len(FEATURES))      # `pair_features`' columns
+    k, features = len(model.meta["kinds"]), len(feature_names(model.meta["kinds"]))
     if model.n_features != features:
         raise ArtefactError(path, f"takes {model.n_features} features, where a model of {k} type(s) takes {features}")
     return FieldFile(model, path)
@@ -133,8 +133,7 @@ def train_from_pairs(rows, options: PairOptions = PairOptions(), cache: FitCache
         est, hyper, cv = FieldModel(regressor).fit(X, fields), {}, float("nan")
     meta = {"model": STATISTICAL, "lattice": options.lattice, "kinds": kinds, "regressor": regressor,
             "hyper": {k: float(v) for k, v in hyper.items()}, "cv_field_rmse_pct": cv,
-            "features": list(FEATURES) if len(kinds) < 2 else
-                        [f"type={k}" for k in kinds] + [f"{f} if type={k}" for k in kinds for f in FEATURES],
+            "features": feature_names(kinds),
             "target": "PCA weights of the FFD displacement field, box units",
             "training": {"pairs": len(train), "befores": len(befores), "fit": "corresponding" if options.corresponding
                          else "closest"}}
