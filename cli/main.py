@@ -6,6 +6,8 @@ below, the order of `breastplan --help`). A command imports its stage only when 
 from __future__ import annotations
 
 import sys
+import warnings
+from typing import NoReturn
 
 from breastplan import BadInputError
 from breastplan.errors import Interrupted
@@ -15,25 +17,50 @@ from .app import app
 from .output import stderr
 
 
+REFUSED = (2, 3, 130)    # usage error, bad input, interrupted: the exit codes that end in one sentence
+
+
 def main() -> None:
-    """Entry point: run the app, mapping deliberate errors to exit codes (docs/cli.md)."""
+    """Entry point: run the app, mapping deliberate errors to exit codes (docs/cli.md).
+
+    Warnings the libraries raise on the way (numpy's on data about to be refused) are held back:
+    a refusal is its one sentence; any other ending shows them after the fact."""
+    with warnings.catch_warnings(record=True) as held:
+        try:
+            _run()
+        except SystemExit as exc:
+            if exc.code not in REFUSED:
+                _show(held)
+            raise
+        except BaseException:
+            _show(held)
+            raise
+        _show(held)
+
+
+def _run() -> None:
     empty = _empty_argument(sys.argv[1:])
     if empty:
-        stderr.print(f"error: {empty} is empty: give it a value or leave it out (see `breastplan --help`).",
-                     markup=False, soft_wrap=True)
-        sys.exit(2)
+        _refuse(f"error: {empty} is empty: give it a value or leave it out (see `breastplan --help`).", 2)
     try:
         app()
     except BadInputError as exc:
-        stderr.print(f"error: {exc}", markup=False, soft_wrap=True)
-        sys.exit(3)
+        _refuse(f"error: {exc}", 3)
     except OSError as exc:  # an output we cannot write, a disk that is full
         where = f"{exc.filename}: " if exc.filename else ""
-        stderr.print(f"error: {where}{exc.strerror or exc}.", markup=False, soft_wrap=True)
-        sys.exit(3)
+        _refuse(f"error: {where}{exc.strerror or exc}.", 3)
     except Interrupted as exc:
-        stderr.print(f"interrupted: {exc}", markup=False, soft_wrap=True)
-        sys.exit(130)
+        _refuse(f"interrupted: {exc}", 130)
+
+
+def _refuse(sentence: str, code: int) -> NoReturn:
+    stderr.print(sentence, markup=False, soft_wrap=True)
+    sys.exit(code)
+
+
+def _show(held: list[warnings.WarningMessage]) -> None:
+    for w in held:
+        warnings.showwarning(w.message, w.category, w.filename, w.lineno)
 
 
 def _empty_argument(args: list[str]) -> str | None:

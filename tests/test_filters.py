@@ -336,10 +336,21 @@ PLUGIN = {
         from breastplan.filters import filter
 
 
+        import numpy as np
+
+        from breastplan.filters import Mesh, filter
+
+
         @filter("count_points")
         def count_points(mesh) -> dict:
             """Count the points (a module whose import registers its filters)."""
             return {"points": len(mesh.vertices)}
+
+
+        @filter("log_depth")
+        def log_depth(mesh) -> Mesh:
+            """z replaced by its logarithm: numpy warns of a zero z, and its -inf is refused."""
+            return Mesh(np.column_stack([mesh.vertices[:, :2], np.log(mesh.vertices[:, 2])]), mesh.faces)
         ''',
 }
 BROKEN = {
@@ -413,6 +424,16 @@ def test_a_plugin_filter_runs_on_a_scan_file(cli, scan, plugin_site, tmp_path):
     assert json.loads(res.stdout)["result"] == {"points": len(read_ply(path).points)}
     res = run_with(with_plugins(plugin_site), cli, "filter", "scale_mesh", path, "--param", "factor=big", "--out", out)
     assert res.returncode == 2 and "factor='big' is not a finite number" in " ".join(res.stderr.split())
+
+
+def test_a_refusal_is_one_sentence_though_numpy_warned_on_the_way(cli, scan, plugin_site, tmp_path):
+    path, _ = scan
+    flat = tmp_path / "flat.ply"
+    write_ply(flat, read_ply(path).points * [1.0, 1.0, 0.0])                # every z is 0: log gives -inf
+    res = run_with(with_plugins(plugin_site), cli, "filter", "log_depth", flat, "--out", tmp_path / "log.ply")
+    said = [line for line in res.stderr.splitlines() if "plugin broken" not in line]     # the broken one is listed
+    assert res.returncode == 3 and len(said) == 1 and "log_depth" in said[0], res.stderr
+    assert not (tmp_path / "log.ply").exists()
 
 
 def test_the_meshlab_bridge_offers_plugin_filters(plugin_site):
