@@ -8,6 +8,7 @@ surface and predicts the field for the type and degree: a lattice that moves her
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -116,11 +117,21 @@ def train_from_pairs(rows, options: PairOptions = PairOptions(), cache: FitCache
             clouds[r.before] = breast_cloud(r.before)
             befores[r.before] = fit_before(clouds[r.before], options.lattice, cache)
         advance()
+    changes = {}
+
     def after(r):
-        cloud = breast_cloud(r.after)
-        if options.corresponding and cloud.shape != clouds[r.before].shape:
+        cloud, before = breast_cloud(r.after), clouds[r.before]
+        if options.corresponding and cloud.shape != before.shape:
             raise BadInputError(r.after, f"holds {len(cloud):,} points where its before scan holds "
-                                         f"{len(clouds[r.before]):,}; --corresponding pairs correspond point for point")
+                                         f"{len(before):,}; --corresponding pairs correspond point for point")
+        if cloud.shape == before.shape and np.array_equal(cloud, before):
+            raise BadInputError(r.after, f"holds the very breast of its before scan {r.before.name}: a pair of "
+                                         f"{r.kind} at degree {r.degree:g} shows a change")
+        same = changes.setdefault((r.before, r.kind, cloud.shape, hashlib.sha256(cloud.tobytes()).digest()), r)
+        if same.degree != r.degree:
+            raise BadInputError(r.after, f"holds the same breast as {same.after.name}, both after {r.before.name} "
+                                         f"by {r.kind}: one change cannot be of degree {same.degree:g} and "
+                                         f"{r.degree:g}")
         return cloud
 
     fields = np.stack([fit_pair(befores[r.before], clouds[r.before], after(r), options, cache, r.kind) for r in train])

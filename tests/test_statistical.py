@@ -365,3 +365,17 @@ def test_a_training_set_a_model_of_degrees_cannot_learn_from_is_refused(cli, tra
               "--cache", tmp / "cache")
     assert_bad_input(res, after, tmp_path)
     assert "holds 200 points where its before scan holds" in res.stderr
+
+    before = pairs / rows[0].split(",")[0]
+    write_ply(after, read_ply(before).points)                                 # no change at all
+    res = run(cli, "train-statistical", "--pairs", pairs, "--out", tmp_path / "m.npz", "--cache", tmp / "cache")
+    assert_bad_input(res, after, tmp_path)
+    assert f"holds the very breast of its before scan {before.name}" in res.stderr
+
+    shutil.copy(tmp / "pairs" / rows[0].split(",")[1], after)
+    first = rows[0].split(",")
+    twice = ",".join([first[0], first[1], first[2], str(int(first[3]) % 8 + 1), *first[4:]])
+    (pairs / "pairs.csv").write_text("\n".join([header, *rows, twice]) + "\n")   # one change at two degrees
+    res = run(cli, "train-statistical", "--pairs", pairs, "--out", tmp_path / "m.npz", "--cache", tmp / "cache")
+    assert_bad_input(res, after, tmp_path)
+    assert f"one change cannot be of degree {first[3]} and {int(first[3]) % 8 + 1}" in res.stderr
