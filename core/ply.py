@@ -8,6 +8,7 @@ open3d's reader reports such defects only as console warnings, hence this module
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
@@ -75,13 +76,17 @@ def read_ply(path: str | Path) -> Geometry:
     return _to_geometry(path, elements, arrays, comments)
 
 
+_END_HEADER = re.compile(rb"^end_header[ \t\r]*$", re.MULTILINE)
+
+
 def _parse_header(path: Path, data: bytes):
     """(byte order or None for ASCII, elements, comments, offset of the body) of a PLY header."""
     if not data.startswith(b"ply"):
         raise ArtefactError(path, "is not a PLY file (it does not start with 'ply')")
-    end = data.find(b"end_header", 0, _MAX_HEADER)
-    if end < 0:
+    last = _END_HEADER.search(data, 0, _MAX_HEADER)          # the line itself, not those words in a comment
+    if last is None:
         raise ArtefactError(path, "is not a valid PLY file: its header has no 'end_header' line")
+    end = last.start()
     nl = data.find(b"\n", end)
     start = nl + 1 if nl >= 0 else len(data)
     try:
@@ -323,7 +328,7 @@ def write_ply(path: str | Path, points, faces=None, normals=None, comments=()) -
     if normals is not None:
         vert["nx"], vert["ny"], vert["nz"] = np.asarray(normals, dtype=np.float64).T
     header = ["ply", "format binary_little_endian 1.0"]
-    header += [f"comment {c}" for c in comments]
+    header += [f"comment {_header_text(c)}" for c in comments]
     header.append(f"element vertex {len(points)}")
     header += [f"property double {name}" for name, _ in fields]
     face_bytes = b""
@@ -336,7 +341,14 @@ def write_ply(path: str | Path, points, faces=None, normals=None, comments=()) -
     header.append("end_header")
     path = Path(path)
     with atomic_open(path) as fh:
-        fh.write(("\n".join(header) + "\n").encode("ascii", errors="replace"))  # PLY headers are ASCII
+        fh.write(("\n".join(header) + "\n").encode("ascii"))
         fh.write(vert.tobytes())
         fh.write(face_bytes)
     return path
+
+
+def _header_text(text: str) -> str:
+    """`text` as one line of printable ASCII, which a PLY header is: other characters (a newline or
+    an accent in a file name) escaped as Python writes them (`\\n`, `\\xfc`, `\\udcfc`)."""
+    return re.sub(r"[^\x20-\x7e]", lambda m: m.group().encode("unicode_escape", "backslashreplace").decode("ascii"),
+                  text)

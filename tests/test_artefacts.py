@@ -171,6 +171,20 @@ def test_ply_round_trip_is_exact(tmp_path_factory, n, seed, with_faces):
     assert (g.faces is None) if not with_faces else np.array_equal(g.faces, F)
 
 
+@settings(max_examples=50, deadline=None)
+@given(st.text(st.characters(exclude_categories=()), max_size=40) | st.just("x\nend_header\ny"))
+def test_a_comment_of_any_text_is_one_header_line(tmp_path_factory, text):
+    """A file name carried into a comment may hold a newline, a control character or bytes that are
+    not UTF-8 (a surrogate): the header stays one ASCII line per comment and the points read back;
+    printable ASCII is kept as it is."""
+    points = np.arange(9.0).reshape(3, 3)
+    g = read_ply(write_ply(tmp_path_factory.mktemp("ply") / "c.ply", points, comments=[f"source {text}", "last"]))
+    assert np.array_equal(g.points, points)
+    assert len(g.comments) == 2 and g.comments[1] == "last" and g.comments[0].isascii()
+    if all(" " <= c <= "~" for c in text):
+        assert g.comments[0].rstrip() == f"source {text}".rstrip()
+
+
 def test_a_long_legal_name_is_written(tmp_path):
     """A 250-byte name is legal (NAME_MAX 255); the temporary name beside it must fit too."""
     path = tmp_path / ("b" * 246 + ".ply")
