@@ -2,9 +2,9 @@
 
 A folder is walked recursively (hidden entries and the batch's own output folder left out, symbolic
 links to folders not followed). Each file becomes an `Input`: one to plan, or one skipped with the
-reason — not a scan or recording, a symbolic link leading outside the folder, or a case name
-already taken by another input (`a.ply` and `a.mcap` both become case `a`; the first in sorted
-order is planned).
+reason — not a scan or recording, not a regular file (a named pipe, a device), a symbolic link
+leading outside the folder, or a case name already taken by another input (`a.ply` and `a.mcap`
+both become case `a`; the first in sorted order is planned).
 """
 from __future__ import annotations
 
@@ -63,6 +63,8 @@ def _classify(folder: Path, root: Path, path: Path) -> Input:
             return _input(folder, path, f"a symbolic link leading outside the input folder (to {target})")
     if path.suffix.lower() not in SCAN_SUFFIXES:
         return _input(folder, path, f"not a scan or recording (the planned kinds end in {', '.join(SCAN_SUFFIXES)})")
+    if path.exists() and not path.is_file():  # a named pipe or a device: reading it may never end
+        return _input(folder, path, "not a regular file")
     return _input(folder, path)
 
 

@@ -194,7 +194,10 @@ def _breast(input: Path):
 
 
 def _starts_with(path: Path, magic: bytes) -> bool:
-    """Whether `path` starts with `magic`; True when it is empty or cannot be read: the reader then says why."""
+    """Whether `path` starts with `magic`; True when it is empty, cannot be read or is no regular file (a
+    named pipe, which reading would block on): the reader then says why."""
+    if not path.is_file():
+        return True
     try:
         with open(path, "rb") as fh:
             head = fh.read(len(magic))

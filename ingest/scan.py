@@ -25,6 +25,8 @@ def is_recording(path: Path) -> bool:
     """An MCAP file, by extension or by its magic bytes."""
     if path.suffix.lower() == ".mcap":
         return True
+    if not path.is_file():                    # a named pipe would block the sniffing below
+        return False
     try:
         with open(path, "rb") as fh:
             return fh.read(len(MCAP_MAGIC)) == MCAP_MAGIC

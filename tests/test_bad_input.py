@@ -123,6 +123,16 @@ def test_an_unreadable_file_is_bad_input_not_a_usage_error(cli, tmp_path, comman
     assert "cannot be read (Permission denied)" in res.stderr
 
 
+@pytest.mark.parametrize("command", [DEFORM, FIT, INGEST, ["plan"], ["filter", "get_breast_measures"]])
+@pytest.mark.parametrize("name", ["scan.ply", "scan.mcap"])
+def test_a_named_pipe_is_refused_not_waited_on(cli, tmp_path, command, name):
+    """Reading a named pipe blocks until something writes to it: no command may open one to sniff it."""
+    path = tmp_path / name
+    os.mkfifo(path)
+    res = run(cli, *command, path, *(["--out", tmp_path / "out"] if command[0] != "filter" else []))
+    assert_bad_input(res, path, tmp_path)
+
+
 def test_an_unreadable_case_folder_is_bad_input(cli, tmp_path):
     case = tmp_path / "case"
     case.mkdir()

@@ -87,6 +87,13 @@ def test_find_inputs_names_each_file_and_why_it_is_skipped(patients, tmp_path):
     assert found["gone.ply"].skipped is None          # found; it fails when read
 
 
+def test_find_inputs_skips_a_named_pipe_which_reading_would_block_on(tmp_path):
+    os.mkfifo(tmp_path / "pipe.ply")
+    (tmp_path / "gone.ply").symlink_to(tmp_path / "deleted.ply")
+    found = {i.name: i.skipped for i in find_inputs(tmp_path)}
+    assert found == {"pipe.ply": "not a regular file", "gone.ply": None}     # a dangling link fails when read
+
+
 def test_find_inputs_leaves_out_hidden_files_and_the_output_folder(tmp_path):
     (tmp_path / ".cache").mkdir()
     (tmp_path / ".cache" / "x.ply").write_text("ply")
