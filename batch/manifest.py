@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from breastplan.atomic import atomic_set
-from breastplan.json_text import to_json
+from breastplan.json_text import to_json, utf8
 
 MANIFEST_SCHEMA = "breastplan.batch/1"
 CSV_NAME, JSON_NAME = "manifest.csv", "manifest.json"
@@ -59,5 +59,5 @@ class Manifest:
         writer.writeheader()
         writer.writerows(asdict(r) for r in self.rows)
         with atomic_set() as stage:
-            Path(stage(self.out / CSV_NAME)).write_text(text.getvalue(), encoding="utf-8")
+            Path(stage(self.out / CSV_NAME)).write_bytes(utf8(text.getvalue()))
             Path(stage(self.out / JSON_NAME)).write_text(to_json(self.as_dict(), indent=1), encoding="utf-8")

@@ -25,6 +25,8 @@ def main() -> None:
 
     Warnings the libraries raise on the way (numpy's on data about to be refused) are held back:
     a refusal is its one sentence; any other ending shows them after the fact."""
+    for stream in (sys.stdout, sys.stderr):      # a terminal that is not UTF-8, a file name that is not
+        stream.reconfigure(errors="backslashreplace")           # UTF-8: shown escaped, never a crash
     with warnings.catch_warnings(record=True) as held:
         try:
             _run()

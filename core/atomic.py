@@ -11,8 +11,10 @@ the same file, and the folders a failed set created are removed with its tempora
 """
 from __future__ import annotations
 
+import bisect
 import contextlib
 import errno
+import itertools
 import json
 import os
 import re
@@ -32,8 +34,10 @@ JOURNAL_SCHEMA = "breastplan.commit/1"
 
 
 def short_name(name: str) -> str:
-    """`name` cut to NAME_KEPT bytes (whole characters), to fit in a temporary's name."""
-    return name.encode()[:NAME_KEPT].decode(errors="ignore")
+    """`name` cut to NAME_KEPT bytes (whole characters), to fit in a temporary's name; a name's bytes that
+    are not UTF-8 (held as surrogates) count one byte each, as the file system stores them."""
+    ends = list(itertools.accumulate(len(os.fsencode(c)) for c in name))
+    return name[:bisect.bisect_right(ends, NAME_KEPT)]
 
 
 def file_mode() -> int:

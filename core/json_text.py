@@ -1,5 +1,6 @@
-"""The JSON text breastplan writes: strict JSON (a NaN or an infinity, which JSON has not, is null),
-numpy arrays and scalars as plain lists and numbers, anything else unknown as its string."""
+"""The text breastplan writes. JSON: strict (a NaN or an infinity, which JSON has not, is null), numpy
+arrays and scalars as plain lists and numbers, anything else unknown as its string. Any text file:
+UTF-8, whatever file names it holds."""
 from __future__ import annotations
 
 import json
@@ -21,3 +22,13 @@ def _strict(value):
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
+
+
+def utf8(text: str) -> bytes:
+    """`text` as UTF-8 bytes, a file name's bytes that are not UTF-8 (which Python holds as surrogates,
+    e.g. a Latin-1 `M\\xfcller.ply`) written as `\\xfc`."""
+    try:
+        raw = text.encode("utf-8", "surrogateescape")
+    except UnicodeEncodeError:                               # a surrogate no file name holds
+        return text.encode("utf-8", "backslashreplace")
+    return raw.decode("utf-8", "backslashreplace").encode("utf-8")

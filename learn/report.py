@@ -10,7 +10,7 @@ import numpy as np
 from breastplan.atomic import atomic_open
 from breastplan.deform.by_degree import slug
 from breastplan.deform.conditions import find_condition
-from breastplan.json_text import to_json
+from breastplan.json_text import to_json, utf8
 
 from .figures import six_plot
 from .metrics import summary, ttest
@@ -157,7 +157,7 @@ def _headline(study: str, cond: str, results: list[Result], best: Result) -> dic
 
 def _write_text(path: Path, text: str) -> None:
     with atomic_open(path) as fh:
-        fh.write(text.encode())
+        fh.write(utf8(text))
 
 
 def _f(v) -> str:

@@ -14,7 +14,7 @@ import numpy as np
 from breastplan import __version__, transform_points, write_ply
 from breastplan.atomic import Stage, atomic_set
 from breastplan.case import Case, Provenance, sha256
-from breastplan.json_text import to_json
+from breastplan.json_text import to_json, utf8
 from breastplan.deform.names import PARAM_NAMES, at_bounds
 from breastplan.fitting.ffd import STOP_RESIDUAL
 from breastplan.options import SIDES
@@ -55,7 +55,7 @@ def write_plan(plan: Plan, folder: Path) -> dict:
             write_ply(stage(folder / name), moved, comments=[
                 f"breastplan plan: {change.name}, the torso with the planned change, input frame, mm"])
             torso_files[change.name] = name
-        Path(stage(folder / Case.REPORT)).write_text(render(plan, record), encoding="utf-8")
+        Path(stage(folder / Case.REPORT)).write_bytes(utf8(render(plan, record)))
         summary_png(plan, record, stage(folder / SUMMARY))
         Path(stage(folder / Case.PLAN_JSON)).write_text(to_json(record, indent=1), encoding="utf-8")
     _remove_earlier_plans(folder, record)

@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from breastplan import ArtefactError, load_npz, read_ply, save_npz, write_ply
-from breastplan.atomic import atomic_open, atomic_set
-from breastplan.json_text import to_json
+from breastplan.atomic import NAME_KEPT, atomic_open, atomic_set, short_name
+from breastplan.json_text import to_json, utf8
 
 SPEC = {"points": ("f", ("n", 3)), "label": ("U", ("n",))}
 
@@ -183,6 +183,18 @@ def test_a_comment_of_any_text_is_one_header_line(tmp_path_factory, text):
     assert len(g.comments) == 2 and g.comments[1] == "last" and g.comments[0].isascii()
     if all(" " <= c <= "~" for c in text):
         assert g.comments[0].rstrip() == f"source {text}".rstrip()
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.binary(max_size=300).filter(lambda b: b"/" not in b and b"\0" not in b))
+def test_any_file_name_is_written_as_utf8_text_and_cut_to_whole_characters(raw):
+    """A POSIX name is any bytes but '/' and NUL; Python holds those that are not UTF-8 as surrogates."""
+    name = os.fsdecode(raw)
+    text = utf8(f"input {name}").decode("utf-8")                            # valid UTF-8 whatever the name
+    assert text == f"input {raw.decode('utf-8', 'backslashreplace')}"
+    cut = short_name(name)
+    assert name.startswith(cut) and len(os.fsencode(cut)) <= NAME_KEPT
+    assert len(os.fsencode(name[:len(cut) + 1])) > NAME_KEPT or cut == name  # as long as it may be
 
 
 def test_a_long_legal_name_is_written(tmp_path):

@@ -133,6 +133,19 @@ def test_a_named_pipe_is_refused_not_waited_on(cli, tmp_path, command, name):
     assert_bad_input(res, path, tmp_path)
 
 
+def test_a_file_name_that_is_not_utf8_and_a_terminal_that_is_not_are_no_faults(cli, tmp_path):
+    """A Latin-1 name copied from another machine (b'M\\xfcller.ply') is a legal POSIX name; a Latin-1
+    terminal cannot show '→'. Both are shown escaped, and the breast is deformed."""
+    before = os.fsdecode(os.path.join(os.fsencode(tmp_path), b"M\xfcller.ply"))
+    after = os.fsdecode(os.path.join(os.fsencode(tmp_path), b"M\xfcller-b0.ply"))
+    write_ply(before, breast_mm())
+    res = subprocess.run([cli, *DEFORM, before, "--out", after], capture_output=True,
+                         env={**os.environ, "PYTHONIOENCODING": "latin-1"})
+    assert res.returncode == 0, res.stderr
+    assert b"M\\udcfcller" in res.stdout and b"ptosis \\u2192" in res.stdout and b"Traceback" not in res.stderr
+    assert read_ply(after).points.shape == read_ply(before).points.shape
+
+
 def test_an_unreadable_case_folder_is_bad_input(cli, tmp_path):
     case = tmp_path / "case"
     case.mkdir()
