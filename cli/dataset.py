@@ -9,7 +9,7 @@ from breastplan.clock import Clock
 from breastplan.deform.conditions import CONDITIONS, find_condition
 
 from .app import JSON, command
-from .output import progress, report, usage_error, writable
+from .output import apart, progress, report, usage_error, writable
 
 
 MAX_DD = 64
@@ -32,8 +32,7 @@ def dataset(
         raise usage_error(str(exc), "--condition") from None
     if not 2 <= dd <= MAX_DD:
         raise usage_error(f"--dd must be 2..{MAX_DD}, got {dd}", "--dd")
-    if out.resolve() == db.resolve():
-        raise usage_error(f"it names the database read ({db}), which the dataset would replace", "--out")
+    apart(out, db)
 
     import numpy as np
 

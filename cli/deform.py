@@ -12,7 +12,7 @@ from breastplan.clock import Clock
 from breastplan.deform.names import DD, DEFAULT_CONDITION, KIND_PARAMS, METHODS, NEEDS_PRIMITIVE
 
 from .app import JSON, command, parse_pairs
-from .output import report, usage_error, writable
+from .output import apart, report, usage_error, writable
 
 if TYPE_CHECKING:
     from breastplan import Primitive
@@ -81,7 +81,7 @@ def deform(
     problem = breast_points_problem(geometry.points)
     if problem:
         raise BadInputError(input, problem)
-    writable(out)
+    writable(apart(out, input))
     prim = given or carried
     if prim is None and kind in NEEDS_PRIMITIVE:
         raise usage_error(f"{kind} needs the breast primitive, and {input} carries none: "

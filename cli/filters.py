@@ -11,7 +11,7 @@ from breastplan.clock import Clock
 from breastplan.errors import about
 
 from .app import JSON, command
-from .output import report, stderr, stdout, usage_error, writable
+from .output import apart, report, stderr, stdout, usage_error, writable
 
 
 @command("filters")
@@ -75,7 +75,7 @@ def run_filter(
     if out is not None:
         if out.suffix.lower() != ".ply":
             raise usage_error(f"'{out}' does not end in .ply; a filter writes its mesh as a PLY", "--out")
-        writable(out)
+        writable(apart(out, input))
 
     from breastplan.filters import Mesh, ParameterError, read_mesh, write_mesh
 

@@ -48,6 +48,19 @@ def writable(path: Path, folder: bool = False, option: str = "--out") -> Path:
     return path
 
 
+def apart(out: Path, input: Path, option: str = "--out") -> Path:
+    """`out` unless writing it would replace what the command reads: `input` itself (by whatever path or
+    link), or one of the files of the case folder it is in; a usage error (exit 2) then."""
+    from breastplan.case import Case
+
+    if out.resolve() == input.resolve() or (_exists(out) and _exists(input) and os.path.samefile(out, input)):
+        raise usage_error(f"it names {input}, which is read: writing there would replace it", option)
+    if Case.owns(out):
+        raise usage_error(f"it names the {out.name} of the case folder {out.parent}: writing there would leave "
+                          "that case's files disagreeing", option)
+    return out
+
+
 def _exists(path: Path) -> bool:
     try:                         # Path.exists raises on a name too long
         path.stat()

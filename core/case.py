@@ -172,6 +172,7 @@ class Case:
     SCAN_PLY, SCAN_NPZ, CAMERA_PLY = "scan.ply", "scan.npz", "camera.ply"
     FIT_PLY, FIT_NPZ = "fit.ply", "fit.npz"
     PLAN, REPORT, PLAN_JSON = "plan", "report.html", "plan.json"
+    FILES = (SCAN_PLY, SCAN_NPZ, CAMERA_PLY, FIT_PLY, FIT_NPZ, REPORT, PLAN_JSON)
 
     def __init__(self, folder: str | Path):
         self.folder = Path(folder)
@@ -181,6 +182,12 @@ class Case:
 
     def path(self, name: str) -> Path:
         return self.folder / name
+
+    @classmethod
+    def owns(cls, path: str | Path) -> bool:
+        """Whether `path` (by whatever path or link) is one of the files a case folder writes."""
+        path = Path(path).resolve()
+        return path.name in cls.FILES and any((path.parent / f).is_file() for f in (cls.SCAN_NPZ, cls.PLAN_JSON))
 
     @classmethod
     def holds(cls, folder: str | Path) -> bool:

@@ -1,5 +1,6 @@
 """The `breastplan` command end to end through files, as a user runs it (docs/cli.md exit codes)."""
 import json
+import os
 import subprocess
 
 import numpy as np
@@ -150,6 +151,26 @@ def test_a_report_folder_that_is_a_file_is_refused_before_any_work(cli, tmp_path
     res = run(cli, *args, "--out", tmp_path / "taken")
     assert_bad_input(res, tmp_path / "taken", tmp_path)
     assert "is a file, not a folder" in res.stderr and (tmp_path / "taken").read_text() == "a file"
+
+
+def test_an_output_that_would_replace_what_is_read_is_a_usage_error(cli, synth_s, tmp_path):
+    """deform and filter read their input whole before they write: an --out naming the input (by any path
+    or link) would replace the patient's scan, and one naming a case's own file would leave the case
+    disagreeing with itself."""
+    out, _ = synth_s
+    body = tmp_path / "body.ply"
+    body.write_bytes((out / "S-shape1-00.ply").read_bytes())
+    (tmp_path / "case").mkdir()
+    (tmp_path / "case" / "scan.npz").write_bytes(b"a case's scan")
+    (tmp_path / "case" / "fit.ply").write_bytes(b"a case's fit")
+    os.link(body, tmp_path / "hard.ply")
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    for target in (body, tmp_path / "case" / ".." / "body.ply", tmp_path / "hard.ply", tmp_path / "case" / "fit.ply"):
+        for command in (["deform", body, "--kind", "ptosis", "--param", "b0=1"],
+                        ["filter", "apply_breast_ptosis", body, "--param", "degree=3"]):
+            res = run(cli, *command, "--out", target)
+            assert res.returncode == 2 and "--out" in res.stderr, (command, target, res.stderr)
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
 
 
 def test_help_lists_the_commands(cli):
