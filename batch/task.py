@@ -7,7 +7,6 @@ finished cases intact and only hidden folders (`LEFTOVER`), which the next batch
 """
 from __future__ import annotations
 
-import json
 import os
 import re
 import secrets
@@ -15,6 +14,8 @@ import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
+
+from breastplan.json_text import from_json
 
 LEFTOVER = re.compile(r"^\..+\.(plan|batch|stale)-[0-9a-f]{8}$")
 """Hidden folders a killed batch may leave: `run_plan`'s build folder, a re-plan's copy, a swapped-out case."""
@@ -111,7 +112,7 @@ def _record(case: Path) -> dict:
     from breastplan.case import Case
 
     try:
-        record = json.loads((case / Case.PLAN_JSON).read_text())
+        record = from_json((case / Case.PLAN_JSON).read_text())
     except (OSError, ValueError):
         return {}
     return record if isinstance(record, dict) else {}

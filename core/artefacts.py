@@ -17,6 +17,7 @@ import numpy as np
 
 from .atomic import atomic_open
 from .errors import ArtefactError, NewerArtefactError, require_file
+from .json_text import from_json
 
 RESERVED = ("schema", "units", "frame", "version", "meta")
 
@@ -86,8 +87,8 @@ def load_npz(path: str | Path, schema: str, spec: Spec | None = None, meta_spec:
     art.schema, art.units = found, str(raw.get("units", ""))
     art.frame, art.version = str(raw.get("frame", "")), str(raw.get("version", ""))
     try:
-        art.meta = json.loads(str(raw.get("meta", "{}")))
-    except json.JSONDecodeError:
+        art.meta = from_json(str(raw.get("meta", "{}")))
+    except ValueError:
         raise ArtefactError(path, "has metadata that is not valid JSON") from None
     if not isinstance(art.meta, dict):
         raise ArtefactError(path, f"has metadata that is {_json_name(art.meta)}, not a JSON object")

@@ -23,6 +23,8 @@ import tempfile
 from pathlib import Path
 from typing import BinaryIO, Callable, Iterator
 
+from .json_text import from_json
+
 
 Stage = Callable[[str | Path], Path]
 """An `atomic_set`'s `stage`: the path to write a target's content to."""
@@ -158,7 +160,7 @@ def _write_journal(journal: Path, staged: list[tuple[Path, Path]]) -> None:
 def _read_journal(journal: Path) -> list[tuple[Path, Path]] | None:
     """The renames of a journal, each a staged file onto its own target; None if it is not such a journal."""
     try:
-        doc = json.loads(journal.read_bytes())
+        doc = from_json(journal.read_bytes())
         pairs = doc["renames"] if doc.get("schema") == JOURNAL_SCHEMA else None
         renames = [(journal.parent / src, journal.parent / dst) for src, dst in pairs]
     except (OSError, ValueError, TypeError, KeyError, AttributeError):

@@ -12,6 +12,15 @@ def to_json(value, **kwargs) -> str:
     return json.dumps(_strict(value), allow_nan=False, default=str, **kwargs)
 
 
+def from_json(text: str | bytes):
+    """The value of JSON `text`; ValueError for text that is not JSON, nested too deep included (Python's
+    parser recurses: a file of 100 000 '[' would otherwise end it with a RecursionError)."""
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise ValueError("JSON nested deeper than Python's parser reaches") from None
+
+
 def _strict(value):
     if isinstance(value, dict):
         return {k: _strict(v) for k, v in value.items()}

@@ -10,7 +10,6 @@ an existing one is updated one artefact set at a time, each all or nothing.
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import secrets
 import shutil
@@ -27,6 +26,7 @@ from breastplan.atomic import short_name
 from breastplan.case import Case, Fit, Provenance, Scan, sha256
 from breastplan.clock import Clock
 from breastplan.errors import about
+from breastplan.json_text import from_json
 from breastplan.options import FitOptions, IngestOptions, PlanOptions
 
 from .changes import Change, combine, solve_change
@@ -228,7 +228,7 @@ def _check_schema(folder: Path) -> None:
     if not doc.is_file():
         return
     try:
-        schema = json.loads(doc.read_text()).get("schema", "")
+        schema = from_json(doc.read_text()).get("schema", "")
     except (OSError, ValueError, AttributeError):
         raise BadInputError(doc, "is not a plan record (not JSON)") from None
     if schema != PLAN_SCHEMA:

@@ -266,6 +266,17 @@ def test_npz_metadata_types(tmp_path):
     np.savez(tmp_path / "d.npz", schema=np.str_("breastplan.test/1"), meta=np.str_("[1, 2]"))
     with pytest.raises(ArtefactError, match="metadata that is a list, not a JSON object"):
         load_npz(tmp_path / "d.npz", "breastplan.test/1")
+    np.savez(tmp_path / "e.npz", schema=np.str_("breastplan.test/1"), meta=np.str_("[" * 100_000 + "]" * 100_000))
+    with pytest.raises(ArtefactError, match="metadata that is not valid JSON"):          # deeper than json recurses
+        load_npz(tmp_path / "e.npz", "breastplan.test/1")
+
+
+def test_a_journal_nested_deeper_than_json_recurses_is_no_journal(tmp_path):
+    """A leftover `.x.commit` that is not a journal is ignored by the next write into its folder."""
+    (tmp_path / ".a.txt.commit").write_text('{"schema":' * 100_000 + "1" + "}" * 100_000)
+    with atomic_set() as stage:
+        Path(stage(tmp_path / "a.txt")).write_text("new a")
+    assert (tmp_path / "a.txt").read_text() == "new a"
 
 
 def test_json_text_is_strict_json():
