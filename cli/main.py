@@ -5,6 +5,7 @@ below, the order of `breastplan --help`). A command imports its stage only when 
 """
 from __future__ import annotations
 
+import signal
 import sys
 import warnings
 from typing import NoReturn
@@ -25,6 +26,7 @@ def main() -> None:
 
     Warnings the libraries raise on the way (numpy's on data about to be refused) are held back:
     a refusal is its one sentence; any other ending shows them after the fact."""
+    signal.signal(signal.SIGPIPE, signal.SIG_DFL)   # a reader gone (`| head -1`) ends us as it ends any tool
     for stream in (sys.stdout, sys.stderr):      # a terminal that is not UTF-8, a file name that is not
         stream.reconfigure(errors="backslashreplace")           # UTF-8: shown escaped, never a crash
     with warnings.catch_warnings(record=True) as held:

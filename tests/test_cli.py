@@ -173,6 +173,18 @@ def test_an_output_that_would_replace_what_is_read_is_a_usage_error(cli, synth_s
     assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
 
 
+def test_a_reader_that_went_away_ends_the_command_as_it_ends_any_tool(cli):
+    """`breastplan filters | head -1`: head exits, the pipe closes; the command ends by SIGPIPE, as cat or
+    ls do, with nothing on stderr (not a traceback, nor exit 1, which says breastplan has a bug)."""
+    import signal
+
+    read, write = os.pipe()
+    os.close(read)
+    res = subprocess.run([cli, "filters"], stdout=write, stderr=subprocess.PIPE, text=True, timeout=600)
+    os.close(write)
+    assert res.returncode == -signal.SIGPIPE and res.stderr == ""
+
+
 def test_help_lists_the_commands(cli):
     res = run(cli, "--help")
     assert res.returncode == 0
