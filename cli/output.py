@@ -28,11 +28,16 @@ def usage_error(message: str, param: str | None = None) -> typer.BadParameter:
 def writable(path: Path, folder: bool = False, option: str = "--out") -> Path:
     """`path` if an output file (or `folder`) can be written there; else BadInputError naming it (exit 3),
     raised before any work: a name longer than the file system holds, a file where a folder is needed
-    (or a folder where `option` needs a file), a folder the user may not write in."""
+    (or a folder where `option` needs a file), a symbolic link leading nowhere, a folder the user may
+    not write in."""
     from breastplan import BadInputError
 
     path = Path(path)
     existing = next((p for p in (path, *path.parents) if _exists(p)), Path(path.anchor or "."))
+    dangling = next((p for p in (path, *path.parents) if p.is_symlink() and not _exists(p)), None)
+    if dangling is not None:
+        raise BadInputError(path, f"cannot be written: {dangling} is a symbolic link to {os.readlink(dangling)}, "
+                                  "which does not exist")
     limit = os.pathconf(existing if existing.is_dir() else existing.parent, "PC_NAME_MAX")
     long = [p for p in path.relative_to(existing).parts if len(os.fsencode(p)) > limit]
     if long:

@@ -169,6 +169,17 @@ def test_an_output_folder_without_write_permission_is_bad_input(cli, tmp_path):
     assert list(locked.iterdir()) == []
 
 
+@pytest.mark.parametrize("command,out", [(INGEST, "gone"), (DEFORM, "gone/out.ply"), (DEFORM, "gone")])
+def test_an_output_through_a_link_leading_nowhere_is_refused_before_any_work(cli, tmp_path, command, out):
+    write_ply(tmp_path / "breast.ply", breast_mm())
+    (tmp_path / "gone").symlink_to(tmp_path / "deleted")
+    res = run(cli, *command, tmp_path / "breast.ply", "--out", tmp_path / out)
+    assert res.returncode == 3 and res.stderr.strip().splitlines() == [
+        f"error: {tmp_path / out}: cannot be written: {tmp_path / 'gone'} is a symbolic link to "
+        f"{tmp_path / 'deleted'}, which does not exist."], res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["breast.ply", "gone"]
+
+
 def test_a_legal_250_character_out_name_is_written(cli, tmp_path):
     write_ply(tmp_path / "breast.ply", breast_mm())
     out = tmp_path / ("d" * 246 + ".ply")
