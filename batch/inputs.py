@@ -3,8 +3,9 @@
 A folder is walked recursively (hidden entries and the batch's own output folder left out, symbolic
 links to folders not followed). Each file becomes an `Input`: one to plan, or one skipped with the
 reason — not a scan or recording, not a regular file (a named pipe, a device), a symbolic link
-leading outside the folder, or a case name already taken by another input (`a.ply` and `a.mcap`
-both become case `a`; the first in sorted order is planned).
+leading outside the folder, a case name already taken by another input (`a.ply` and `a.mcap`
+both become case `a`; the first in sorted order is planned), or a case inside another's (`a/left.ply`
+beside `a.ply`).
 """
 from __future__ import annotations
 
@@ -74,13 +75,20 @@ def _input(folder: Path, path: Path, skipped: str | None = None) -> Input:
 
 
 def _mark_duplicates(inputs: list[Input]) -> list[Input]:
-    """The second and later inputs of one case name skipped, naming the first."""
+    """The second and later inputs of one case name skipped, naming the first; and an input whose case
+    folder would lie inside another's (`anna/left.ply` beside `anna.ply`, whose case holds `left/`),
+    naming the input whose case holds it."""
     owner: dict[str, str] = {}
-    marked = []
     for i in inputs:
         if i.skipped is None:
-            first = owner.setdefault(i.case, i.name)
-            if first != i.name:
-                i = Input(i.path, i.name, i.case, f"a duplicate name: case '{i.case}' is planned from {first}")
+            owner.setdefault(i.case, i.name)
+    marked = []
+    for i in inputs:
+        outer = next((p.as_posix() for p in Path(i.case).parents if p.as_posix() in owner), None)
+        if i.skipped is None and owner[i.case] != i.name:
+            i = Input(i.path, i.name, i.case, f"a duplicate name: case '{i.case}' is planned from {owner[i.case]}")
+        elif i.skipped is None and outer is not None:
+            i = Input(i.path, i.name, i.case, f"its case '{i.case}' would lie inside case '{outer}', planned from "
+                                              f"{owner[outer]}")
         marked.append(i)
     return marked

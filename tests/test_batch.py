@@ -94,6 +94,17 @@ def test_find_inputs_skips_a_named_pipe_which_reading_would_block_on(tmp_path):
     assert found == {"pipe.ply": "not a regular file", "gone.ply": None}     # a dangling link fails when read
 
 
+def test_find_inputs_skips_a_case_that_would_lie_inside_another(tmp_path):
+    """Case `anna` holds left/, right/ and plan.json: inputs whose cases would be those are not planned."""
+    (tmp_path / "anna").mkdir()
+    for name in ("anna.ply", "anna/left.ply", "anna/plan.json.ply", "annabel.ply"):
+        (tmp_path / name).write_text("ply")
+    found = {i.name: i.skipped for i in find_inputs(tmp_path)}
+    assert found["anna.ply"] is None and found["annabel.ply"] is None
+    assert found["anna/left.ply"] == "its case 'anna/left' would lie inside case 'anna', planned from anna.ply"
+    assert "inside case 'anna'" in found["anna/plan.json.ply"]
+
+
 def test_find_inputs_leaves_out_hidden_files_and_the_output_folder(tmp_path):
     (tmp_path / ".cache").mkdir()
     (tmp_path / ".cache" / "x.ply").write_text("ply")
