@@ -10,7 +10,10 @@ an existing one is updated one artefact set at a time, each all or nothing.
 from __future__ import annotations
 
 import contextlib
+import fcntl
+import glob
 import os
+import re
 import secrets
 import shutil
 from dataclasses import dataclass, field, replace
@@ -143,22 +146,58 @@ def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Prog
 @contextlib.contextmanager
 def _building(out: Path) -> Iterator[Path]:
     """The folder to build the case in: `out` itself if it exists, else a hidden sibling renamed to
-    `out` once the plan is whole (removed if it fails)."""
+    `out` once the plan is whole (removed if it fails, and by a later plan if this one is killed)."""
     if out.exists():
         yield out
         return
-    work = out.parent / f".{short_name(out.name)}.plan-{secrets.token_hex(4)}"
+    stem = f".{short_name(out.name)}.plan-"
+    work = out.parent / f"{stem}{secrets.token_hex(4)}"
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        work.mkdir()
-        yield work
-        os.rename(work, out)
+        with _locked_folder(work, stem):
+            yield work
+            os.rename(work, out)
     except OSError as exc:                   # name the folder the user asked for, not the one being built
         where = str(exc.filename or out)
         raise OSError(exc.errno, exc.strerror, str(out) + where[len(str(work)):] if where.startswith(str(work))
                       else where) from None
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _locked_folder(work: Path, stem: str) -> Iterator[None]:
+    """Create `work` and hold a lock on it (the system releases it when the process dies, even by
+    kill -9), first removing the folders `stem`XXXXXXXX beside it whose lock no living plan holds:
+    those a killed plan left. Both under a lock on their parent, so that no folder is removed between
+    its creation and its lock."""
+    parent = _lock(work.parent)
+    try:
+        for folder in work.parent.glob(f"{glob.escape(stem)}*"):
+            if re.fullmatch(rf"{re.escape(stem)}[0-9a-f]{{8}}", folder.name) and folder.is_dir():
+                abandoned = _lock(folder, wait=False)
+                if abandoned is not None:
+                    shutil.rmtree(folder, ignore_errors=True)
+                    os.close(abandoned)
+        work.mkdir()
+        held = _lock(work)
+    finally:
+        os.close(parent)
+    try:
+        yield
+    finally:
+        os.close(held)
+
+
+def _lock(folder: Path, wait: bool = True) -> int | None:
+    """A descriptor of `folder` holding its exclusive lock; None when another process holds it and not `wait`."""
+    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+    except BlockingIOError:
+        os.close(fd)
+        return None
+    return fd
 
 
 def _sides(source: Path, folder: Path, options: PlanOptions, clock: Clock, progress: Progress) -> dict[str, SidePlan]:

@@ -531,3 +531,35 @@ def test_a_side_case_of_an_older_schema_is_named_as_such(planned, cli, tmp_path)
         np.savez(fh, **scan)
     res = run(cli, "plan", case)
     assert res.returncode == 3 and "older schema" in res.stderr and "scan.npz" in res.stderr, res.stderr
+
+
+def test_a_plan_removes_the_build_folders_of_killed_plans_and_no_other(tmp_path):
+    """A new case is built in a hidden locked sibling: one whose plan was killed (kill -9: the system
+    released its lock) is removed by the next plan; one a living plan builds, and another case's, are not."""
+    import fcntl
+    import subprocess
+    import sys
+
+    from breastplan.plan.job import _building
+
+    killed, live, other = (tmp_path / name for name in (".case.plan-0123abcd", ".case.plan-89abcdef",
+                                                          ".cases.plan-00000000"))
+    for folder in (killed, live, other):
+        folder.mkdir()
+        (folder / "scan.npz").write_text("half written")
+    holder = subprocess.Popen([sys.executable, "-c", "import fcntl, os, sys, time\n"
+                               f"fd = os.open({str(killed)!r}, os.O_RDONLY)\nfcntl.flock(fd, fcntl.LOCK_EX)\n"
+                               "print('locked', flush=True)\ntime.sleep(600)"], stdout=subprocess.PIPE, text=True)
+    assert holder.stdout.readline() == "locked\n"
+    holder.kill()
+    holder.wait()
+    fd = os.open(live, os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_EX)                                           # a plan still building
+    try:
+        with _building(tmp_path / "case") as work:
+            assert not killed.exists() and live.exists() and other.exists()
+            (work / "plan.json").write_text("{}")
+    finally:
+        os.close(fd)
+    assert (tmp_path / "case" / "plan.json").read_text() == "{}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".case.plan-89abcdef", ".cases.plan-00000000", "case"]
