@@ -63,6 +63,12 @@ def many_lines(d: Path) -> Path:
     return d / "many.xyz"
 
 
+def fan_obj(d: Path) -> Path:
+    """An OBJ of one triangle's 3 vertices and 10 million faces over them (80 MB)."""
+    (d / "fan.obj").write_bytes(b"v 0 0 0\nv 300 0 0\nv 0 300 10\n" + b"f 1 2 3\n" * 10_000_000)
+    return d / "fan.obj"
+
+
 def locked(d: Path) -> Path:
     path = write_ply(d / "locked.ply", breast_mm())
     path.chmod(0)
@@ -119,6 +125,7 @@ CASES = [
     Case("PLY of 100 vertices and 2 GB more (fit)", fit(file("tail.ply", ply_header(100)))),
     Case("ascii PLY of 100 vertices and 2 GB more (ingest)", ingest(file("tail.ply", ply_header(100, "ascii")))),
     Case("XYZ of 20 000 001 lines, 120 MB (ingest)", ingest(many_lines)),
+    Case("OBJ of 3 vertices and 10 M faces, 80 MB (ingest)", ingest(fan_obj)),
     Case("binary STL declaring 2^32 - 1 triangles (ingest)", ingest(file("big.stl", bytes(80) + b"\xff" * 4, 134))),
     Case("PCD declaring 100 M points (ingest)", ingest(file("big.pcd", b"VERSION .7\nFIELDS x y z\nSIZE 4 4 4\n"
                                                         b"TYPE F F F\nCOUNT 1 1 1\nWIDTH 100000000\nHEIGHT 1\n"

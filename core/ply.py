@@ -34,6 +34,8 @@ _MAX_POLYGON = 1 << 16
 """Vertices a face may have."""
 MAX_ELEMENTS = 20_000_000
 """Vertices (or faces) a PLY may declare: no body scan holds more."""
+FACES_PER_VERTEX = 4
+"""Faces a mesh may have per vertex: a triangulated surface has about 2, a closed one 2 exactly (Euler)."""
 
 
 @dataclass
@@ -121,6 +123,15 @@ def _parse_header(path: Path, data: bytes):
     return fmt, elements, comments, start
 
 
+def faces_problem(vertices: int, faces: int) -> str | None:
+    """What is wrong with a mesh of these counts that no surface has (more faces than FACES_PER_VERTEX
+    per vertex, where a reader would build them all before finding out), or None."""
+    if faces > FACES_PER_VERTEX * vertices + 100:
+        return (f"{counted(faces, 'face')} over {counted(vertices, 'vertex', 'vertices')}: a scanned surface has "
+                f"about 2 faces per vertex, and breastplan reads meshes of {FACES_PER_VERTEX} at most")
+    return None
+
+
 def _check_declared(path: Path, elements: list[_Element], fmt: str | None, body_size: int) -> None:
     """ArtefactError if the header declares more than any body scan holds, or more than the file's
     `body_size` bytes can hold (each face counted as a triangle; in ASCII, 2 bytes per number)."""
@@ -128,6 +139,10 @@ def _check_declared(path: Path, elements: list[_Element], fmt: str | None, body_
         if el.count > MAX_ELEMENTS:
             raise ArtefactError(path, f"declares {el.count:,} '{el.name}' elements, more than any body scan "
                                       f"holds ({MAX_ELEMENTS:,})")
+    counts = {el.name: el.count for el in elements}
+    problem = faces_problem(counts.get("vertex", 0), counts.get("face", 0))
+    if problem:
+        raise ArtefactError(path, f"declares {problem}")
     need = 0
     for el in elements:
         if fmt is None:

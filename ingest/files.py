@@ -23,7 +23,7 @@ import numpy as np
 from breastplan import BadInputError, read_ply, require_file
 from breastplan.errors import counted
 from breastplan.case import CAMERA_FRAME
-from breastplan.ply import MAX_ELEMENTS as MAX_POINTS
+from breastplan.ply import MAX_ELEMENTS as MAX_POINTS, faces_problem
 from breastplan.units import FAR_EXTENT_MM as FAR_EXTENT
 from breastplan.units import SCAN_EXTENT_MM
 from breastplan.units import extent as extent_of
@@ -312,6 +312,9 @@ def _check_obj(path: Path) -> tuple[bool, int, int]:
         for count, what in ((vertices, "vertices"), (faces, "faces")):
             if count > MAX_POINTS:
                 raise BadInputError(path, f"holds more than {MAX_POINTS:,} {what}, more than any body scan")
+    problem = faces_problem(vertices, faces)
+    if problem:
+        raise BadInputError(path, f"holds {problem}")
     return polygons, vertices, faces
 
 

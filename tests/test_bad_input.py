@@ -98,6 +98,13 @@ CASES = {  # name → (file name, builder(path) → path, command, extra options
                                              "element face 1\nproperty list int int vertex_indices\nend_header\n"
                                              .encode() + bytes(36) + (2**31 - 1).to_bytes(4, "little") + bytes(12)),
         DEFORM, [], "truncated"),
+    "obj of 3 vertices and 1000 faces (ingest)": (
+        "fan.obj", lambda p: p.write_text("v 0 0 0\nv 300 0 0\nv 0 300 10\n" + "f 1 2 3\n" * 1000), INGEST, [],
+        "holds 1,000 faces over 3 vertices: a scanned surface has about 2 faces per vertex"),
+    "ply declaring 3 vertices and 19 M faces (fit)": (
+        "fan.ply", lambda p: sparse(p, ply_header(3).replace(b"end_header", b"element face 19000000\n"
+                                    b"property list uchar int vertex_indices\nend_header"), 19_000_000 * 13 + 300),
+        FIT, [], "declares 19,000,000 faces over 3 vertices"),
 }
 
 
