@@ -38,8 +38,10 @@ KINDS = tuple(dict.fromkeys(c.kind for c in CONDITIONS.values()))
 """Deformation kinds that have degrees: those with conditions (ptosis, turn, top-shape)."""
 DEGREES = (1.0, float(DD))
 SPLITS = ("train", "test")
+MAX_PAIRS = 100_000
+"""Pairs pairs.csv may hold: more than any study of before/after scans has (each pair is fitted)."""
 MAX_CSV_BYTES = 64 << 20
-"""Bytes pairs.csv may hold: a million pairs or more."""
+"""Bytes pairs.csv may hold: MAX_PAIRS rows of long paths."""
 MIN_POINTS = 100
 """Points a breast needs at least to be learnt from."""
 BEFORE, AFTER = "before", "after"
@@ -96,9 +98,13 @@ def read_pairs(folder: str | Path) -> list[PairRow]:
         if header is None:
             raise BadInputError(table, f"is empty: it has no header line ({','.join(REQUIRED)}[,split][,condition])")
         index = _columns(table, reader.line_num, header)
+        resolved: dict[str, Path] = {}           # a path named on many rows is looked up once
         for cells in reader:
             if any(c.strip() for c in cells):    # blank lines (and all-empty ones a spreadsheet adds) skipped
-                rows.append(_row(table, reader.line_num, root, cells, index, len(header)))
+                if len(rows) == MAX_PAIRS:
+                    raise BadInputError(table, f"holds more than {MAX_PAIRS:,} pairs, more than breastplan "
+                                               "trains on")
+                rows.append(_row(table, reader.line_num, (root, resolved), cells, index, len(header)))
     except csv.Error as exc:
         raise BadInputError(table, f"line {reader.line_num}: is not valid CSV ({exc})") from None
     if not rows:
@@ -121,7 +127,9 @@ def _columns(table: Path, line: int, header: list[str]) -> dict[str, int]:
     return {name: names.index(name) for name in COLUMNS if name in names}
 
 
-def _row(table: Path, line: int, root: Path, cells: list[str], index: dict[str, int], width: int) -> PairRow:
+def _row(table: Path, line: int, paths: tuple[Path, dict[str, Path]], cells: list[str], index: dict[str, int],
+         width: int) -> PairRow:
+    """The pair of one line; `paths`: the folder and the paths resolved so far, by the text naming them."""
     def bad(problem: str) -> BadInputError:
         return BadInputError(table, f"line {line}: {problem}")
 
@@ -153,7 +161,9 @@ def _row(table: Path, line: int, root: Path, cells: list[str], index: dict[str, 
         if cond.kind != kind:
             raise bad(f"condition '{cond.name}' changes {cond.kind}, not the row's type {kind}")
         condition = cond.name
-    before, after = (_member(bad, root, value[col], col) for col in (BEFORE, AFTER))
+    root, resolved = paths
+    before, after = (resolved[value[col]] if value[col] in resolved else
+                     resolved.setdefault(value[col], _member(bad, root, value[col], col)) for col in (BEFORE, AFTER))
     return PairRow(before=before, after=after, kind=kind, degree=degree, split=split, condition=condition)
 
 

@@ -272,6 +272,17 @@ def test_a_defective_table_is_bad_input_naming_pairs_csv_and_the_line(tmp_path, 
     assert "\n" not in message
 
 
+def test_a_table_of_more_pairs_than_breastplan_trains_on_is_refused_and_repeated_rows_are_read(tmp_path):
+    from breastplan.learn.pair_folder import MAX_PAIRS
+
+    folder = pairs_folder(tmp_path / "DIR", HEADER + LINE2 * MAX_PAIRS)
+    rows = read_pairs(folder)
+    assert len(rows) == MAX_PAIRS and rows[0] == rows[-1]
+    (folder / PAIRS_CSV).write_text(HEADER + LINE2 * (MAX_PAIRS + 1))
+    with pytest.raises(BadInputError, match=f"holds more than {MAX_PAIRS:,} pairs"):
+        read_pairs(folder)
+
+
 def test_a_missing_folder_or_table_is_bad_input_naming_it(tmp_path):
     for folder, named in [(tmp_path / "nowhere", tmp_path / "nowhere"), (tmp_path, tmp_path / PAIRS_CSV)]:
         with pytest.raises(BadInputError, match="no such") as err:
