@@ -155,9 +155,19 @@ def _check_declared(path: Path, elements: list[_Element], fmt: str | None, body_
             raise _truncated(path, el)
 
 
+class FaceLayoutError(ArtefactError):
+    """Face data that does not fit faces of the first face's vertex count: a truncated file, or faces of
+    several vertex counts (triangles and quads), which this reader does not read but a polygon reader may."""
+
+
 def _truncated(path: Path, el: _Element) -> ArtefactError:
-    return ArtefactError(path, f"is truncated: its header declares {counted(el.count, repr(el.name) + ' element')} "
-                               f"but the file ends before their data does")
+    error = FaceLayoutError if _has_faces([el]) else ArtefactError
+    return error(path, f"is truncated: its header declares {counted(el.count, repr(el.name) + ' element')} "
+                       f"but the file ends before their data does")
+
+
+def _has_faces(elements: list[_Element]) -> bool:
+    return any(el.name == "face" and any(p[2] is not None for p in el.props) for el in elements)
 
 
 def _read_binary(path: Path, elements: list[_Element], fh: BinaryIO, order: str, size: int) -> dict:
@@ -176,8 +186,9 @@ def _read_binary(path: Path, elements: list[_Element], fh: BinaryIO, order: str,
         arrays[el.name] = np.frombuffer(fh.read(dtype.itemsize * el.count), dtype=dtype, count=el.count)
     extra = size - fh.tell()
     if extra > _TRAILING or fh.read(extra).strip():
-        raise ArtefactError(path, f"is not a valid PLY file: it holds {counted(extra, 'byte')} after the data its "
-                                  f"header declares (a wrong element count or property type?)")
+        raise (FaceLayoutError if _has_faces(elements) else ArtefactError)(
+            path, f"is not a valid PLY file: it holds {counted(extra, 'byte')} after the data its header declares "
+                  "(a wrong element count or property type?)")
     return arrays
 
 
@@ -192,7 +203,7 @@ def _face_dtype(path: Path, el: _Element, fh: BinaryIO, order: str, size: int) -
         if el.count:                                            # the first face's vertex count
             at = fh.tell() + np.dtype(fields).itemsize
             if at + np.dtype(count_t).itemsize > size:
-                raise ArtefactError(path, "is truncated: the file ends before its face data")
+                raise _truncated(path, el)
             fh.seek(at)
             k = int(np.frombuffer(fh.read(np.dtype(count_t).itemsize), order + count_t)[0])
             fh.seek(at - np.dtype(fields).itemsize)
@@ -294,8 +305,9 @@ def _read_ascii(path: Path, elements: list[_Element], numbers: _Numbers) -> dict
     extra = numbers.rest()
     if extra != 0:
         many = f"{extra} value{'s' * (extra != 1)}" if extra is not None else "values"
-        raise ArtefactError(path, f"is not a valid ASCII PLY file: its data holds {many} more than its header "
-                                  f"declares (a line with too many numbers?)")
+        raise (FaceLayoutError if _has_faces(elements) else ArtefactError)(
+            path, f"is not a valid ASCII PLY file: its data holds {many} more than its header declares (a line with "
+                  "too many numbers?)")
     return arrays
 
 
@@ -320,7 +332,7 @@ def _to_geometry(path: Path, elements: list[_Element], arrays: dict, comments: l
     if "face" in arrays and len(arrays["face"]["_n"]):
         f = arrays["face"]
         if not np.all(f["_n"] == f["_idx"].shape[1]):
-            raise ArtefactError(path, "mixes faces of different vertex counts; triangulate it first")
+            raise FaceLayoutError(path, "mixes faces of different vertex counts; triangulate it first")
         idx = np.asarray(f["_idx"], dtype=np.int64)
         if idx.min() < 0 or idx.max() >= n:
             raise ArtefactError(path, f"has faces whose vertex indices lie outside 0..{n - 1}")

@@ -23,7 +23,7 @@ import numpy as np
 from breastplan import BadInputError, read_ply, require_file
 from breastplan.errors import counted
 from breastplan.case import CAMERA_FRAME
-from breastplan.ply import MAX_ELEMENTS as MAX_POINTS, faces_problem
+from breastplan.ply import MAX_ELEMENTS as MAX_POINTS, FaceLayoutError, faces_problem
 from breastplan.units import FAR_EXTENT_MM as FAR_EXTENT
 from breastplan.units import SCAN_EXTENT_MM
 from breastplan.units import extent as extent_of
@@ -207,8 +207,16 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 # --- format readers: path → (points, faces or None, normals or None, comments), file units ---
 
 def _read_ply(path: Path):
-    """PLY through breastplan's strict reader (ArtefactError, a BadInputError, on defects)."""
-    g = read_ply(path)
+    """PLY through breastplan's strict reader (ArtefactError, a BadInputError, on defects); a mesh whose
+    faces it cannot read as faces of one vertex count (triangles and quads mixed, as scanners export),
+    triangulated by pymeshlab, whose reader says the file's own error if it is truncated."""
+    try:
+        g = read_ply(path)
+    except FaceLayoutError:
+        polygons = _read_polygons(path)
+        if polygons is None:
+            raise
+        return *polygons, None, []
     return g.points, g.faces, g.normals, g.comments
 
 
@@ -222,7 +230,10 @@ def _read_mesh(path: Path):
     if obj and not polygons and len(faces) < n_faces:
         _check_face_references(path, n_vertices)
     if polygons:
-        points, faces = _read_polygon_obj(path)
+        polygons = _read_polygons(path)
+        if polygons is None:
+            raise _not_valid(path, "")
+        points, faces = polygons
     if len(faces) == 0:
         raise _not_valid(path, "or holds no triangles")
     return points, faces, None, []
@@ -268,15 +279,16 @@ def _read_xyz(path: Path):
 _READERS = {".ply": _read_ply, ".obj": _read_mesh, ".stl": _read_mesh, ".pcd": _read_pcd, ".xyz": _read_xyz}
 
 
-def _read_polygon_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """An OBJ with quads or larger polygons, triangulated by pymeshlab."""
+def _read_polygons(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """(vertices, triangles) of a mesh with quads or larger polygons, triangulated by pymeshlab; None if
+    pymeshlab cannot read it."""
     import pymeshlab
 
     ms = pymeshlab.MeshSet()
     try:
         ms.load_new_mesh(str(path))
     except pymeshlab.PyMeshLabException:
-        raise _not_valid(path, "") from None
+        return None
     mesh = ms.current_mesh()
     return mesh.vertex_matrix().astype(np.float64), mesh.face_matrix().astype(np.int64)
 

@@ -103,6 +103,35 @@ def test_quad_obj_is_triangulated_not_dropped(tmp_path):
     assert (np.abs(scan.points - 50.0).max(axis=0) > 49.9).all()  # points reach every face
 
 
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
+def test_a_ply_of_triangles_and_quads_is_read_whole_and_a_truncated_one_refused(tmp_path, fmt):
+    """Scanners export PLY meshes of mixed triangles and quads: a 100 mm cube of 3 quads and 6 triangles
+    (the other 3 quads split) keeps all 6 of its faces; cut short, it is refused as truncated."""
+    v = np.array([[x, y, z] for x in (0, 100) for y in (0, 100) for z in (0, 100)], float)
+    quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1]]
+    triangles = [[2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]]
+    header = (f"ply\nformat {fmt} 1.0\nelement vertex 8\nproperty double x\nproperty double y\nproperty double z\n"
+              "element face 9\nproperty list uchar int vertex_indices\nend_header\n").encode()
+    if fmt == "ascii":
+        body = "".join(f"{a} {b} {c}\n" for a, b, c in v) + "".join(f"{len(f)} {' '.join(map(str, f))}\n"
+                                                                   for f in quads + triangles)
+        body = body.encode()
+    else:
+        body = v.astype("<f8").tobytes() + b"".join(np.uint8(len(f)).tobytes() + np.array(f, "<i4").tobytes()
+                                                    for f in quads + triangles)
+    (tmp_path / "cube.ply").write_bytes(header + body)
+    scan = read_scan_file(tmp_path / "cube.ply")
+    gap = np.minimum(np.abs(scan.points), np.abs(100.0 - scan.points)).min(axis=1)
+    assert np.allclose(gap, 0.0, atol=1e-6)
+    assert (np.abs(scan.points - 50.0).max(axis=0) > 49.9).all()          # points reach every face
+    for axis in range(3):                                                   # and cover each face alike
+        low = np.isclose(scan.points[:, axis], 0.0).mean()
+        assert 1 / 6 - 0.02 < low < 1 / 6 + 0.02
+    (tmp_path / "cut.ply").write_bytes(header + body[:-9])
+    with pytest.raises(BadInputError, match="cut.ply: is truncated"):
+        read_scan_file(tmp_path / "cut.ply")
+
+
 # --- point files: points and normals kept ----------------------------------------------------
 
 def test_pcd_round_trip_with_and_without_normals(tmp_path):
