@@ -53,6 +53,9 @@ def batch(
     if wall_from is not None and wall_from.resolve() == out.resolve():
         raise usage_error(f"it names the output folder this batch writes ({out}); give the earlier batch's",
                           "--wall-from")
+    if out.resolve() == input.resolve():
+        raise usage_error(f"it names IN_DIR itself ({input}), whose case folders the next batch would take for "
+                          "scans; give another folder (one inside IN_DIR is left out of the search)", "--out")
     require_folder(input, "folder of scans and recordings")
     if wall_from is not None:
         require_folder(wall_from, "folder of earlier cases")

@@ -81,7 +81,7 @@ def deform(
     problem = breast_points_problem(geometry.points)
     if problem:
         raise BadInputError(input, problem)
-    writable(apart(out, input))
+    apart(writable(out), input)
     prim = given or carried
     if prim is None and kind in NEEDS_PRIMITIVE:
         raise usage_error(f"{kind} needs the breast primitive, and {input} carries none: "

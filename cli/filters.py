@@ -75,7 +75,7 @@ def run_filter(
     if out is not None:
         if out.suffix.lower() != ".ply":
             raise usage_error(f"'{out}' does not end in .ply; a filter writes its mesh as a PLY", "--out")
-        writable(apart(out, input))
+        apart(writable(out), input)
 
     from breastplan.filters import Mesh, ParameterError, read_mesh, write_mesh
 

@@ -34,15 +34,15 @@ def writable(path: Path, folder: bool = False, option: str = "--out") -> Path:
 
     path = Path(path)
     existing = next((p for p in (path, *path.parents) if _exists(p)), Path(path.anchor or "."))
-    dangling = next((p for p in (path, *path.parents) if p.is_symlink() and not _exists(p)), None)
-    if dangling is not None:
-        raise BadInputError(path, f"cannot be written: {dangling} is a symbolic link to {os.readlink(dangling)}, "
-                                  "which does not exist")
     limit = os.pathconf(existing if existing.is_dir() else existing.parent, "PC_NAME_MAX")
     long = [p for p in path.relative_to(existing).parts if len(os.fsencode(p)) > limit]
     if long:
         raise BadInputError(path, f"cannot be written: its name has {len(os.fsencode(long[0]))} bytes, more "
                                   f"than the {limit} a file name may have")
+    dangling = next((p for p in (path, *path.parents) if p.is_symlink() and not _exists(p)), None)
+    if dangling is not None:
+        raise BadInputError(path, f"cannot be written: {dangling} is a symbolic link to {os.readlink(dangling)}, "
+                                  "which does not exist")
     if existing == path and path.is_dir() != folder:
         raise BadInputError(path, "is a file, not a folder" if folder else f"is a folder; {option} needs a file name")
     where = existing if existing != path else path if folder else path.parent    # the folder written in
@@ -58,9 +58,14 @@ def apart(out: Path, input: Path, option: str = "--out") -> Path:
     link), or one of the files of the case folder it is in; a usage error (exit 2) then."""
     from breastplan.case import Case
 
-    if out.resolve() == input.resolve() or (_exists(out) and _exists(input) and os.path.samefile(out, input)):
+    try:
+        same = out.resolve() == input.resolve() or (_exists(out) and _exists(input) and os.path.samefile(out, input))
+        owned = Case.owns(out)
+    except OSError:                          # a name too long to be either: `writable` says so
+        return out
+    if same:
         raise usage_error(f"it names {input}, which is read: writing there would replace it", option)
-    if Case.owns(out):
+    if owned:
         raise usage_error(f"it names the {out.name} of the case folder {out.parent}: writing there would leave "
                           "that case's files disagreeing", option)
     return out

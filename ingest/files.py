@@ -12,8 +12,9 @@ open3d is imported when a reader needs it.
 from __future__ import annotations
 
 import re
+import tempfile
 import warnings
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -221,19 +222,21 @@ def _read_ply(path: Path):
 
 
 def _read_mesh(path: Path):
-    """OBJ/STL through open3d; polygon OBJs, whose non-triangles open3d drops, through pymeshlab."""
+    """OBJ/STL through open3d; polygon OBJs, whose non-triangles open3d drops, through pymeshlab; an OBJ
+    of indented lines (legal, but neither reads them) from a copy without the indentation."""
     obj = path.suffix.lower() == ".obj"
-    polygons, n_vertices, n_faces = _check_obj(path) if obj else (_check_stl(path), 0, 0)
-    with _open3d() as o3d:
-        mesh = o3d.io.read_triangle_mesh(str(path))
-    points, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.triangles, dtype=np.int64)
-    if obj and not polygons and len(faces) < n_faces:
-        _check_face_references(path, n_vertices)
-    if polygons:
-        polygons = _read_polygons(path)
-        if polygons is None:
-            raise _not_valid(path, "")
-        points, faces = polygons
+    polygons, n_vertices, n_faces, indented = _check_obj(path) if obj else (_check_stl(path), 0, 0, False)
+    with _dedented(path) if indented else nullcontext(path) as readable:
+        with _open3d() as o3d:
+            mesh = o3d.io.read_triangle_mesh(str(readable))
+        points, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.triangles, dtype=np.int64)
+        if obj and not polygons and len(faces) < n_faces:
+            _check_face_references(path, n_vertices)
+        if polygons:
+            polygons = _read_polygons(readable)
+            if polygons is None:
+                raise _not_valid(path, "")
+            points, faces = polygons
     if len(faces) == 0:
         raise _not_valid(path, "or holds no triangles")
     return points, faces, None, []
@@ -258,7 +261,7 @@ def _read_xyz(path: Path):
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
-            table = np.loadtxt(path, dtype=np.float64, ndmin=2, encoding="utf-8")
+            table = np.loadtxt(path, dtype=np.float64, ndmin=2, encoding="utf-8-sig")
     except UnicodeDecodeError:
         raise _not_valid(path, "(it is not text)") from None
     except ValueError as exc:
@@ -311,15 +314,18 @@ def _text_chunks(path: Path) -> Iterator[bytes]:
         yield carry
 
 
-def _check_obj(path: Path) -> tuple[bool, int, int]:
+def _check_obj(path: Path) -> tuple[bool, int, int, bool]:
     """Refuse an OBJ that is not text or holds more vertices or faces than any body scan; whether it
-    has a face ('f' line) of 4 or more vertices, and its numbers of vertices and faces."""
+    has a face ('f' line) of 4 or more vertices, its numbers of vertices and faces, and whether any of
+    its lines is indented."""
     vertices = faces = 0
-    polygons = False
+    polygons = indented = False
     for chunk in _text_chunks(path):
         chunk = b"\n" + chunk                                          # every line starts after a newline
-        vertices += chunk.count(b"\nv ") + chunk.count(b"\nv\t")
-        faces += chunk.count(b"\nf ") + chunk.count(b"\nf\t")
+        inner = re.findall(rb"\n[ \t]+([vf])[ \t]", chunk)                  # OBJ lines may be indented
+        indented = indented or re.search(rb"\n[ \t]+[^ \t\r\n]", chunk) is not None
+        vertices += chunk.count(b"\nv ") + chunk.count(b"\nv\t") + inner.count(b"v")
+        faces += chunk.count(b"\nf ") + chunk.count(b"\nf\t") + inner.count(b"f")
         polygons = polygons or re.search(rb"(?m)^[ \t]*f(?:[ \t]+[^ \t\r\n]+){4,}", chunk) is not None
         for count, what in ((vertices, "vertices"), (faces, "faces")):
             if count > MAX_POINTS:
@@ -327,7 +333,18 @@ def _check_obj(path: Path) -> tuple[bool, int, int]:
     problem = faces_problem(vertices, faces)
     if problem:
         raise BadInputError(path, f"holds {problem}")
-    return polygons, vertices, faces
+    return polygons, vertices, faces, indented
+
+
+@contextmanager
+def _dedented(path: Path) -> Iterator[Path]:
+    """A temporary copy of the text file `path` with the blanks that start its lines removed."""
+    with tempfile.TemporaryDirectory(prefix="breastplan-obj-") as folder:
+        plain = Path(folder) / path.name
+        with plain.open("wb") as fh:
+            for chunk in _text_chunks(path):
+                fh.write(re.sub(rb"(?m)^[ \t]+", b"", chunk))
+        yield plain
 
 
 def _check_face_references(path: Path, vertices: int) -> None:

@@ -136,6 +136,7 @@ def test_missing_and_nan_inputs_exit_3(cli, tmp_path):
     ["evaluate", "--study", "statistical", "--dd", "4", "--out", "o"],                    # no degrees to count
     ["evaluate", "--study", "ptosis-V", "--dd", "5", "--out", "o"],
     ["deform", "x.ply", "--kind", "ptosis", "--param", "b0=1", "--out", ""],            # the current folder
+    ["batch", ".", "--out", "."],                                   # its cases would be the next batch's scans
 ])
 def test_usage_errors_exit_2(cli, tmp_path, args):
     res = subprocess.run([cli, *args], capture_output=True, text=True, cwd=tmp_path)

@@ -157,6 +157,17 @@ def test_xyz_round_trip_and_metres(tmp_path):
     np.savetxt(tmp_path / "n.xyz", np.hstack([pts, nrm]))
     scan = read_scan_file(tmp_path / "n.xyz")
     assert np.array_equal(scan.points, pts) and np.allclose(scan.normals, nrm)
+    (tmp_path / "bom.xyz").write_bytes(b"\xef\xbb\xbf" + (tmp_path / "mm.xyz").read_bytes())   # Windows' UTF-8
+    assert np.array_equal(read_scan_file(tmp_path / "bom.xyz").points, pts)
+
+
+def test_an_obj_of_indented_lines_is_read_as_the_same_mesh(tmp_path):
+    """OBJ lines may start with blanks; open3d drops such faces, which must not drop the surface."""
+    save_mesh(tmp_path / "plain.obj", sphere_m())
+    text = (tmp_path / "plain.obj").read_text()
+    (tmp_path / "indented.obj").write_text("".join("  " + line for line in text.splitlines(keepends=True)))
+    plain, indented = (read_scan_file(tmp_path / name) for name in ("plain.obj", "indented.obj"))
+    assert np.array_equal(indented.points, plain.points)                  # the same surface, sampled alike
 
 
 def test_ply_points_normals_and_camera_frame_hint(tmp_path):
