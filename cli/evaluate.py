@@ -10,7 +10,7 @@ from breastplan.clock import Clock
 from breastplan.learn.studies import STUDIES
 
 from .app import JSON, command
-from .output import progress, report, usage_error, writable
+from .output import cache_folder, progress, report, usage_error, writable
 
 
 @command()
@@ -38,10 +38,8 @@ def evaluate(
     if dd not in (4, 8):
         raise usage_error(f"--dd must be 4 or 8 (thesis), got {dd}", "--dd")
     writable(out, folder=True)
-    if cache is not None:
-        writable(cache, folder=True, option="--cache")
     if study == "statistical":
-        return _statistical(quick, out, cache, as_json, clock)
+        return _statistical(quick, out, cache_folder(cache), as_json, clock)
 
     from breastplan.learn.report import write_report
     from breastplan.learn.study import configurations, run_studies, study_datasets
@@ -64,14 +62,14 @@ def evaluate(
 def _statistical(quick: bool, out: Path, cache: Path | None, as_json: bool, clock: Clock) -> None:
     from threadpoolctl import threadpool_limits
 
-    from breastplan.learn.displacements import FitCache, default_cache
+    from breastplan.learn.displacements import FitCache
     from breastplan.learn.statistical_report import write_report
     from breastplan.learn.statistical_study import StudyPlan, run_study, study_database
 
     plan = StudyPlan.quick_plan() if quick else StudyPlan()
     db = study_database(quick)
     with progress("statistical study", plan.steps(len(db), len(db) * 8)) as advance, threadpool_limits(1, "blas"):
-        results, seconds = run_study(plan, FitCache(cache or default_cache()), advance)
+        results, seconds = run_study(plan, FitCache(cache), advance)
     meta = {"study": "statistical", "quick": quick, "fit_seconds": seconds, "seconds": clock.seconds}
     written = write_report(out, results, meta)
     best = {f"{h['condition']} {h['control_points']} CP {h['fit']}": {

@@ -53,6 +53,23 @@ def writable(path: Path, folder: bool = False, option: str = "--out") -> Path:
     return path
 
 
+def cache_folder(cache: Path | None) -> Path | None:
+    """The folder of cached FFD fits: `--cache`, checked as an output is (exit 3); else the default
+    ($BREASTPLAN_CACHE or the user's cache folder) if it can be written, else none (fits kept in memory
+    only), said in a note: a cache is never needed."""
+    from breastplan import BadInputError
+
+    if cache is not None:
+        return writable(cache, folder=True, option="--cache")
+    from breastplan.learn.displacements import default_cache
+
+    try:
+        return writable(default_cache(), folder=True)
+    except BadInputError as exc:
+        stderr.print(f"note: FFD fits are not cached on disk: {exc}", markup=False, soft_wrap=True)
+        return None
+
+
 def apart(out: Path, input: Path, option: str = "--out") -> Path:
     """`out` unless writing it would replace what the command reads: `input` itself (by whatever path or
     link), or one of the files of the case folder it is in; a usage error (exit 2) then."""

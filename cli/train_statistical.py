@@ -9,7 +9,7 @@ from breastplan.clock import Clock
 from breastplan.errors import about
 
 from .app import JSON, command
-from .output import progress, report, usage_error, writable
+from .output import cache_folder, progress, report, usage_error, writable
 
 REGRESSORS = ("ridge", "kernel-ridge", "mlp")
 """The regressors a model file holds (learn.statistical.EXPORTABLE; listed here so that --help stays light)."""
@@ -38,11 +38,10 @@ def train_statistical(
     if out.suffix != ".npz":
         raise usage_error(f"the model file must end in .npz, got {out.name}", "--out")
     writable(out)
-    if cache is not None:
-        writable(cache, folder=True, option="--cache")
+    cache = cache_folder(cache)
     from threadpoolctl import threadpool_limits
 
-    from breastplan.learn.displacements import FitCache, PairOptions, default_cache
+    from breastplan.learn.displacements import FitCache, PairOptions
     from breastplan.learn.field_file import save_field_model, train_from_pairs
     from breastplan.learn.pair_folder import read_pairs
 
@@ -50,7 +49,7 @@ def train_statistical(
     options = PairOptions(lattice=lattice, corresponding=corresponding)
     with progress("fitting before scans", sum(r.split != "test" for r in rows)) as advance, threadpool_limits(1, "blas"):
         with about(pairs / "pairs.csv"):
-            estimator, meta = train_from_pairs(rows, options, FitCache(cache or default_cache()), regressor, advance)
+            estimator, meta = train_from_pairs(rows, options, FitCache(cache), regressor, advance)
     save_field_model(out, estimator, meta)
     report({"model": str(out), "kinds": meta["kinds"], "pairs": meta["training"]["pairs"],
             "befores": meta["training"]["befores"], "regressor": regressor, "hyper": meta["hyper"],

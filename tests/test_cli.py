@@ -221,3 +221,19 @@ def test_an_ascii_ply_with_a_line_of_four_numbers_is_bad_input(cli, tmp_path, co
     res = run(cli, command, bad, *args, "--out", tmp_path / "out_four")
     assert_bad_input(res, bad, tmp_path)
     assert "1 value more than its header declares" in res.stderr
+
+
+def test_a_default_cache_that_cannot_be_written_is_no_cache_and_a_given_one_is_refused(tmp_path, monkeypatch, capsys):
+    """A cache is never needed: a read-only home (or $BREASTPLAN_CACHE naming a file) only costs the
+    reuse of fits; a --cache that cannot be written is the user's own mistake, said before any work."""
+    from breastplan import BadInputError
+    from breastplan.cli.output import cache_folder
+
+    (tmp_path / "file").write_text("not a folder")
+    monkeypatch.setenv("BREASTPLAN_CACHE", str(tmp_path / "file"))
+    assert cache_folder(None) is None
+    assert "note: FFD fits are not cached on disk" in capsys.readouterr().err
+    monkeypatch.setenv("BREASTPLAN_CACHE", str(tmp_path / "cache"))
+    assert cache_folder(None) == tmp_path / "cache"
+    with pytest.raises(BadInputError, match="is a file, not a folder"):
+        cache_folder(tmp_path / "file")
