@@ -13,7 +13,6 @@ import contextlib
 import fcntl
 import glob
 import os
-import re
 import secrets
 import shutil
 from dataclasses import dataclass, field, replace
@@ -173,12 +172,11 @@ def _locked_folder(work: Path, stem: str) -> Iterator[None]:
     its creation and its lock."""
     parent = _lock(work.parent)
     try:
-        for folder in work.parent.glob(f"{glob.escape(stem)}*"):
-            if re.fullmatch(rf"{re.escape(stem)}[0-9a-f]{{8}}", folder.name) and folder.is_dir():
-                abandoned = _lock(folder, wait=False)
-                if abandoned is not None:
-                    shutil.rmtree(folder, ignore_errors=True)
-                    os.close(abandoned)
+        for folder in work.parent.glob(glob.escape(stem) + "[0-9a-f]" * 8):
+            abandoned = _lock(folder, wait=False) if folder.is_dir() else None
+            if abandoned is not None:
+                shutil.rmtree(folder, ignore_errors=True)
+                os.close(abandoned)
         work.mkdir()
         held = _lock(work)
     finally:
