@@ -34,6 +34,8 @@ def evaluate(
     if study != "statistical" and any(n not in STUDIES for n in names):
         raise usage_error(f"'{study}' is not a study; choose one of {', '.join(STUDIES)}, all or statistical",
                           "--study")
+    if study != "statistical" and cache is not None:
+        raise usage_error("the regression studies fit no FFD; --cache is for the statistical study", "--cache")
     dd = 8 if dd is None else dd
     if dd not in (4, 8):
         raise usage_error(f"--dd must be 4 or 8 (thesis), got {dd}", "--dd")

@@ -135,6 +135,7 @@ def test_missing_and_nan_inputs_exit_3(cli, tmp_path):
     ["dataset", "--db", "x.npz", "--condition", "ptosis b0", "--out", "./x.npz"],          # would replace its input
     ["evaluate", "--study", "statistical", "--dd", "4", "--out", "o"],                    # no degrees to count
     ["evaluate", "--study", "ptosis-V", "--dd", "5", "--out", "o"],
+    ["evaluate", "--study", "ptosis-V", "--cache", "c", "--out", "o"],             # no FFD to cache
     ["deform", "x.ply", "--kind", "ptosis", "--param", "b0=1", "--out", ""],            # the current folder
     ["batch", ".", "--out", "."],                                   # its cases would be the next batch's scans
 ])
