@@ -5,6 +5,7 @@ below, the order of `breastplan --help`). A command imports its stage only when 
 """
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import warnings
@@ -26,9 +27,9 @@ def main() -> None:
 
     Warnings the libraries raise on the way (numpy's on data about to be refused) are held back:
     a refusal is its one sentence; any other ending shows them after the fact."""
-    signal.signal(signal.SIGPIPE, signal.SIG_DFL)   # a reader gone (`| head -1`) ends us as it ends any tool
     for stream in (sys.stdout, sys.stderr):      # a terminal that is not UTF-8, a file name that is not
         stream.reconfigure(errors="backslashreplace")           # UTF-8: shown escaped, never a crash
+    sys.stdout = _Stdout(sys.stdout)
     with warnings.catch_warnings(record=True) as held:
         try:
             _run()
@@ -40,6 +41,35 @@ def main() -> None:
             _show(held)
             raise
         _show(held)
+
+
+class _Stdout:
+    """stdout, whose reader going away (`breastplan filters | head -1`) ends the process by SIGPIPE, as it
+    ends any tool. Only stdout's: a broken pipe to a worker process stays the exception it is."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            _end_by_sigpipe()
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            _end_by_sigpipe()
+
+
+def _end_by_sigpipe() -> NoReturn:
+    signal.signal(signal.SIGPIPE, signal.SIG_DFL)
+    os.kill(os.getpid(), signal.SIGPIPE)
+    raise SystemExit(141)                       # not reached: the signal ends the process
 
 
 def _run() -> None:
