@@ -14,6 +14,10 @@ from .app import JSON, command
 from .output import apart, report, stderr, stdout, usage_error, writable
 
 
+NARROW = 60
+"""Below this many columns the filters are listed one block each, not as a table."""
+
+
 @command("filters")
 def list_filters(as_json: bool = JSON):
     """List the filters, built-in and from plugins, with their typed parameters and defaults."""
@@ -28,6 +32,13 @@ def list_filters(as_json: bool = JSON):
     from rich.markup import escape
     from rich.table import Table
 
+    if stdout.width < NARROW:   # a table would drop a column: one block per filter
+        stdout.print(f"{len(found)} filters")
+        for f in found:
+            origin = "" if f.source == "breastplan" else f"\n[dim]from {escape(f.source)}[/dim]"
+            params = "".join(f"\n  {escape(str(p))}" for p in f.parameters)
+            stdout.print(f"\n[bold]{f.name}[/bold]\n{escape(f.description)}{origin}{params}", soft_wrap=True)
+        return
     table = Table(title=f"{len(found)} filters", title_justify="left", show_lines=True)
     table.add_column("filter", ratio=1)
     table.add_column("parameters", no_wrap=True)

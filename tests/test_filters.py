@@ -187,6 +187,17 @@ def test_filters_json_lists_every_filter_with_typed_parameters(cli):
     assert listed["get_breast_measures"]["returns"] == "measures" and listed["compute_breast_fit"]["returns"] == "mesh"
 
 
+@pytest.mark.parametrize("columns", ["20", "200"])
+def test_filters_lists_every_name_and_parameter_whole_at_any_width(cli, columns):
+    res = subprocess.run([cli, "filters"], capture_output=True, text=True, timeout=600,
+                         env={**os.environ, "COLUMNS": columns})
+    assert res.returncode == 0, res.stderr
+    words = set(re.findall(r"[\w.]+", res.stdout))
+    for name in BUILTINS:
+        assert name in words
+        assert set(list(inspect.signature(get(name).function).parameters)[1:]) <= words
+
+
 def test_isolation_keeps_the_breast_around_the_true_nipple(cli, scan, tmp_path):
     path, body = scan
     out = tmp_path / "breast.ply"
