@@ -32,20 +32,21 @@ def list_filters(as_json: bool = JSON):
     from rich.markup import escape
     from rich.table import Table
 
+    def about_filter(f) -> str:
+        origin = "" if f.source == "breastplan" else f"\n[dim]from {escape(f.source)}[/dim]"
+        return f"[bold]{f.name}[/bold]\n{escape(f.description)}{origin}"
+
     if stdout.width < NARROW:   # a table would drop a column: one block per filter
         stdout.print(f"{len(found)} filters")
         for f in found:
-            origin = "" if f.source == "breastplan" else f"\n[dim]from {escape(f.source)}[/dim]"
             params = "".join(f"\n  {escape(str(p))}" for p in f.parameters)
-            stdout.print(f"\n[bold]{f.name}[/bold]\n{escape(f.description)}{origin}{params}", soft_wrap=True)
+            stdout.print(f"\n{about_filter(f)}{params}", soft_wrap=True)
         return
     table = Table(title=f"{len(found)} filters", title_justify="left", show_lines=True)
     table.add_column("filter", ratio=1)
     table.add_column("parameters", no_wrap=True)
     for f in found:
-        origin = "" if f.source == "breastplan" else f"\n[dim]from {escape(f.source)}[/dim]"
-        table.add_row(f"[bold]{f.name}[/bold]\n{escape(f.description)}{origin}",
-                      escape("\n".join(str(p) for p in f.parameters)) or "—")
+        table.add_row(about_filter(f), escape("\n".join(str(p) for p in f.parameters)) or "—")
     stdout.print(table)
 
 
