@@ -196,14 +196,9 @@ def _breast(input: Path):
 def _starts_with(path: Path, magic: bytes) -> bool:
     """Whether `path` starts with `magic`; True when it is empty, cannot be read or is no regular file (a
     named pipe, which reading would block on): the reader then says why."""
-    if not path.is_file():
-        return True
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(len(magic))
-    except OSError:
-        return True
-    return head in (magic, b"")
+    from breastplan.errors import file_head
+
+    return file_head(path, len(magic)) in (magic, b"", None)
 
 
 def _parse_primitive(text: Optional[str]) -> Optional[Primitive]:

@@ -56,6 +56,18 @@ def require_file(path: str | Path, kind: str, error: type[BadInputError] = BadIn
     return path
 
 
+def file_head(path: Path, size: int) -> bytes | None:
+    """The first `size` bytes of the regular file `path` (fewer if it is shorter); None if it is no
+    regular file (a named pipe, which reading would block on) or cannot be read."""
+    if not path.is_file():
+        return None
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(size)
+    except OSError:
+        return None
+
+
 def require_folder(path: str | Path, kind: str, error: type[BadInputError] = BadInputError) -> Path:
     """`path` as a Path if it is a folder whose files can be listed and read; else `error` saying why."""
     path = Path(path)

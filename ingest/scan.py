@@ -12,6 +12,7 @@ import numpy as np
 
 from breastplan.case import Provenance, Scan, Source
 from breastplan.clock import Clock
+from breastplan.errors import file_head
 from breastplan.options import IngestOptions
 
 from .files import read_scan_file
@@ -25,13 +26,7 @@ def is_recording(path: Path) -> bool:
     """An MCAP file, by extension or by its magic bytes."""
     if path.suffix.lower() == ".mcap":
         return True
-    if not path.is_file():                    # a named pipe would block the sniffing below
-        return False
-    try:
-        with open(path, "rb") as fh:
-            return fh.read(len(MCAP_MAGIC)) == MCAP_MAGIC
-    except OSError:
-        return False
+    return file_head(path, len(MCAP_MAGIC)) == MCAP_MAGIC
 
 
 def ingest(input: Path | None, options: IngestOptions) -> Scan:
