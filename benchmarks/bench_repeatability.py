@@ -18,16 +18,17 @@ from __future__ import annotations
 
 import json
 import statistics
+from typing import Iterator
 
 import numpy as np
 from rich.console import Console
 from threadpoolctl import threadpool_limits
 
 from breastplan.clock import Clock
-from breastplan.fitting.breast_fit import fit_scan
+from breastplan.fitting.breast_fit import BreastFit, fit_scan
 from breastplan.ingest import synthetic
 from breastplan.ingest.depth import depth_range, fuse, to_points
-from breastplan.ingest.pipeline import isolate
+from breastplan.ingest.pipeline import Ingested, isolate
 from breastplan.ingest.realistic import make_body_scene
 from breastplan.options import SIDES, IngestOptions
 
@@ -57,15 +58,23 @@ def camera_points(depth: np.ndarray, K: np.ndarray) -> np.ndarray:
     return to_points(image, K, *depth_range(image))
 
 
-def shifted_fits(points: np.ndarray, side: str) -> dict:
-    """Volume (cc) and chest-wall offset (mm, mean over GRID_MM around the unshifted nipple) per shift."""
-    volumes, walls, nipple = [], [], None
-    for shift in np.array(SHIFTS_MM, float):
+def fits_under_shifts(points: np.ndarray, side: str, shifts) -> Iterator[tuple[np.ndarray, Ingested, BreastFit]]:
+    """(shift, ingested, fit) of the breast on `side` for each shift (mm) of the camera points, the
+    viewing frame shifted with them."""
+    for shift in np.array(shifts, float):
         view_from_camera = np.eye(4)
         view_from_camera[:3, 3] = shift
         ingested = isolate(points + shift, view_from_camera, IngestOptions(side=side), Clock(), viewer=shift)
         with threadpool_limits(1, "blas"):
-            volumes.append(fit_scan(ingested).volume_cc)
+            fit = fit_scan(ingested)
+        yield shift, ingested, fit
+
+
+def shifted_fits(points: np.ndarray, side: str) -> dict:
+    """Volume (cc) and chest-wall offset (mm, mean over GRID_MM around the unshifted nipple) per shift."""
+    volumes, walls, nipple = [], [], None
+    for shift, ingested, fit in fits_under_shifts(points, side, SHIFTS_MM):
+        volumes.append(fit.volume_cc)
         nipple = ingested.nipple_camera[:2] if nipple is None else nipple
         walls.append(float(np.mean(ingested.chest_wall.z(nipple + GRID_MM + shift[:2]) - shift[2])))
     return {"volumes_cc": volumes, "spread_pct": 100.0 * (max(volumes) - min(volumes)) / statistics.mean(volumes),

@@ -19,32 +19,20 @@ import statistics
 
 import numpy as np
 from rich.console import Console
-from threadpoolctl import threadpool_limits
 
-from breastplan.clock import Clock
-from breastplan.fitting.breast_fit import fit_scan
 from breastplan.ingest import synthetic
-from breastplan.ingest.pipeline import isolate
 from breastplan.ingest.realistic import make_body_scene
-from breastplan.options import SIDES, IngestOptions
+from breastplan.options import SIDES
 
 from bench_realistic import FRAMES, PAIRS, SAG_TIE_MM, TARGETS, VIEWS, chen_scene, chen_specs, new_table
-from bench_repeatability import camera_points
+from bench_repeatability import camera_points, fits_under_shifts
 
 SHIFTS_MM = ((0, 0, 0), (3, 0, 0), (0, 3, 0), (-4, 2, 6))
 
 
 def shifted(points: np.ndarray, side: str) -> list[tuple[float, float]]:
     """(volume cc, ptosis sag mm) of the breast on `side` for each shift of the camera points."""
-    out = []
-    for shift in np.array(SHIFTS_MM, float):
-        view_from_camera = np.eye(4)
-        view_from_camera[:3, 3] = shift
-        ingested = isolate(points + shift, view_from_camera, IngestOptions(side=side), Clock(), viewer=shift)
-        with threadpool_limits(1, "blas"):
-            fit = fit_scan(ingested)
-        out.append((fit.volume_cc, fit.ptosis_sag_mm))
-    return out
+    return [(fit.volume_cc, fit.ptosis_sag_mm) for _, _, fit in fits_under_shifts(points, side, SHIFTS_MM)]
 
 
 def realistic_cases(console: Console) -> list[dict]:
