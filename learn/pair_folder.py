@@ -162,8 +162,10 @@ def _row(table: Path, line: int, paths: tuple[Path, dict[str, Path]], cells: lis
             raise bad(f"condition '{cond.name}' changes {cond.kind}, not the row's type {kind}")
         condition = cond.name
     root, resolved = paths
-    before, after = (resolved[value[col]] if value[col] in resolved else
-                     resolved.setdefault(value[col], _member(bad, root, value[col], col)) for col in (BEFORE, AFTER))
+    for col in (BEFORE, AFTER):
+        if value[col] not in resolved:
+            resolved[value[col]] = _member(bad, root, value[col], col)
+    before, after = resolved[value[BEFORE]], resolved[value[AFTER]]
     return PairRow(before=before, after=after, kind=kind, degree=degree, split=split, condition=condition)
 
 
