@@ -84,11 +84,16 @@ def _mark_duplicates(inputs: list[Input]) -> list[Input]:
             owner.setdefault(i.case, i.name)
     marked = []
     for i in inputs:
-        outer = next((p.as_posix() for p in Path(i.case).parents if p.as_posix() in owner), None)
-        if i.skipped is None and owner[i.case] != i.name:
-            i = Input(i.path, i.name, i.case, f"a duplicate name: case '{i.case}' is planned from {owner[i.case]}")
-        elif i.skipped is None and outer is not None:
-            i = Input(i.path, i.name, i.case, f"its case '{i.case}' would lie inside case '{outer}', planned from "
-                                              f"{owner[outer]}")
-        marked.append(i)
+        reason = None if i.skipped is not None else _clash(i, owner)
+        marked.append(i if reason is None else Input(i.path, i.name, i.case, reason))
     return marked
+
+
+def _clash(i: Input, owner: dict[str, str]) -> str | None:
+    """Why a planned input must be skipped after all: its case taken by another input, or lying inside one."""
+    if owner[i.case] != i.name:
+        return f"a duplicate name: case '{i.case}' is planned from {owner[i.case]}"
+    outer = next((p.as_posix() for p in Path(i.case).parents if p.as_posix() in owner), None)
+    if outer is not None:
+        return f"its case '{i.case}' would lie inside case '{outer}', planned from {owner[outer]}"
+    return None

@@ -52,7 +52,10 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
         manifest = Manifest(out, about, rows)
         manifest.write()
         by_case = {r.case: r for r in rows if r.status == "pending"}   # case names unique among the planned
-        row_of = lambda task: by_case[Path(task.case).relative_to(out.resolve()).as_posix()]  # noqa: E731
+
+        def row_of(task: Task) -> Row:
+            return by_case[Path(task.case).relative_to(out.resolve()).as_posix()]
+
         for row in rows:
             if row.status != "pending":
                 progress(row, len(tasks))
