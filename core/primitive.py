@@ -7,6 +7,7 @@ z = 0 → nipple), y superior, x lateral–medial. Latitude u ∈ [0, π/2] (0 =
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,14 +55,23 @@ class Primitive:
     eps2: float = 1.0
 
     def __post_init__(self):
+        for name in PARAM_NAMES:
+            value = getattr(self, name)
+            if not isinstance(value, numbers.Real):
+                raise TypeError(f"primitive parameter {name} must be a real number, got {type(value).__name__} {value!r}")
+            object.__setattr__(self, name, float(value))
         values = self.as_array()
         if not np.isfinite(values).all() or (values <= 0).any():
             raise ValueError(f"primitive parameters must be finite and positive, got {self.as_dict()}")
 
     @classmethod
     def from_array(cls, values) -> "Primitive":
-        """From (a1, a2, a3, a4, a5, eps1, eps2)."""
-        return cls(*map(float, np.asarray(values, dtype=float).ravel()))
+        """From (a1, a2, a3, a4, a5, eps1, eps2); ValueError for any other number of values."""
+        values = np.asarray(values, dtype=float).ravel()
+        if len(values) != len(PARAM_NAMES):
+            raise ValueError(f"a primitive has {len(PARAM_NAMES)} parameters ({', '.join(PARAM_NAMES)}), "
+                             f"got {len(values)} values")
+        return cls(*map(float, values))
 
     def as_array(self) -> np.ndarray:
         return np.array([getattr(self, n) for n in PARAM_NAMES], dtype=float)
@@ -80,6 +90,8 @@ class Primitive:
             if line.startswith(COMMENT):
                 try:
                     values = dict(item.split("=", 1) for item in line[len(COMMENT):].split())
+                    if sorted(values) != sorted(PARAM_NAMES):
+                        raise ValueError(f"it names {', '.join(values) or 'nothing'}, not {', '.join(PARAM_NAMES)}")
                     return cls(**{k: float(v) for k, v in values.items()})
                 except (TypeError, ValueError) as exc:
                     raise ValueError(f"its primitive comment '{line}' is malformed ({exc})") from None

@@ -52,6 +52,12 @@ def _shape3(shape: int | Sequence[int]) -> tuple[int, int, int]:
     return tuple(int(d) for d in dims)
 
 
+def _frozen(array: np.ndarray) -> np.ndarray:
+    """`array`, made read-only: a lattice's box, grid and control points change only through its setters."""
+    array.setflags(write=False)
+    return array
+
+
 def grid(lo: np.ndarray, hi: np.ndarray, shape: tuple[int, int, int]) -> np.ndarray:
     """(K, 3) regular control points on the box [lo, hi] (mm), "ij" order."""
     axes = [np.linspace(lo[k], hi[k], shape[k]) for k in range(3)]
@@ -62,13 +68,13 @@ class Lattice:
     """An l×m×n FFD lattice on the box [lo, hi] (mm, breast frame); `lattice(points)` deforms points.
 
     `rest` (K, 3) is the regular grid of the box, `points` (K, 3) the current control points
-    (mm; set them, or `displacements`, to deform). Use `Lattice.around` to build one about a cloud.
+    (mm; assign new ones, or `displacements`, to deform; the arrays themselves are read-only). Use `Lattice.around` to build one about a cloud.
     """
 
     def __init__(self, lo, hi, shape: int | Sequence[int], points: np.ndarray | None = None,
                  rest: np.ndarray | None = None):
-        self.lo = np.array(lo, dtype=float).reshape(3)
-        self.hi = np.array(hi, dtype=float).reshape(3)
+        self.lo = _frozen(np.array(lo, dtype=float).reshape(3))
+        self.hi = _frozen(np.array(hi, dtype=float).reshape(3))
         if not (np.isfinite(self.lo).all() and np.isfinite(self.hi).all() and (self.lo < self.hi).all()):
             raise ValueError(f"lattice box lo {self.lo} must be below hi {self.hi} on every axis")
         self.shape = _shape3(shape)
@@ -81,12 +87,12 @@ class Lattice:
             if rest.shape != regular.shape or not np.allclose(rest, regular, rtol=0, atol=tol):
                 raise ValueError(f"rest control points of shape {rest.shape} are not the regular "
                                  f"{'×'.join(map(str, self.shape))} grid of the box")
-        self.rest = rest
+        self.rest = _frozen(rest)
         self.points = rest.copy() if points is None else points
 
     @property
     def points(self) -> np.ndarray:
-        """(K, 3) current control points, mm."""
+        """(K, 3) current control points, mm; read-only: assign new ones (or `displacements`)."""
         return self._points
 
     @points.setter
@@ -96,7 +102,7 @@ class Lattice:
             raise ValueError(f"control points of shape {value.shape}, expected {self.rest.shape}")
         if not np.isfinite(value).all():
             raise ValueError("control points must be finite")
-        self._points = value
+        self._points = _frozen(value)
 
     @property
     def displacements(self) -> np.ndarray:

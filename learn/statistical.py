@@ -14,6 +14,8 @@ displacement field in box units (K·3 columns, `learn.displacements`).
 """
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.compose import TransformedTargetRegressor
@@ -25,6 +27,7 @@ from sklearn.linear_model import Ridge
 from sklearn.neural_network import MLPRegressor
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import MinMaxScaler, PolynomialFeatures
+from sklearn.utils.validation import check_is_fitted, validate_data
 
 REGRESSORS = ("ridge", "kernel-ridge", "gp", "mlp")
 THESIS_EPOCHS = 500
@@ -76,12 +79,25 @@ class FieldModel(RegressorMixin, BaseEstimator):
         raise ValueError(f"unknown regressor '{self.regressor}'; choose one of {', '.join(REGRESSORS)}")
 
     def fit(self, X, Y) -> "FieldModel":
-        X, Y = np.asarray(X, float), np.asarray(Y, float)
-        self.pca_ = PCA(max(1, min(self.n_modes, len(Y) - 1, Y.shape[1]))).fit(Y)
+        """Learn from X (n, features) and Y (n, K·3) displacement fields (box units); returns self."""
+        X, Y = validate_data(self, X, Y, multi_output=True, y_numeric=True, dtype=float, ensure_min_samples=2)
+        self.single_output_ = Y.ndim == 1                    # a scalar target, as scikit-learn allows
+        Y = Y.reshape(len(Y), -1)
+        if isinstance(self.n_modes, bool) or not isinstance(self.n_modes, numbers.Integral) or self.n_modes < 1:
+            raise ValueError(f"n_modes must be a whole number of PCA modes >= 1, got {self.n_modes!r}")
+        modes = min(self.n_modes, len(Y) - 1, Y.shape[1])
+        self.pca_ = PCA(modes, svd_solver="full").fit(Y)     # exact, so one seed gives one model
         self.weights_ = self._weights_model(X.shape[1]).fit(X, self.pca_.transform(Y))
-        self.n_features_in_ = X.shape[1]
         return self
 
     def predict(self, X) -> np.ndarray:
-        """(n, K·3) displacement fields, box units."""
-        return self.pca_.inverse_transform(self.weights_.predict(np.asarray(X, float)).reshape(len(X), -1))
+        """(n, K·3) displacement fields, box units ((n,) for a model fitted on a 1-D Y)."""
+        check_is_fitted(self)
+        X = validate_data(self, X, reset=False, dtype=float)
+        fields = self.pca_.inverse_transform(self.weights_.predict(X).reshape(len(X), -1))
+        return fields[:, 0] if self.single_output_ else fields
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.target_tags.multi_output = True
+        return tags

@@ -60,7 +60,9 @@ def test_moving_one_control_point_by_d_moves_a_point_by_its_weight_times_d(shape
     lat = Lattice(LO, HI, shape)
     row = (ijk[0] * shape[1] + ijk[1]) * shape[2] + ijk[2]          # "ij" order
     assert np.array_equal(lat.rest[row], [np.linspace(LO[a], HI[a], shape[a])[ijk[a]] for a in range(3)])
-    lat.points[row] += d
+    moved_points = lat.points.copy()
+    moved_points[row] += d
+    lat.points = moved_points
     p = inside(s)
     moved = lat(p[None])[0] - p
     assert np.allclose(moved, bernstein_weight(shape, ijk, s) * np.array(d), rtol=1e-9, atol=1e-9)
@@ -163,3 +165,15 @@ def test_a_corrupt_or_foreign_lattice_file_raises_an_artefact_error_naming_it(tm
     for path in (corrupt, foreign, tmp_path / "missing.npz"):
         with pytest.raises(ArtefactError, match=path.name):
             Lattice.load(path)
+
+
+def test_a_lattices_arrays_change_only_through_its_setters_which_refuse_non_finite_points():
+    lat = Lattice(LO, HI, 3)
+    for array in (lat.points, lat.rest, lat.lo, lat.hi):
+        with pytest.raises(ValueError, match="read-only"):
+            array[0] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        lat.points = np.where(np.arange(lat.size)[:, None] == 0, np.nan, lat.rest)
+    lat.displacements = np.ones((lat.size, 3))
+    assert np.array_equal(lat(lat.rest[13:14]), lat.rest[13:14] + 1.0)   # the middle control point, moved by 1 mm
+

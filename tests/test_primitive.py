@@ -97,6 +97,20 @@ def test_invalid_primitive_is_refused():
         Primitive(a1=-1.0)
     with pytest.raises(ValueError):
         Primitive(eps1=float("nan"))
+    with pytest.raises(TypeError, match="a1 must be a real number"):
+        Primitive(a1="10")
+
+
+@pytest.mark.parametrize("count", [0, 6, 8])
+def test_a_primitive_from_other_than_seven_values_is_refused_not_filled_in(count):
+    with pytest.raises(ValueError, match=f"7 parameters .* got {count} values"):
+        Primitive.from_array(np.full(count, 5.0))
+
+
+def test_a_primitive_comment_naming_only_some_parameters_is_refused():
+    assert Primitive.from_comments([Primitive(a1=3.0).comment()]) == Primitive(a1=3.0)
+    with pytest.raises(ValueError, match="names a1, not a1, a2"):
+        Primitive.from_comments(["primitive (model units) a1=3"])
 
 
 @pytest.mark.parametrize("e", [0.1, 0.3, 0.5, 1.0, 1.7, 2.0, 3.5, 60.0, 150.0])

@@ -379,3 +379,25 @@ def test_a_training_set_a_model_of_degrees_cannot_learn_from_is_refused(cli, tra
     res = run(cli, "train-statistical", "--pairs", pairs, "--out", tmp_path / "m.npz", "--cache", tmp / "cache")
     assert_bad_input(res, after, tmp_path)
     assert f"one change cannot be of degree {first[3]} and {int(first[3]) % 8 + 1}" in res.stderr
+
+
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.SkipTestWarning")
+@pytest.mark.parametrize("regressor", ["ridge", "kernel-ridge"])
+def test_the_field_model_passes_scikit_learns_estimator_checks(regressor):
+    from sklearn.utils.estimator_checks import check_estimator
+    failed = [r for r in check_estimator(FieldModel(regressor=regressor), on_fail=None) if r["status"] == "failed"]
+    assert failed == []
+
+
+def test_the_field_model_refuses_to_predict_unfitted_or_keep_no_mode_and_is_exact_on_large_fields():
+    from sklearn.exceptions import NotFittedError
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(600, 6))
+    Y = X @ rng.normal(size=(6, 1029)) + rng.normal(size=(600, 1029))      # a 7×7×7 lattice's fields
+    with pytest.raises(NotFittedError):
+        FieldModel().predict(X)
+    for bad in (0, -3, 2.5):
+        with pytest.raises(ValueError, match="n_modes must be a whole number"):
+            FieldModel(n_modes=bad).fit(X[:20], Y[:20])
+    a, b = (FieldModel(regressor="ridge").fit(X, Y) for _ in range(2))
+    assert np.array_equal(a.predict(X), b.predict(X))
