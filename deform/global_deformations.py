@@ -104,30 +104,70 @@ def top_shape_inverse(points, s0: float, s1: float, t0: float, t1: float, *,
                       primitive: Primitive, fast: bool = False) -> np.ndarray:
     """Inverse of top_shape on the upper half, from a table of its 1-D map refined by root bracketing.
 
-    On the upper half top-shape maps z ↦ f(z) = z·β(w(z)). With s1 < 0 (every Table 4.1 shape)
-    f rises to a maximum and folds back to a5 just below the nipple, because dw/dz is unbounded
-    there (docs/model.md §3), so heights between a5 and the maximum have two preimages. Exact
-    (default): every point takes the rising branch, solved to rounding by scipy's bracketed root
-    finder inside the table's bracket. `fast`: for points on the breast's surface, as a fit needs
-    hundreds of times: the table's linear interpolation, and a point whose primitive surface above
-    (x, y) rises past the fold takes the folding branch, which is where a surface point comes from.
-    Heights beyond the maximum (never an image) are left as they are, or with `fast` clipped to it.
+    On the upper half top-shape maps z ↦ f(z) = z·β(w(z)), monotone only piecewise: with s1 < 0
+    (every Table 4.1 shape) f rises to a maximum and folds back to a5 just below the nipple, because
+    dw/dz is unbounded there (docs/model.md §3), and some rows of the conditions, on a primitive with
+    eps1 < 1, make it rise, fall and rise again; a height may then have several preimages. A point
+    takes the one on the piece of the map nearest the primitive's own surface height above its (x, y),
+    which is where a surface point comes from (a point inside the breast, in a band of several
+    preimages, may come from another). Exact (default): among the pieces whose images hold its height,
+    solved to rounding by scipy's bracketed root finder inside the table's bracket; heights that are
+    no image are left as they are. `fast`, for surface points, as a fit needs hundreds of times: the
+    table's linear interpolation on the piece holding that surface height, clipped to its images.
     """
     prim = _need(primitive, "top-shape")
 
     def forward(z):
         return z * beta(prim.latitude_at(z) * (2 / np.pi), s0, s1, t0, t1)
 
-    z, image, top = top_shape_table(prim.a5, prim.eps1, s0, s1, t0, t1)
+    z, image, bounds = top_shape_table(prim.a5, prim.eps1, s0, s1, t0, t1)
     p = _copy(points)
-    sel = (p[..., 1] > 0) & (p[..., 2] > 0) & (fast | (p[..., 2] < image[top]))   # fast: clip to the top
-    h = p[..., 2][sel]
-    solved = _monotone_inverse(forward, h, z[:top + 1], image[:top + 1], exact=not fast)
-    if fast and top < TABLE_SIZE - 1:
-        fold = prim.height(p[sel]) > z[top]
-        solved[fold] = np.interp(h[fold], image[top:][::-1], z[top:][::-1])
-    p[..., 2][sel] = solved
+    sel = (p[..., 1] > 0) & (p[..., 2] > 0)
+    h, surface = p[..., 2][sel], prim.height(p[sel])
+    if fast:
+        piece = np.searchsorted(z[bounds[1:-1]], surface, side="left")
+    else:
+        piece = _nearest_piece(h, surface, z, image, bounds)
+        sel[sel] = piece >= 0
+        h, piece = h[piece >= 0], piece[piece >= 0]
+    p[..., 2][sel] = piece_inverse(h, piece, z, image, bounds, forward if not fast else None)
     return p
+
+
+def monotone_pieces(image: np.ndarray) -> np.ndarray:
+    """Nodes splitting a tabulated map into its monotone pieces: piece i runs from node bounds[i] to node
+    bounds[i + 1] (a flat step counts as falling)."""
+    rising = np.diff(image) > 0
+    turns = np.flatnonzero(rising[1:] != rising[:-1]) + 1
+    return np.r_[0, turns, len(image) - 1]
+
+
+def _nearest_piece(h: np.ndarray, guide: np.ndarray, z: np.ndarray, image: np.ndarray, bounds: np.ndarray
+                   ) -> np.ndarray:
+    """For each height h, of the monotone pieces whose images hold it, the one whose heights z lie nearest
+    its guide height; −1 for none."""
+    piece, best = np.full(len(h), -1), np.full(len(h), np.inf)
+    for i in range(len(bounds) - 1):
+        ends = image[[bounds[i], bounds[i + 1]]]
+        off = np.maximum(z[bounds[i]] - guide, 0.0) + np.maximum(guide - z[bounds[i + 1]], 0.0)
+        better = (ends.min() <= h) & (h <= ends.max()) & (off < best)
+        piece[better], best[better] = i, off[better]
+    return piece
+
+
+def piece_inverse(h: np.ndarray, piece: np.ndarray, z: np.ndarray, image: np.ndarray, bounds: np.ndarray,
+                  forward=None) -> np.ndarray:
+    """Preimages of heights h, each on its monotone piece of the tabulated map (z, image) (`monotone_pieces`),
+    clipped to that piece's images: the table's interpolation, refined to rounding if `forward` (the map) is
+    given."""
+    out = np.empty_like(h)
+    for i in np.unique(piece):
+        on = piece == i
+        zs, fs = z[bounds[i]:bounds[i + 1] + 1], image[bounds[i]:bounds[i + 1] + 1]
+        if fs[-1] < fs[0]:
+            zs, fs = zs[::-1], fs[::-1]
+        out[on] = _monotone_inverse(forward, h[on], zs, fs, exact=forward is not None)
+    return out
 
 
 _TABLE_SINES = np.sin(np.linspace(0.0, np.pi / 2, TABLE_SIZE))
@@ -137,10 +177,10 @@ _TABLE_LATITUDES: dict = {}
 often than with the primitive (each column of its finite-difference Jacobian steps one of them)."""
 
 
-def top_shape_table(a5, eps1, s0, s1, t0, t1) -> tuple[np.ndarray, np.ndarray, int]:
+def top_shape_table(a5, eps1, s0, s1, t0, t1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Top-shape's map z ↦ z·β(w(z)) on the upper half, tabulated (`top_shape_inverse`): the heights
-    z = a5·sin(u)^eps1 at TABLE_SIZE latitudes u uniform on [0, π/2], their images, and the index of
-    the map's first maximum (the table's last node if it rises throughout)."""
+    z = a5·sin(u)^eps1 at TABLE_SIZE latitudes u uniform on [0, π/2], their images, and the nodes
+    bounding the map's monotone pieces (`monotone_pieces`; [0, last node] if it rises throughout)."""
     key = (float(a5), float(eps1))
     cached = _TABLE_LATITUDES.get(key)
     if cached is None:
@@ -152,9 +192,7 @@ def top_shape_table(a5, eps1, s0, s1, t0, t1) -> tuple[np.ndarray, np.ndarray, i
         _TABLE_LATITUDES[key] = cached = (z, w)
     z, w = cached
     image = z * beta(w, s0, s1, t0, t1)
-    falling = np.flatnonzero(np.diff(image) <= 0)
-    top = int(falling[0]) if len(falling) else TABLE_SIZE - 1      # the first maximum of the map
-    return z, image, top
+    return z, image, monotone_pieces(image)
 
 
 # --- flatten-side: x scaled by γ(|x|/a2), lateral half ---------------------------------
@@ -201,7 +239,8 @@ def _monotone_inverse(f, target: np.ndarray, xs: np.ndarray, fs: np.ndarray, exa
     if inside.any():
         from scipy.optimize import elementwise     # only the exact inverses need it
 
-        res = elementwise.find_root(lambda v, t: f(v) - t, (xs[k - 1][inside], xs[k][inside]),
+        a, b = xs[k - 1][inside], xs[k][inside]                  # a falling piece's table is read backwards
+        res = elementwise.find_root(lambda v, t: f(v) - t, (np.minimum(a, b), np.maximum(a, b)),
                                     args=(target[inside],))
         x[inside] = res.x
     return x

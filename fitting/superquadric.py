@@ -16,8 +16,8 @@ from scipy.optimize import least_squares
 
 from breastplan import BadInputError, Primitive, to_mm, to_model_units
 from breastplan.deform.breast_model import BreastModel
-from breastplan.deform.global_deformations import (REFERENCE_AXIS, TABLE_SIZE, TABULATED, Deformation,
-                                                   apply_kind, beta, top_shape_table)
+from breastplan.deform.global_deformations import (REFERENCE_AXIS, TABULATED, Deformation,
+                                                   apply_kind, beta, piece_inverse, top_shape_table)
 from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
 from breastplan.errors import counted
 from breastplan.primitive import EPS_BOUNDS
@@ -437,16 +437,14 @@ def _top_shape_undone(q: np.ndarray, rows: np.ndarray, params: np.ndarray, a: np
         groups.setdefault((a[b, 4], e[b, 0], *params[b].tolist()), []).append(k)
     for members in groups.values():
         b = rows[members[0]]
-        z, image, top = top_shape_table(a[b, 4], e[b, 0], *params[b].tolist())
+        z, image, bounds = top_shape_table(a[b, 4], e[b, 0], *params[b].tolist())
         sub = q[members] if len(members) < len(q) else q
         height = sub[..., 2]
         sel = (sub[..., 1] > 0) & (height > 0)
-        h = height[sel]
-        solved = np.interp(h, image[:top + 1], z[:top + 1])
-        if top < TABLE_SIZE - 1:                       # past the fold: the folding branch (surface points)
-            fold = _folded(sub, sel, a[rows[members]], e[b], z[top])[sel]
-            solved[fold] = np.interp(h[fold], image[top:][::-1], z[top:][::-1])
-        height[sel] = solved
+        piece = np.zeros(int(sel.sum()), dtype=int)
+        for turn in bounds[1:-1]:                      # past a turn of the map: its next piece (surface points)
+            piece += _folded(sub, sel, a[rows[members]], e[b], z[turn])[sel]
+        height[sel] = piece_inverse(height[sel], piece, z, image, bounds)
         if sub is not q:
             q[members] = sub
 

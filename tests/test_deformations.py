@@ -6,6 +6,7 @@ from hypothesis import strategies as st
 
 from breastplan import Primitive
 from breastplan.deform import global_deformations as gd
+from breastplan.deform.conditions import CONDITIONS
 from breastplan.deform.global_deformations import Deformation, apply_kind
 from breastplan.meshes import mesh_volume
 
@@ -119,11 +120,21 @@ def first_fold(prim, params, n=200_001):
     return prim.a5 if not falling.any() else z[np.argmax(falling)]
 
 
+def preimages(prim, params, points, n=20_001):
+    """How many heights z in (0, a5] top-shape maps to each point's height (on a fine grid of z)."""
+    z = np.linspace(0, prim.a5, n)[1:]
+    f = z * gd.beta(np.arcsin((z / prim.a5) ** (1 / prim.eps1)) * 2 / np.pi, *params)
+    crossings = np.diff(np.sign(f[None, :] - points[:, 2:3]), axis=1) != 0
+    return crossings.sum(axis=1) + (f[0] > points[:, 2])     # a height below the first node: the rising start
+
+
 @pytest.mark.parametrize("kind,params", [(k, p) for k, ps in TABLE_PARAMS.items() for p in ps])
 def test_every_deformation_is_invertible(kind, params):
-    points = np.vstack([PRIM.sample(60, 60), np.random.default_rng(2).uniform(-10, 10, (500, 3))])
-    if kind == "top-shape":  # invertible below its first fold (see the next test)
-        points = points[(points[:, 2] < 0.99 * first_fold(PRIM, params)) | (points[:, 1] <= 0)]
+    inside = np.random.default_rng(2).uniform(-10, 10, (500, 3))
+    if kind == "top-shape":  # off the surface, invertible where a height has one preimage (see the next test)
+        inside = inside[(preimages(PRIM, params, gd.top_shape(inside, *params, primitive=PRIM)) == 1)
+                        | (inside[:, 1] <= 0)]
+    points = np.vstack([PRIM.sample(60, 60), inside])
     there = apply_kind(points, kind, params, PRIM)
     back = apply_kind(there, kind, params, PRIM, inverse=True)
     assert np.allclose(back, points, atol=1e-9)
@@ -197,3 +208,17 @@ def test_split_and_plus_keep_model_order():
     assert np.allclose(rest.apply(before.apply(PRIM.sample(20, 20), PRIM), PRIM),
                        SHAPED.apply(PRIM.sample(20, 20), PRIM), atol=1e-12)
     assert SHAPED.plus("ptosis", {"b1": 0.05}).ptosis == (-0.1, 0.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(axes=st.tuples(*[st.floats(5.0, 15.0)] * 5), eps=st.tuples(st.floats(0.3, 2.0), st.floats(0.3, 2.0)),
+       row=st.sampled_from([c for c in CONDITIONS.values() if c.kind == "top-shape"]), t=st.floats(0.0, 1.0))
+def test_top_shape_takes_every_surface_point_back_even_where_its_map_folds(axes, eps, row, t):
+    # on any primitive, along any top-shape condition (its map may fold once, or rise, fall and rise
+    # again): a surface point's preimage is the primitive's own height above its (x, y)
+    prim = Primitive(*axes, *eps)
+    params = tuple(row.at(t))
+    samples = prim.sample(40, 36)
+    moved = gd.top_shape(samples, *params, primitive=prim)
+    assert np.allclose(gd.top_shape_inverse(moved, *params, primitive=prim), samples, atol=1e-9)
+    assert np.allclose(gd.top_shape_inverse(moved, *params, primitive=prim, fast=True), samples, atol=0.05)
