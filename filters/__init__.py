@@ -9,12 +9,12 @@ plugins come through the entry-point group `breastplan.filters` (docs/filters.md
 from .mesh import Mesh, read_mesh, write_mesh
 from .registry import (GROUP, Filter, FilterError, Parameter, ParameterError, PluginWarning, UnknownFilterError,
                        filter, filters, get, load_plugins)
-from .stages import (apply_breast_ptosis, apply_breast_top_shape, apply_breast_turn, compute_breast_fit,
-                     compute_breast_isolation, forget, get_breast_measures)
+from .stages import (ShortOfDegree, apply_breast_ptosis, apply_breast_top_shape, apply_breast_turn,
+                     compute_breast_fit, compute_breast_isolation, forget, get_breast_measures)
 
 __all__ = [
-    "GROUP", "Filter", "FilterError", "Mesh", "Parameter", "ParameterError", "PluginWarning", "UnknownFilterError",
-    "apply_breast_ptosis", "apply_breast_top_shape", "apply_breast_turn", "compute_breast_fit",
+    "GROUP", "Filter", "FilterError", "Mesh", "Parameter", "ParameterError", "PluginWarning", "ShortOfDegree",
+    "UnknownFilterError", "apply_breast_ptosis", "apply_breast_top_shape", "apply_breast_turn", "compute_breast_fit",
     "compute_breast_isolation", "filter", "filters", "forget", "get", "get_breast_measures", "load_plugins",
     "read_mesh", "write_mesh",
 ]

@@ -23,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import json
 import threading
+import warnings
 from collections import OrderedDict
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Literal
@@ -48,6 +49,11 @@ Method = Literal[METHODS]
 
 MEMORY = 16
 """Surfaces (and scans) remembered; the least recently used is forgotten first."""
+class ShortOfDegree(UserWarning):
+    """A change's surface does not round to the degree asked: exact stops at the end of its condition's line
+    for this breast, learnt has the model's prediction (the measures' `changes` give the degree reached)."""
+
+
 MEASURES = ("volume_cc", "upper_pole_cc", "lower_pole_cc", "pole_ratio", "width_mm", "projection_mm")
 """The measures of `plan.measures.breast_measures` that need no torso."""
 
@@ -153,7 +159,8 @@ def get_breast_measures(mesh: Mesh, *, side: SideOrAuto = "auto", units: Units =
             "normalised_residual": float(fit.normalised_residual), "stopping_rule_met": bool(fit.stopping_rule_met),
             "converged": bool(fit.converged), "points": int(fit.points),
             "changes": [{"kind": d["kind"], "degree": float(d["degree"]), "degree_reached": float(d["degree_reached"]),
-                         "method": method} for d, (_, _, method) in zip(details, record.changes)]}
+                         "reached": bool(d["reached"]), "method": method}
+                        for d, (_, _, method) in zip(details, record.changes)]}
 
 
 # --- what the filters share -------------------------------------------------------------------
@@ -287,7 +294,7 @@ def _apply(kind: str, mesh: Mesh, degree: float, method: str, side: str, units: 
     _check_degree({"degree": degree})
     from threadpoolctl import threadpool_limits
 
-    from breastplan.plan.changes import combine, solve_change
+    from breastplan.plan.changes import combine, short_of, solve_change
 
     record = _fitted(mesh, side, units, up, FitOptions())
     order = list(KIND_PARAMS)
@@ -297,6 +304,9 @@ def _apply(kind: str, mesh: Mesh, degree: float, method: str, side: str, units: 
     local = plan.local_surface()
     with threadpool_limits(1, "blas"):
         singles = [solve_change(local, k, d, plan.primitive, m) for k, d, m in changes]
+    short = short_of(singles[[c[0] for c in changes].index(kind)].details[0], method)
+    if short is not None:
+        warnings.warn(f"{kind} reaches {short}", ShortOfDegree, stacklevel=4)   # the caller of the filter
     change = singles[0] if len(singles) == 1 else combine(singles)
     vertices = plan.planned(change).model(plan.surface_input)
     return _remember(Mesh(vertices, plan.fit.faces), replace(record, changes=changes, change=change))

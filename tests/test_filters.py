@@ -250,6 +250,22 @@ def test_a_ptosis_of_degree_5_lowers_the_nipple_along_her_up_axis_and_keeps_the_
     assert any("mm, the input's frame" in c for c in after.comments)
 
 
+def test_a_change_short_of_its_degree_warns_and_its_measures_say_so(scan):
+    import warnings
+
+    from breastplan.filters import ShortOfDegree, apply_breast_ptosis, get_breast_measures
+    fitted = get("compute_breast_fit")(Mesh(read_ply(scan[0]).points), side="left")
+    for degree in (1.0, 8.0):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            change = get_breast_measures(apply_breast_ptosis(fitted, degree=degree))["changes"][0]
+        short = [w for w in caught if issubclass(w.category, ShortOfDegree)]
+        assert change["reached"] == (abs(change["degree_reached"] - degree) < 0.5)   # rounds to the degree
+        assert len(short) == (not change["reached"])
+        if short:
+            assert f"degree {change['degree_reached']:.2f}, not {degree:g}" in str(short[0].message)
+
+
 def test_a_scan_without_a_breast_exits_3_naming_the_file(cli, tmp_path):
     """A flat board 600 × 400 mm, 2 mm apart, 0.5 mm noise (as tests/test_realistic.py)."""
     x, y = np.meshgrid(np.arange(-300.0, 300.0, 2.0), np.arange(-200.0, 200.0, 2.0))
