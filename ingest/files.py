@@ -118,11 +118,15 @@ def as_rows(path: Path | None, values, columns: int, dtype, what: str) -> np.nda
     shape, for values that are not numbers, or for `what` that are not whole when `dtype` is."""
     try:
         a = np.asarray(values)
-    except (TypeError, ValueError):
-        a = np.zeros((0, 0))
+    except ValueError:                            # rows of unequal length
+        raise BadInputError(path, f"has {what} in rows of unequal length, not (N, {columns})") from None
+    except TypeError as exc:
+        raise BadInputError(path, f"has {what} that are no array of numbers ({exc})") from None
     if a.size == 0:
         a = a.reshape(0, columns)
-    if a.ndim != 2 or a.shape[1] != columns or (a.size and not np.issubdtype(a.dtype, np.number)):
+    if a.size and (a.dtype == bool or not np.issubdtype(a.dtype, np.number) or np.iscomplexobj(a)):
+        raise BadInputError(path, f"has {what} of type {a.dtype}, not real numbers")
+    if a.ndim != 2 or a.shape[1] != columns:
         raise BadInputError(path, f"has {what} of shape {a.shape}, not (N, {columns})")
     if np.issubdtype(dtype, np.integer) and a.size and not np.issubdtype(a.dtype, np.integer):
         if not np.isfinite(a).all() or not np.array_equal(a, np.round(a)):

@@ -150,6 +150,11 @@ def test_meshes_with_bad_arrays_are_bad_input():
     with pytest.raises(BadInputError, match=r"vertices of shape \(4, 2\)"):
         Mesh(np.zeros((4, 2)))
     assert Mesh(np.zeros((3, 3)), np.zeros((0, 3), int)).faces is None    # no faces: a point cloud
+    with pytest.raises(BadInputError, match=r"vertices in rows of unequal length, not \(N, 3\)"):
+        Mesh([[1, 2, 3], [1, 2]])
+    for values in (np.ones((4, 3), bool), np.ones((4, 3), complex), np.ones((4, 3), object), np.full((4, 3), "1")):
+        with pytest.raises(BadInputError, match=f"vertices of type {values.dtype}, not real numbers"):
+            Mesh(values)
 
 
 @pytest.mark.parametrize("points, words", [
