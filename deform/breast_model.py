@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from breastplan import Primitive, mu3_to_cc, to_mm, to_model_units, transform_points
+from breastplan.frames import is_rigid
 from breastplan.meshes import mesh_volume
 
 from .global_deformations import Deformation
@@ -24,6 +25,11 @@ class BreastModel:
     primitive: Primitive
     deformation: Deformation = Deformation()
     pose: np.ndarray = field(default_factory=lambda: np.eye(4))
+
+    def __post_init__(self):
+        if np.shape(self.pose) != (4, 4) or not is_rigid(self.pose):
+            raise ValueError(f"a breast model's pose is a rigid 4×4 transform (rotation and translation), "
+                             f"got {np.asarray(self.pose).tolist()}")
 
     def place(self, points_mu) -> np.ndarray:
         """Primitive-frame points (model units) deformed and posed: breast frame, mm."""

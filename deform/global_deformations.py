@@ -24,7 +24,7 @@ TABLE_SIZE = 512
 
 def _copy(points) -> np.ndarray:
     p = np.array(points, dtype=np.float64, copy=True)
-    if p.shape[-1] != 3:
+    if p.ndim == 0 or p.shape[-1] != 3:
         raise ValueError(f"points must have shape (..., 3), got {p.shape}")
     return p
 
@@ -127,6 +127,7 @@ def top_shape_inverse(points, s0: float, s1: float, t0: float, t1: float, *,
     if fast:
         piece = np.searchsorted(z[bounds[1:-1]], surface, side="left")
     else:
+        z, image, bounds = _true_turns(forward, z, image, bounds)
         piece = _nearest_piece(h, surface, z, image, bounds)
         sel[sel] = piece >= 0
         h, piece = h[piece >= 0], piece[piece >= 0]
@@ -140,6 +141,24 @@ def monotone_pieces(image: np.ndarray) -> np.ndarray:
     rising = np.diff(image) > 0
     turns = np.flatnonzero(rising[1:] != rising[:-1]) + 1
     return np.r_[0, turns, len(image) - 1]
+
+
+def _true_turns(f, z: np.ndarray, image: np.ndarray, bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The table with each interior turn node moved to the map's true extremum between its neighbours
+    (scipy's bounded scalar minimiser), so that the heights beyond a turn node, up to the true extremum,
+    have their preimages."""
+    if len(bounds) == 2:
+        return z, image, bounds
+    from scipy.optimize import minimize_scalar
+
+    z, image = z.copy(), image.copy()
+    for k in bounds[1:-1]:
+        sign = 1.0 if image[k] >= image[k - 1] else -1.0          # a maximum, or a minimum
+        best = minimize_scalar(lambda v: -sign * f(v), bounds=(z[k - 1], z[k + 1]), method="bounded",
+                               options={"xatol": 1e-12 * max(z[-1], 1.0)})
+        if sign * f(best.x) > sign * image[k]:
+            z[k], image[k] = best.x, f(best.x)
+    return z, image, bounds
 
 
 def _nearest_piece(h: np.ndarray, guide: np.ndarray, z: np.ndarray, image: np.ndarray, bounds: np.ndarray

@@ -130,6 +130,10 @@ class Lattice:
         """Rest lattice of shape n (or (l, m, n)) on the bounding box of points (mm), padded by
         margin·extent + 1 mm on each side."""
         points = np.asarray(points, float)
+        if points.ndim == 0 or points.shape[-1] != 3 or points.size == 0 or not np.isfinite(points).all():
+            raise ValueError(f"a lattice is built around one or more finite points (..., 3), got shape {points.shape}"
+                             + ("" if points.size == 0 or np.isfinite(points).all() else " with NaN or infinite ones"))
+        points = points.reshape(-1, 3)
         lo, hi = points.min(0), points.max(0)
         pad = margin * (hi - lo) + 1.0
         return cls(lo - pad, hi + pad, n)
@@ -158,7 +162,7 @@ class Lattice:
         work does best to limit BLAS to one thread (threadpoolctl), as the commands do.
         """
         pts = np.asarray(points, float)
-        if pts.shape[-1] != 3:
+        if pts.ndim == 0 or pts.shape[-1] != 3:
             raise ValueError(f"points must have shape (..., 3), got {pts.shape}")
         flat = pts.reshape(-1, 3)
         out = flat.copy()

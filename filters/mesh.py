@@ -46,10 +46,11 @@ class Mesh:
 
 
 def _matrix(values, dtype, what: str) -> np.ndarray:
-    """A read-only (N, 3) copy of `values` as `dtype` (`ingest.files.as_rows`)."""
+    """A read-only, C-ordered (N, 3) copy of `values` as `dtype` (`ingest.files.as_rows`): a Fortran-ordered
+    array (pymeshlab's) gives the very same results as its C-ordered copy."""
     from breastplan.ingest.files import as_rows
 
-    out = np.array(as_rows(None, values, 3, dtype, what), dtype)
+    out = np.array(as_rows(None, values, 3, dtype, what), dtype, order="C")   # one layout: one result
     out.flags.writeable = False
     return out
 

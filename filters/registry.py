@@ -44,6 +44,10 @@ TYPES = (int, float, str, bool)
 _TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
 
 
+BRIDGE_NAMES = frozenset({"run"})
+"""The names of `breastplan.meshlab`'s own functions, which no filter may take (its filters are its attributes)."""
+
+
 class FilterError(ValueError):
     """A filter asked for that does not exist, or parameters it does not take."""
 
@@ -140,6 +144,8 @@ class Filter:
                  check: Callable[[dict], None] | None = None):
         if not isinstance(name, str) or not name.isidentifier() or keyword.iskeyword(name):
             raise ValueError(f"a filter's name is a Python identifier (letters, digits, _), not {name!r}")
+        if name in BRIDGE_NAMES:
+            raise ValueError(f"a filter cannot be named {name!r}: breastplan.meshlab keeps that name for itself")
         self.name = name
         self.function = function
         self.source = source

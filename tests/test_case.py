@@ -316,3 +316,9 @@ def test_a_fit_from_a_newer_breastplan_is_refused_not_refitted_over(tmp_path):
         case.is_fresh(Case.FIT_NPZ, made)
     _rewrite_npz(case.path(Case.FIT_NPZ), schema="breastplan.fit/2", meta="[]")
     assert not case.is_fresh(Case.FIT_NPZ, made)                # damaged: redone
+
+
+@pytest.mark.parametrize("pose", [np.eye(3), 2 * np.eye(4), np.full((4, 4), np.nan)])
+def test_a_breast_model_refuses_a_pose_that_is_no_rigid_transform(pose):
+    with pytest.raises(ValueError, match="rigid 4×4 transform"):
+        BreastModel(Primitive(), pose=pose)

@@ -138,6 +138,22 @@ def test_a_function_that_is_no_filter_is_refused(sandbox, source, words):
         get("test_bad")
 
 
+def test_a_fortran_ordered_array_as_pymeshlab_gives_is_fitted_exactly_as_its_c_ordered_copy(scan):
+    points = read_ply(scan[0]).points
+    fortran = np.asfortranarray(points)
+    assert fortran.flags.f_contiguous and not fortran.flags.c_contiguous
+    from breastplan.filters import forget
+
+    c_result = get("compute_breast_fit")(Mesh(points), side="left").vertices
+    forget()                                               # not the remembered fit of the same values
+    assert np.array_equal(get("compute_breast_fit")(Mesh(fortran), side="left").vertices, c_result)
+
+
+def test_a_filter_cannot_take_the_name_of_the_meshlab_bridges_own_function(sandbox):
+    with pytest.raises(ValueError, match="cannot be named 'run'"):
+        filter("run")(lambda mesh: {})
+
+
 def test_a_second_function_cannot_take_a_registered_name(sandbox):
     with pytest.warns(registry.PluginWarning, match="apply_breast_ptosis .* registered a filter of that name first"):
         filter("apply_breast_ptosis")(lambda mesh: {})

@@ -177,3 +177,13 @@ def test_a_lattices_arrays_change_only_through_its_setters_which_refuse_non_fini
     lat.displacements = np.ones((lat.size, 3))
     assert np.array_equal(lat(lat.rest[13:14]), lat.rest[13:14] + 1.0)   # the middle control point, moved by 1 mm
 
+
+
+def test_a_lattice_around_no_point_or_a_scalar_point_is_refused_in_a_sentence_and_one_point_is_boxed():
+    for bad in (np.zeros((0, 3)), 5.0, np.full((2, 3), np.nan)):
+        with pytest.raises(ValueError, match="around one or more finite points"):
+            Lattice.around(bad, 3)
+    lat = Lattice.around(np.array([1.0, 2.0, 3.0]), 3)                 # one point: its box padded by 1 mm
+    assert np.allclose(lat.lo, [0.0, 1.0, 2.0]) and np.allclose(lat.hi, [2.0, 3.0, 4.0])
+    with pytest.raises(ValueError, match=r"shape \(\.\.\., 3\)"):
+        lat(5.0)
