@@ -174,6 +174,15 @@ def top_shape(p, prim, s0, s1, t0, t1) -> np.ndarray:
     return p
 
 
+def top_shape_preimages(p, prim, s0, s1, t0, t1, n: int = 20_001) -> np.ndarray:
+    """For each point p (upper half), how many heights z in (0, a5] top-shape maps to its height (on a
+    fine grid of z): a point whose height has one preimage can be taken back whatever it is."""
+    z = np.linspace(0.0, prim[4], n)[1:]
+    f = top_shape(np.column_stack([0 * z, 1 + 0 * z, z]), prim, s0, s1, t0, t1)[:, 2]
+    h = np.asarray(p, float)[:, 2:3]
+    return (np.diff(np.sign(f[None, :] - h), axis=1) != 0).sum(axis=1) + (f[0] > h[:, 0])
+
+
 def flatten_side(p, prim, h0, h1) -> np.ndarray:
     """x ← x·γ(|x|/a2), where x < 0."""
     p = np.array(p, float)
