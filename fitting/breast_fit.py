@@ -120,9 +120,9 @@ def fit_breast(points_mm: np.ndarray, options: FitOptions = FitOptions(),
     BadInputError for unusable points or a fit that finds no breast surface (mean normalised
     residual above MAX_RESIDUAL, or no enclosed volume).
     """
-    points = canonical_order(points_mm)
-    sq = fit_superquadric(points, deformations=options.deformations)
+    sq = fit_superquadric(points_mm, deformations=options.deformations)
     vertices, faces = model_mesh(sq)
+    points = np.asarray(points_mm, float)
     ffd = fit_ffd(points, vertices, faces, n=options.lattice, smoothness=smoothness(vertices, points),
                   held=held_weights(vertices), max_iterations=options.max_iterations)
     if not ffd.residual < MAX_RESIDUAL:
@@ -135,16 +135,6 @@ def fit_breast(points_mm: np.ndarray, options: FitOptions = FitOptions(),
         raise BadInputError(None, f"gives a fitted surface that encloses no volume ({fit.mesh_volume_cc:.0f} cc): "
                                   "its points do not hold a breast")
     return fit
-
-
-def canonical_order(points_mm) -> np.ndarray:
-    """(N, 3) points sorted by x, then y, then z: a fit's subsets and sums then depend on the points alone,
-    not on the order a file or a crop lists them in (a fit with nearby minima would otherwise end in
-    another for another order)."""
-    points = np.asarray(points_mm, float)
-    if points.ndim != 2 or points.shape[-1] != 3:
-        return points                                  # refused, in a sentence, by the fit
-    return points[np.lexsort(points.T[::-1])]
 
 
 def fit_scan(scan, options: FitOptions = FitOptions()) -> BreastFit:
