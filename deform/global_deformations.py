@@ -131,11 +131,11 @@ def top_shape_inverse(points, s0: float, s1: float, t0: float, t1: float, *,
         piece = _nearest_piece(h, surface, z, image, bounds)
         sel[sel] = piece >= 0
         h, piece = h[piece >= 0], piece[piece >= 0]
-    p[..., 2][sel] = piece_inverse(h, piece, z, image, bounds, forward if not fast else None)
+    p[..., 2][sel] = _piece_inverse(h, piece, z, image, bounds, forward if not fast else None)
     return p
 
 
-def monotone_pieces(image: np.ndarray) -> np.ndarray:
+def _monotone_pieces(image: np.ndarray) -> np.ndarray:
     """Nodes splitting a tabulated map into its monotone pieces: piece i runs from node bounds[i] to node
     bounds[i + 1] (a flat step counts as falling)."""
     rising = np.diff(image) > 0
@@ -174,9 +174,9 @@ def _nearest_piece(h: np.ndarray, guide: np.ndarray, z: np.ndarray, image: np.nd
     return piece
 
 
-def piece_inverse(h: np.ndarray, piece: np.ndarray, z: np.ndarray, image: np.ndarray, bounds: np.ndarray,
+def _piece_inverse(h: np.ndarray, piece: np.ndarray, z: np.ndarray, image: np.ndarray, bounds: np.ndarray,
                   forward=None) -> np.ndarray:
-    """Preimages of heights h, each on its monotone piece of the tabulated map (z, image) (`monotone_pieces`),
+    """Preimages of heights h, each on its monotone piece of the tabulated map (z, image) (`_monotone_pieces`),
     clipped to that piece's images: the table's interpolation, refined to rounding if `forward` (the map) is
     given."""
     out = np.empty_like(h)
@@ -199,7 +199,7 @@ often than with the primitive (each column of its finite-difference Jacobian ste
 def top_shape_table(a5, eps1, s0, s1, t0, t1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Top-shape's map z ↦ z·β(w(z)) on the upper half, tabulated (`top_shape_inverse`): the heights
     z = a5·sin(u)^eps1 at TABLE_SIZE latitudes u uniform on [0, π/2], their images, and the nodes
-    bounding the map's monotone pieces (`monotone_pieces`; [0, last node] if it rises throughout)."""
+    bounding the map's monotone pieces (`_monotone_pieces`; [0, last node] if it rises throughout)."""
     key = (float(a5), float(eps1))
     cached = _TABLE_LATITUDES.get(key)
     if cached is None:
@@ -211,7 +211,7 @@ def top_shape_table(a5, eps1, s0, s1, t0, t1) -> tuple[np.ndarray, np.ndarray, n
         _TABLE_LATITUDES[key] = cached = (z, w)
     z, w = cached
     image = z * beta(w, s0, s1, t0, t1)
-    return z, image, monotone_pieces(image)
+    return z, image, _monotone_pieces(image)
 
 
 # --- flatten-side: x scaled by γ(|x|/a2), lateral half ---------------------------------

@@ -17,7 +17,7 @@ from scipy.optimize import least_squares
 from breastplan import BadInputError, Primitive, to_mm, to_model_units
 from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.global_deformations import (REFERENCE_AXIS, TABULATED, Deformation,
-                                                   apply_kind, beta, piece_inverse, top_shape_table)
+                                                   apply_kind, beta, top_shape_table)
 from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
 from breastplan.errors import counted
 from breastplan.primitive import EPS_BOUNDS
@@ -431,20 +431,26 @@ def _undone_rows(xs: np.ndarray, p: np.ndarray, kinds: tuple[str, ...], calls: n
 
 def _top_shape_undone(q: np.ndarray, rows: np.ndarray, params: np.ndarray, a: np.ndarray, e: np.ndarray) -> None:
     """`top_shape_inverse(..., fast=True)` of each q[k] (in place), the row rows[k] of the parameters,
-    semi-axes a and exponents e: one table for the rows that share a5, eps1 and (s0, s1, t0, t1)."""
+    semi-axes a and exponents e: one table for the rows that share a5, eps1 and (s0, s1, t0, t1). The fit
+    keeps the single fold of Table 4.1's shapes: the rising branch, then the falling one read backwards
+    (on a map that rises again after it, as `top_shape_inverse` handles, the fits of bench_realistic
+    end in other minima, one of them far worse: docs/realistic.md)."""
     groups: dict[tuple, list[int]] = {}
     for k, b in enumerate(rows):
         groups.setdefault((a[b, 4], e[b, 0], *params[b].tolist()), []).append(k)
     for members in groups.values():
         b = rows[members[0]]
         z, image, bounds = top_shape_table(a[b, 4], e[b, 0], *params[b].tolist())
+        top = bounds[1] if image[1] > image[0] else 0     # the map's first maximum (its first node if it falls)
         sub = q[members] if len(members) < len(q) else q
         height = sub[..., 2]
         sel = (sub[..., 1] > 0) & (height > 0)
-        piece = np.zeros(int(sel.sum()), dtype=int)
-        for turn in bounds[1:-1]:                      # past a turn of the map: its next piece (surface points)
-            piece += _folded(sub, sel, a[rows[members]], e[b], z[turn])[sel]
-        height[sel] = piece_inverse(height[sel], piece, z, image, bounds)
+        h = height[sel]
+        solved = np.interp(h, image[:top + 1], z[:top + 1])
+        if top < len(z) - 1:                           # past the fold: the folding branch (surface points)
+            fold = _folded(sub, sel, a[rows[members]], e[b], z[top])[sel]
+            solved[fold] = np.interp(h[fold], image[top:][::-1], z[top:][::-1])
+        height[sel] = solved
         if sub is not q:
             q[members] = sub
 
