@@ -58,7 +58,8 @@ class Primitive:
         for name in PARAM_NAMES:
             value = getattr(self, name)
             if not isinstance(value, numbers.Real):
-                raise TypeError(f"primitive parameter {name} must be a real number, got {type(value).__name__} {value!r}")
+                raise TypeError(f"primitive parameter {name} must be a real number, "
+                                f"got {type(value).__name__} {value!r}")
             object.__setattr__(self, name, float(value))
         values = self.as_array()
         if not np.isfinite(values).all() or (values <= 0).any():

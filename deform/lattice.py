@@ -68,7 +68,8 @@ class Lattice:
     """An l×m×n FFD lattice on the box [lo, hi] (mm, breast frame); `lattice(points)` deforms points.
 
     `rest` (K, 3) is the regular grid of the box, `points` (K, 3) the current control points
-    (mm; assign new ones, or `displacements`, to deform; the arrays themselves are read-only). Use `Lattice.around` to build one about a cloud.
+    (mm; assign new ones, or `displacements`, to deform; the arrays themselves are read-only).
+    Use `Lattice.around` to build one about a cloud.
     """
 
     def __init__(self, lo, hi, shape: int | Sequence[int], points: np.ndarray | None = None,

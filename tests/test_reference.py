@@ -169,7 +169,8 @@ def test_the_inverses_undo_the_reference_deformations(shape):
         q = np.vstack([surface, inside])
         if kind == "top-shape":
             moved = ref.apply_kind(inside, kind, params, prim)
-            q = np.vstack([surface, inside[(inside[:, 1] <= 0) | (ref.top_shape_preimages(moved, prim, *params) == 1)]])
+            one = ref.top_shape_preimages(moved, prim, *params) == 1
+            q = np.vstack([surface, inside[(inside[:, 1] <= 0) | one]])
         back = apply_kind(ref.apply_kind(q, kind, params, prim), kind, params, P, inverse=True)
         assert np.allclose(back, q, atol=1e-8), kind
 
