@@ -27,7 +27,7 @@ class BreastModel:
     pose: np.ndarray = field(default_factory=lambda: np.eye(4))
 
     def __post_init__(self):
-        if np.shape(self.pose) != (4, 4) or not is_rigid(self.pose):
+        if not is_rigid(self.pose):
             raise ValueError(f"a breast model's pose is a rigid 4×4 transform (rotation and translation), "
                              f"got {np.asarray(self.pose).tolist()}")
 

@@ -129,8 +129,9 @@ def top_shape_inverse(points, s0: float, s1: float, t0: float, t1: float, *,
     else:
         z, image, bounds = _true_turns(forward, z, image, bounds)
         piece = _nearest_piece(h, surface, z, image, bounds)
-        sel[sel] = piece >= 0
-        h, piece = h[piece >= 0], piece[piece >= 0]
+        found = piece >= 0                                    # heights that are some height's image
+        sel[sel] = found
+        h, piece = h[found], piece[found]
     p[..., 2][sel] = _piece_inverse(h, piece, z, image, bounds, forward if not fast else None)
     return p
 

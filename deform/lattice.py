@@ -131,9 +131,10 @@ class Lattice:
         """Rest lattice of shape n (or (l, m, n)) on the bounding box of points (mm), padded by
         margin·extent + 1 mm on each side."""
         points = np.asarray(points, float)
-        if points.ndim == 0 or points.shape[-1] != 3 or points.size == 0 or not np.isfinite(points).all():
-            raise ValueError(f"a lattice is built around one or more finite points (..., 3), got shape {points.shape}"
-                             + ("" if points.size == 0 or np.isfinite(points).all() else " with NaN or infinite ones"))
+        if points.ndim == 0 or points.shape[-1] != 3 or points.size == 0:
+            raise ValueError(f"a lattice is built around one or more finite points (..., 3), got shape {points.shape}")
+        if not np.isfinite(points).all():
+            raise ValueError("a lattice is built around one or more finite points (..., 3), got NaN or infinite ones")
         points = points.reshape(-1, 3)
         lo, hi = points.min(0), points.max(0)
         pad = margin * (hi - lo) + 1.0

@@ -49,6 +49,8 @@ Method = Literal[METHODS]
 
 MEMORY = 16
 """Surfaces (and scans) remembered; the least recently used is forgotten first."""
+
+
 class ShortOfDegree(UserWarning):
     """A change's surface does not round to the degree asked: exact stops at the end of its condition's line
     for this breast, learnt has the model's prediction (the measures' `changes` give the degree reached)."""
@@ -304,7 +306,8 @@ def _apply(kind: str, mesh: Mesh, degree: float, method: str, side: str, units: 
     local = plan.local_surface()
     with threadpool_limits(1, "blas"):
         singles = [solve_change(local, k, d, plan.primitive, m) for k, d, m in changes]
-    short = short_of(singles[[c[0] for c in changes].index(kind)].details[0], method)
+    asked = next(single for single, (k, _, _) in zip(singles, changes) if k == kind)
+    short = short_of(asked.details[0], method)
     if short is not None:
         warnings.warn(f"{kind} reaches {short}", ShortOfDegree, stacklevel=4)   # the caller of the filter
     change = singles[0] if len(singles) == 1 else combine(singles)

@@ -58,6 +58,14 @@ def test_every_builtin_filter_is_a_function_of_the_module_with_its_parameters():
         meshlab.compute_breast_fitt
 
 
+def test_the_names_no_filter_may_take_are_the_modules_own_functions():
+    from breastplan.filters.registry import BRIDGE_NAMES
+
+    names = {f.name for f in filters(plugins=False)}
+    own = {n for n, v in vars(meshlab).items() if not n.startswith("_") and callable(v) and n not in names}
+    assert own == BRIDGE_NAMES
+
+
 def test_the_filters_add_meshes_to_the_meshset_and_measures_come_back_as_a_dict(scan):
     path, body = scan
     ms = pymeshlab.MeshSet()
