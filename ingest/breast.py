@@ -10,6 +10,7 @@ superior.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,7 +21,7 @@ from breastplan import BadInputError
 from breastplan.chest_wall import ChestWall
 
 from .chest_wall import fit_chest_wall
-from .nipple import find_apex, find_nipple
+from .nipple import DISC_MM, find_apex, find_nipple
 
 MOUND_MM = 10.0
 """Coarse voxels at least this far in front of the chest wall form mounds."""
@@ -35,7 +36,14 @@ BELOW_TOP_MM = (85.0, 340.0)
 """… and this far below the shoulders (a shoulder's own mound higher; breasts 100–300) …"""
 RISE = (0.5, 3.0)
 """… and rises this share of its footprint's radius (`Mound.rise`; breasts 0.56–1.29, a back's
-shoulder blades where breasts would be 0.30–0.44, a hand standing out from the hips 5 and more)."""
+shoulder blades where breasts would be 0.29–0.46, a hand standing out from the hips 5 and more).
+Small flat breasts rise 0.45–0.5 …"""
+LOW_RISE = 0.4
+"""… so a mound rising from this share up is a breast too when no mound on its side rises as
+breasts do (`Mound.low`), but only if a nipple stands on it …"""
+LOW_NIPPLE_MM = 2.0
+"""… its nipple-areola disc raised this far over the breast's smooth surface (the test bodies'
+3.7–4.7 mm; on a back's shoulder blades, skin noise gives 'discs' of 1.1 mm)."""
 MAX_LEVEL_MM = 110.0
 """The two breasts' centres differ in height by at most this much."""
 PAIR_MM = (100.0, 420.0)
@@ -69,6 +77,7 @@ class Mound:
     peak_mm: float             # greatest height above the chest wall
     voxels: np.ndarray         # (M, 3) the mound's voxel centroids
     footprint_mm2: float       # area it covers seen from the viewer
+    low: bool = False          # taken below RISE: a breast only if a nipple stands on it (LOW_NIPPLE_MM)
 
     @property
     def rise(self) -> float:
@@ -155,15 +164,26 @@ def find_breasts(mounds: list[Mound], midline_x: float, top_y: float) -> dict[st
     """Side → breast mound. A breast sits off the trunk's midline, below its shoulders, and
     rises as breasts do (RISE); of such mounds, the largest pair (by summed volume) level with
     each other and as far apart as breasts are is taken, else the largest one on each side (a
-    patient may have one breast).
+    patient may have one breast). A side with none is searched again from LOW_RISE up, and what
+    that finds is marked `low`.
 
     A chin or a belly lies on the midline, a shoulder high and lateral, a hand on the hip
-    stands out steeply, and a back's shoulder blades are broad and low: they are never taken."""
+    stands out steeply, and a back's shoulder blades are broad and low: they are never taken
+    (a low one only until the search for its nipple, which finds none)."""
+    breasts = _breasts(mounds, midline_x, top_y, RISE)
+    if len(breasts) == 2:
+        return breasts
+    low = _breasts(mounds, midline_x, top_y, (LOW_RISE, RISE[1]))
+    return {side: breasts.get(side) or dataclasses.replace(low[side], low=True)
+            for side in ("left", "right") if side in breasts or side in low}
+
+
+def _breasts(mounds: list[Mound], midline_x: float, top_y: float, rises: tuple[float, float]) -> dict[str, Mound]:
     x = np.array([m.centre[0] - midline_x for m in mounds]).reshape(-1)
     y = np.array([m.centre[1] for m in mounds]).reshape(-1)
     rise = np.array([m.rise for m in mounds]).reshape(-1)
     size = np.array([m.voxels.shape[0] * m.peak_mm for m in mounds]).reshape(-1)
-    ok = (_within(np.abs(x), OFF_MIDLINE_MM) & _within(y - top_y, BELOW_TOP_MM) & _within(rise, RISE))
+    ok = (_within(np.abs(x), OFF_MIDLINE_MM) & _within(y - top_y, BELOW_TOP_MM) & _within(rise, rises))
     left, right = np.flatnonzero(ok & (x > 0)), np.flatnonzero(ok & (x < 0))
     L, R = (a.ravel() for a in np.meshgrid(left, right, indexing="ij"))
     apart = x[L] - x[R]
@@ -242,10 +262,11 @@ def frame_at(wall: ChestWall, xy: np.ndarray) -> BreastFrame:
     return BreastFrame(wall.point(xy), np.column_stack([np.cross(y, z), y, z]))
 
 
-def breast_frame(points: np.ndarray, wall: ChestWall, start_xy: np.ndarray,
+def breast_frame(points: np.ndarray, wall: ChestWall, mound: Mound,
                  nipple: np.ndarray | None = None) -> tuple[BreastFrame, np.ndarray, str]:
     """The breast frame, the nipple (viewing frame) and how it was found ("areola" or "apex" as
-    `ingest.nipple.find_nipple` says, "given" when `nipple` is).
+    `ingest.nipple.find_nipple` says, "given" when `nipple` is; on a low mound, a disc under
+    LOW_NIPPLE_MM counts as none).
 
     The base outline is rarely visible all round (the lateral side is seen at grazing angles,
     a ptotic lower pole hides its fold), so the origin is the foot of the nipple on the
@@ -253,13 +274,13 @@ def breast_frame(points: np.ndarray, wall: ChestWall, start_xy: np.ndarray,
     otherwise (the fit refines the pose). The apex and the frame are refined together, then the
     nipple is found near the apex (`ingest.nipple.find_nipple`) and the frame set under it.
     """
-    frame = frame_at(wall, start_xy)
+    frame = frame_at(wall, mound.centre)
     for _ in range(3):
         tip = frame.origin + frame.axes @ find_apex(frame.to_breast(points)) if nipple is None else nipple
         frame = frame_at(wall, foot_on_wall(wall, tip))
     if nipple is not None:
         return frame, nipple, "given"
-    nipple, found = find_nipple(points, frame)
+    nipple, found = find_nipple(points, frame, LOW_NIPPLE_MM if mound.low else DISC_MM[0])
     return frame_at(wall, foot_on_wall(wall, nipple)), nipple, found
 
 

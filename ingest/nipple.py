@@ -59,13 +59,13 @@ def find_apex(local: np.ndarray) -> np.ndarray:
     return apex
 
 
-def find_nipple(points: np.ndarray, frame) -> tuple[np.ndarray, str]:
+def find_nipple(points: np.ndarray, frame, min_rise: float = DISC_MM[0]) -> tuple[np.ndarray, str]:
     """The nipple (viewing frame) of breast points (viewing frame) seen in `frame`, and how it was
     found: "areola", the centre of the nipple-areola disc near the apex, or "apex" where no disc
-    stands out (module docstring)."""
+    stands out (module docstring) by at least `min_rise` mm."""
     local = frame.to_breast(points)
     apex = find_apex(local)
-    disc = find_disc(local, apex[:2])
+    disc = find_disc(local, apex[:2], min_rise)
     if disc is None:
         return frame.origin + frame.axes @ apex, "apex"
     return frame.origin + frame.axes @ np.array([*disc.centre, disc.top]), "areola"
@@ -79,8 +79,9 @@ class Disc(NamedTuple):
     """Height of the skin over its centre."""
 
 
-def find_disc(local: np.ndarray, apex_xy: np.ndarray) -> Disc | None:
-    """The raised disc near `apex_xy` in breast-frame points (N, 3), or None (module docstring)."""
+def find_disc(local: np.ndarray, apex_xy: np.ndarray, min_rise: float = DISC_MM[0]) -> Disc | None:
+    """The raised disc near `apex_xy` in breast-frame points (N, 3), rising at least `min_rise` mm
+    over the breast's smooth surface, or None (module docstring)."""
     near = local[np.linalg.norm(local[:, :2] - apex_xy, axis=1) < SURFACE_RADIUS_MM]
     if len(near) < 50:
         return None
@@ -105,7 +106,7 @@ def find_disc(local: np.ndarray, apex_xy: np.ndarray) -> Disc | None:
     disc = labels == labels[peak]
     radius = np.sqrt(disc.sum() * CELL_MM ** 2 / np.pi)
     border = disc[[0, -1], :].any() or disc[:, [0, -1]].any()
-    if rise < DISC_MM[0] or not DISC_MM[1][0] <= radius <= DISC_MM[1][1] or border:
+    if rise < min_rise or not DISC_MM[1][0] <= radius <= DISC_MM[1][1] or border:
         return None
     centre = grid[:, disc].mean(1)
     if np.hypot(*(grid[:, disc] - centre[:, None])).max() > ROUND * radius:       # an arc, not a disc

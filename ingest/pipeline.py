@@ -218,8 +218,11 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
     with clock("crop + breast frame"):
         region = B.breast_region(torso, mound, wall, COARSE_MM)
         crop = torso[region & in_roi(torso)] if in_roi is not None else torso[region]
-        frame, nipple_view, nipple_found = B.breast_frame(crop, wall, mound.centre, nipple_view)
+        frame, nipple_view, nipple_found = B.breast_frame(crop, wall, mound, nipple_view)
         crop = crop[frame.to_breast(crop)[:, 2] > 0.0]
+    if mound.low and nipple_found == "apex":
+        raise BadInputError(None, f"no breast mound found on the {side} side (the mound there rises only "
+                                  f"{mound.rise:.2f} of its radius and bears no nipple)")
     _enough(len(crop), "cropping")
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(crop))
     with clock("outliers (open3d)"):

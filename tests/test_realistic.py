@@ -132,6 +132,23 @@ def test_asymmetric_nipple_offsets_match_the_truth():
     assert (found["left"] - found["right"])[:2] == pytest.approx(true_offset[:2], abs=LEVEL_MM)
 
 
+SMALL_FLAT = (BodyOptions(cup=0.2, weight=0.6, modifiers={"breast_point": -1.0}),
+              CameraOptions(resolution="640x400", distance_mm=800.0, pitch_deg=10.0, wall_mm=None))
+"""Small breasts pointing little: mounds as low and broad as a back's shoulder blades."""
+
+
+@pytest.mark.parametrize("side", SIDES)
+def test_small_flat_breasts_are_found_by_their_nipples(side):
+    scene = make_body_scene(*SMALL_FLAT)
+    frames = DepthFrames(scene.frames(FRAMES, seed=1), scene.camera.K, "synthetic")
+    result = ingest_frames(frames, IngestOptions(side=side))
+    assert result.side == side and result.nipple_found == "areola"
+    error = np.linalg.norm(result.nipple_camera - scene.nipples_camera()[side])
+    assert error <= NIPPLE_MM, f"{side}: nipple {error:.1f} mm from the truth"
+    shares = crop_against_truth(scene, side, transform_points(np.linalg.inv(result.camera_to_breast), result.points))
+    assert shares["on_breast"] >= 0.99
+
+
 # --- 2. a given nipple picks its breast ----------------------------------------------------------
 
 @pytest.mark.parametrize("side", SIDES)
@@ -227,6 +244,9 @@ BACK_VIEWS = {
                                                                       wall_mm=400.0)),
     "arms down, no wall, 640x400 at 650 mm": (BodyOptions(pose="arms-down"),
                                               CameraOptions(resolution="640x400", wall_mm=None)),
+    # a thin back whose shoulder blades rise as small flat breasts do, skin noise making 'discs' on them
+    "thin, a-pose, no wall, 640x400 at 800 mm, pitch +10": (
+        BodyOptions(weight=0.1), CameraOptions(resolution="640x400", distance_mm=800.0, pitch_deg=10.0, wall_mm=None)),
 }
 _backs: dict = {}
 
@@ -249,7 +269,7 @@ def test_a_patients_back_has_no_breast(view, side):
     scene, frames = back_scene(view)
     depth, ids = scene.render()
     body_pixels = np.isfinite(depth) & (ids == 0)
-    assert body_pixels.mean() > 0.2                                   # she is in view, her back to the camera
+    assert body_pixels.mean() > 0.15                                  # she is in view, her back to the camera
     try:
         result = ingest_frames(frames, IngestOptions(side=side))
     except BadInputError as exc:
