@@ -417,3 +417,27 @@ def test_one_bump_is_one_basin(h, s, x, y, noise_mm, seed):
     points, height = bump_field([(x, y, h, s)], noise_mm, seed)
     labels = breast.height_basins(points, height, CELL_MM)
     assert len(np.unique(labels)) == 1
+
+
+# --- 6. which mounds are breasts --------------------------------------------------------------------
+
+def a_mound(x, rise, radius=50.0, y=150.0):
+    """A mound centred at (x, y) mm (viewing frame, y down; the shoulders at y = 0) rising `rise` of its radius."""
+    return breast.Mound("left" if x > 0 else "right", np.array([x, y]), radius, rise * radius,
+                        np.zeros((20, 3)), np.pi * radius ** 2)
+
+
+@pytest.mark.parametrize("low_side", [None, "left", "right", "both"])
+def test_a_low_mound_is_a_breast_only_where_no_steeper_one_is(low_side):
+    rise = {side: 0.45 if low_side in (side, "both") else 0.8 for side in SIDES}
+    mounds = [a_mound(90.0, rise["left"]), a_mound(-90.0, rise["right"]),
+              a_mound(60.0, 0.3), a_mound(-60.0, 0.3)]                # shoulder-blade-like: below LOW_RISE
+    found = breast.find_breasts(mounds, 0.0, 0.0)
+    assert set(found) == set(SIDES)
+    for side, x in (("left", 90.0), ("right", -90.0)):
+        assert found[side].centre[0] == x
+        assert found[side].low == (rise[side] < breast.RISE[0])
+
+
+def test_mounds_rising_less_than_the_low_bound_are_no_breasts():
+    assert breast.find_breasts([a_mound(90.0, 0.35), a_mound(-90.0, 0.35)], 0.0, 0.0) == {}
