@@ -74,6 +74,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_statistical.py
 	$(BIN)/python benchmarks/bench_realistic.py
 	$(BIN)/python benchmarks/bench_volume_ceiling.py
+	$(BIN)/python benchmarks/bench_low_mounds.py
 	$(BIN)/python benchmarks/bench_repeatability.py
 	$(BIN)/python benchmarks/bench_shifted_pairs.py
 	$(BIN)/python benchmarks/bench_refusal.py
