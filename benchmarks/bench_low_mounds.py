@@ -16,7 +16,6 @@ Run:  .venv/bin/python benchmarks/bench_low_mounds.py     (about 5 minutes)
 """
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import json
 import statistics
@@ -27,7 +26,7 @@ from rich.console import Console
 from breastplan import BadInputError
 from breastplan.ingest.makehuman import BodyOptions
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import BodyScene, CameraOptions, make_body_scene
+from breastplan.ingest.realistic import CameraOptions, make_back_scene, make_body_scene
 from breastplan.ingest.recording import DepthFrames
 from breastplan.options import SIDES, IngestOptions
 
@@ -48,10 +47,7 @@ NIPPLE_MM = 8.0
 
 def sides(body: BodyOptions, camera: CameraOptions, back: bool = False) -> list[float | None]:
     """Per side: the nipple error (mm) of an isolated side (0 on a back), or None where ingest exits 3."""
-    scene = make_body_scene(body, camera)
-    if back:
-        turned = dataclasses.replace(scene.body, vertices=scene.body.vertices * [-1.0, 1.0, -1.0])
-        scene = BodyScene(turned, camera, scene.camera_from_body)
+    scene = (make_back_scene if back else make_body_scene)(body, camera)
     frames = DepthFrames(scene.frames(FRAMES, seed=0), camera.K, "synthetic")
     errors = []
     for side in SIDES:

@@ -13,7 +13,7 @@ check its camera options without that cost.
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -130,6 +130,15 @@ def make_body_scene(body: BodyOptions = BodyOptions(), camera: CameraOptions = C
     made = make_body(body)
     target = 0.5 * (made.nipples["left"] + made.nipples["right"])
     return BodyScene(made, camera, camera_pose(target, camera))
+
+
+def make_back_scene(body: BodyOptions = BodyOptions(), camera: CameraOptions = CameraOptions()) -> BodyScene:
+    """The body of `body` turned 180° about her vertical axis (Y), in front of the camera that would
+    see her front: a scene with no breast in view. Her body frame turns with her (X to her right,
+    Z posterior); a rotation, so the faces stay outward."""
+    front = make_body_scene(body, camera)
+    return BodyScene(replace(front.body, vertices=front.body.vertices * [-1.0, 1.0, -1.0]), camera,
+                     front.camera_from_body)
 
 
 def camera_pose(target: np.ndarray, camera: CameraOptions) -> np.ndarray:

@@ -5,7 +5,6 @@ centroid of each ring), the body's joints and head vertices, the scene's own cam
 scene holding no breast at all (a board, a patient's back), and the geometry of a watershed on
 analytic bumps.
 """
-import dataclasses
 import json
 import re
 
@@ -16,10 +15,10 @@ from hypothesis import strategies as st
 
 from breastplan import BadInputError, transform_points, write_ply
 from breastplan.ingest import breast
-from breastplan.ingest.makehuman import BodyOptions, make_body
+from breastplan.ingest.makehuman import BodyOptions
 from breastplan.ingest.pipeline import find_body, ingest_frames
-from breastplan.ingest.realistic import (BodyScene, CameraOptions, crop_against_truth, file_axes, file_from_body,
-                                          load_body_truth, make_body_scene, visible_points,
+from breastplan.ingest.realistic import (CameraOptions, crop_against_truth, file_axes, file_from_body,
+                                          load_body_truth, make_back_scene, make_body_scene, visible_points,
                                           write_scan_file)
 from breastplan.ingest.files import read_scan_file
 from breastplan.ingest.scan import ingest
@@ -254,12 +253,8 @@ _backs: dict = {}
 def back_scene(view):
     """The patient turned 180° about her vertical axis, in front of the camera that would see her front."""
     if view not in _backs:
-        body_options, camera = BACK_VIEWS[view]
-        front = make_body_scene(body_options, camera)
-        body = front.body
-        back = dataclasses.replace(body, vertices=body.vertices * [-1.0, 1.0, -1.0])   # a rotation: faces stay outward
-        scene = BodyScene(back, camera, front.camera_from_body)
-        _backs[view] = scene, DepthFrames(scene.frames(FRAMES, seed=0), camera.K, "synthetic")
+        scene = make_back_scene(*BACK_VIEWS[view])
+        _backs[view] = scene, DepthFrames(scene.frames(FRAMES, seed=0), scene.camera.K, "synthetic")
     return _backs[view]
 
 
