@@ -1,7 +1,15 @@
-"""Rigid frames: applying 4×4 homogeneous transforms to points."""
+"""Rigid frames: applying 4×4 homogeneous transforms to points (..., 3)."""
 from __future__ import annotations
 
 import numpy as np
+
+
+def points_copy(points) -> np.ndarray:
+    """A float64 copy of points (..., 3); ValueError for any other shape."""
+    p = np.array(points, dtype=np.float64, copy=True)
+    if p.ndim == 0 or p.shape[-1] != 3:
+        raise ValueError(f"points must have shape (..., 3), got {p.shape}")
+    return p
 
 
 def transform_points(T, points) -> np.ndarray:

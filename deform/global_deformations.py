@@ -13,6 +13,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from breastplan import Primitive
+from breastplan.frames import points_copy
 
 from .names import KIND_PARAMS, NEEDS_PRIMITIVE
 
@@ -20,13 +21,6 @@ REFERENCE_AXIS = 10.0
 """ζ = z / 10: polynomial arguments normalised by P00's semi-axis (docs/model.md §3)."""
 TABLE_SIZE = 512
 """Nodes of the tables of the 1-D maps that top-shape and flatten-side invert."""
-
-
-def _copy(points) -> np.ndarray:
-    p = np.array(points, dtype=np.float64, copy=True)
-    if p.ndim == 0 or p.shape[-1] != 3:
-        raise ValueError(f"points must have shape (..., 3), got {p.shape}")
-    return p
 
 
 def _need(primitive: Primitive | None, kind: str) -> Primitive:
@@ -52,7 +46,7 @@ def gamma(w, h0, h1):
 # --- ptosis, turn: shears along y, x driven by z ------------------------------------
 def _shear_by_z(points, axis: int, k0: float, k1: float) -> np.ndarray:
     """coordinate `axis` ← itself − (k0·ζ + k1·ζ²), ζ = z/10, all points."""
-    p = _copy(points)
+    p = points_copy(points)
     zeta = p[..., 2] / REFERENCE_AXIS
     p[..., axis] -= zeta * (k0 + k1 * zeta)
     return p
@@ -80,7 +74,7 @@ def turn_inverse(points, c0: float, c1: float) -> np.ndarray:
 def turn_top(points, g0: float, g1: float, *, primitive: Primitive) -> np.ndarray:
     """x ← x − (g0·w + g1·w²), w = y/a3, where y > 0 (docs/model.md §3)."""
     a3 = _need(primitive, "turn-top").a3
-    p = _copy(points)
+    p = points_copy(points)
     w = p[..., 1] / a3
     p[..., 0] -= np.where(w > 0, w * (g0 + g1 * w), 0.0)
     return p
@@ -94,7 +88,7 @@ def turn_top_inverse(points, g0: float, g1: float, *, primitive: Primitive) -> n
 def top_shape(points, s0: float, s1: float, t0: float, t1: float, *, primitive: Primitive) -> np.ndarray:
     """z ← z·β(w), w = 2u/π with u the point's latitude, where y > 0 (docs/model.md §3)."""
     prim = _need(primitive, "top-shape")
-    p = _copy(points)
+    p = points_copy(points)
     w = prim.latitude(p) * (2 / np.pi)
     p[..., 2] *= np.where(p[..., 1] > 0, beta(w, s0, s1, t0, t1), 1.0)
     return p
@@ -121,7 +115,7 @@ def top_shape_inverse(points, s0: float, s1: float, t0: float, t1: float, *,
         return z * beta(prim.latitude_at(z) * (2 / np.pi), s0, s1, t0, t1)
 
     z, image, bounds = top_shape_table(prim.a5, prim.eps1, s0, s1, t0, t1)
-    p = _copy(points)
+    p = points_copy(points)
     sel = (p[..., 1] > 0) & (p[..., 2] > 0)
     h, surface = p[..., 2][sel], prim.height(p[sel])
     if fast:
@@ -219,7 +213,7 @@ def top_shape_table(a5, eps1, s0, s1, t0, t1) -> tuple[np.ndarray, np.ndarray, n
 def flatten_side(points, h0: float, h1: float, *, primitive: Primitive) -> np.ndarray:
     """x ← x·γ(|x|/a2) where x < 0 (lateral half, docs/model.md §3)."""
     a2 = _need(primitive, "flatten-side").a2
-    p = _copy(points)
+    p = points_copy(points)
     x = p[..., 0]
     p[..., 0] = np.where(x < 0, x * gamma(-x / a2, h0, h1), x)
     return p
@@ -230,7 +224,7 @@ def flatten_side_inverse(points, h0: float, h1: float, *, primitive: Primitive, 
     that map over [0, w_max] (widened until it holds every point), refined by root bracketing
     unless `fast` (see `top_shape_inverse`)."""
     a2 = _need(primitive, "flatten-side").a2
-    p = _copy(points)
+    p = points_copy(points)
     x = p[..., 0]
     sel = x < 0
     target = -x[sel] / a2
@@ -321,14 +315,14 @@ class Deformation:
 
     def apply(self, points, primitive: Primitive | None = None) -> np.ndarray:
         """Deform points (model units); zero-parameter kinds are skipped (they are the identity)."""
-        p = _copy(points)
+        p = points_copy(points)
         for kind in self.active():
             p = apply_kind(p, kind, self.params(kind), primitive)
         return p
 
     def inverse(self, points, primitive: Primitive | None = None, *, fast: bool = False) -> np.ndarray:
         """Undo `apply`: the inverses in reverse order (`fast`: see `apply_kind`)."""
-        p = _copy(points)
+        p = points_copy(points)
         for kind in reversed(self.active()):
             p = apply_kind(p, kind, self.params(kind), primitive, inverse=True, fast=fast)
         return p

@@ -25,6 +25,7 @@ from scipy import sparse
 from scipy.special import comb
 
 from breastplan import ArtefactError, load_npz, save_npz
+from breastplan.frames import points_copy
 
 SCHEMA = "breastplan.lattice/1"
 CHUNK = 1 << 14
@@ -163,11 +164,8 @@ class Lattice:
         O(N·K) operations, O(chunk·m·n) memory. Its matrix products are thin: whoever runs the
         work does best to limit BLAS to one thread (threadpoolctl), as the commands do.
         """
-        pts = np.asarray(points, float)
-        if pts.ndim == 0 or pts.shape[-1] != 3:
-            raise ValueError(f"points must have shape (..., 3), got {pts.shape}")
-        flat = pts.reshape(-1, 3)
-        out = flat.copy()
+        moved = points_copy(points)
+        flat = moved.reshape(-1, 3)                         # a view: each block is read before it moves
         l, m, n = self.shape
         D = self.displacements.reshape(l, m, n, 3)
         disp = np.ascontiguousarray(D.transpose(1, 2, 0, 3).reshape(m * n, l * 3))   # rows (j, k), columns (i, xyz)
@@ -190,10 +188,10 @@ class Lattice:
             t = (byz @ disp).reshape(len(s), l, 3)          # Σ_jk B_j B_k D_ijk: (c, l, 3)
             move = np.einsum("ci,cid->cd", bx, t)                # Σ_i B_i (…): (c, 3)
             if every:
-                out[start:start + len(block)] += move
+                flat[start:start + len(block)] += move
             else:
-                out[start + inside] += move
-        return out.reshape(pts.shape)
+                flat[start + inside] += move
+        return moved
 
     __call__ = apply
 
