@@ -275,13 +275,15 @@ def test_a_patients_back_has_no_breast(view, side):
                 f"mm in her body frame (X left, Y up, Z anterior)")
 
 
-def test_ingest_of_a_recorded_back_exits_3(cli, tmp_path):
-    scene, frames = back_scene("arms down, no wall, 640x400 at 650 mm")
+@pytest.mark.parametrize("view, why", [("arms down, no wall, 640x400 at 650 mm", "none placed or shaped as a breast is"),
+                                       ("thin, a-pose, no wall, 640x400 at 800 mm, pitch +10", "bears no nipple")])
+def test_ingest_of_a_recorded_back_exits_3(cli, tmp_path, view, why):
+    scene, frames = back_scene(view)
     recording = tmp_path / "back.mcap"
     write_recording(recording, frames.depth, frames.K)
     res = run(cli, "ingest", recording, "--side", "left", "--out", tmp_path / "out", "--json")
     assert_bad_input(res, recording, tmp_path)
-    assert NO_BREAST.search(res.stderr), res.stderr
+    assert NO_BREAST.search(res.stderr) and why in res.stderr, res.stderr
     assert not (tmp_path / "out").exists()
 
 
