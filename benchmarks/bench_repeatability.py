@@ -7,15 +7,18 @@ the same fused depth image is ingested (`isolate`, automatic isolation) and fitt
 its points shifted by each of SHIFTS_MM (the viewing frame shifted with them, so the truth is the
 same), and the spread of the fitted volumes, (max − min) / mean, is reported; with the mean height
 of the chest wall found under the breast (at the unshifted nipple's foot, ±60 mm around it) against
-the unshifted one. Cases: 4 MakeHuman bodies of bench_realistic's pairs (cup 0.3 and 0.2, firmness 0
+the unshifted one. The unshifted breast is also fitted with its points in other orders (reversed,
+two seeded shuffles): the same points, so any spread is the fit's own choice among nearby minima
+(its subsets are drawn by index). Cases: 4 MakeHuman bodies of bench_realistic's pairs (cup 0.3 and 0.2, firmness 0
 of cup 0.7 and 0.9) in one view each, both sides; baseline: 2 Chen torsos in the same run.
 
-Nothing is asserted and there is no target; the last line is the JSON summary.
+Nothing is asserted and there is no target; the last two lines are the JSON summaries.
 
-Run:  .venv/bin/python benchmarks/bench_repeatability.py     (about 3 minutes)
+Run:  .venv/bin/python benchmarks/bench_repeatability.py     (about 4 minutes)
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import statistics
 from typing import Iterator
@@ -70,15 +73,35 @@ def fits_under_shifts(points: np.ndarray, side: str, shifts) -> Iterator[tuple[n
         yield shift, ingested, fit
 
 
+def spread_pct(volumes: list[float]) -> float:
+    return 100.0 * (max(volumes) - min(volumes)) / statistics.mean(volumes)
+
+
+def reordered_volumes(ingested: Ingested) -> list[float]:
+    """Fitted volumes (cc) of the same breast with its points reversed and in two seeded shuffles."""
+    n = len(ingested.points)
+    orders = (np.arange(n)[::-1],) + tuple(np.random.default_rng(seed).permutation(n) for seed in (1, 2))
+    volumes = []
+    for order in orders:
+        reordered = dataclasses.replace(ingested, points=np.ascontiguousarray(ingested.points[order]),
+                                        normals=np.ascontiguousarray(ingested.normals[order]))
+        with threadpool_limits(1, "blas"):
+            volumes.append(fit_scan(reordered).volume_cc)
+    return volumes
+
+
 def shifted_fits(points: np.ndarray, side: str) -> dict:
-    """Volume (cc) and chest-wall offset (mm, mean over GRID_MM around the unshifted nipple) per shift."""
-    volumes, walls, nipple = [], [], None
+    """Volume (cc) and chest-wall offset (mm, mean over GRID_MM around the unshifted nipple) per shift,
+    and the unshifted breast's volumes with its points in other orders."""
+    volumes, walls, nipple, orders = [], [], None, []
     for shift, ingested, fit in fits_under_shifts(points, side, SHIFTS_MM):
         volumes.append(fit.volume_cc)
-        nipple = ingested.nipple_camera[:2] if nipple is None else nipple
+        if nipple is None:
+            nipple, orders = ingested.nipple_camera[:2], [fit.volume_cc, *reordered_volumes(ingested)]
         walls.append(float(np.mean(ingested.chest_wall.z(nipple + GRID_MM + shift[:2]) - shift[2])))
-    return {"volumes_cc": volumes, "spread_pct": 100.0 * (max(volumes) - min(volumes)) / statistics.mean(volumes),
-            "wall_offsets_mm": [w - walls[0] for w in walls]}
+    return {"volumes_cc": volumes, "spread_pct": spread_pct(volumes),
+            "wall_offsets_mm": [w - walls[0] for w in walls],
+            "order_volumes_cc": orders, "order_spread_pct": spread_pct(orders)}
 
 
 def main() -> None:
@@ -88,14 +111,18 @@ def main() -> None:
                                  [("chen", chen_points(s)) for s in CHEN_SEEDS]:
         for side in SIDES:
             rows.append({"kind": kind, "case": label, "side": side, **shifted_fits(points, side)})
-            console.log(f"{label} {side}: spread {rows[-1]['spread_pct']:.1f} %")
+            console.log(f"{label} {side}: spread {rows[-1]['spread_pct']:.1f} %, "
+                        f"over point orders {rows[-1]['order_spread_pct']:.1f} %")
     table = new_table("bench_repeatability — one scan shifted by a few mm: fitted volumes",
-                      ("case", "side", "volumes (cc) per shift", "spread", "wall offsets (mm)"),
+                      ("case", "side", "volumes (cc) per shift", "spread", "wall offsets (mm)",
+                       "volumes (cc) per point order", "spread"),
                       f"shifts (mm): {', '.join(str(s) for s in SHIFTS_MM)}; spread (max − min) / mean; wall "
-                      "offsets: the chest wall's mean depth around the nipple against the unshifted one.")
+                      "offsets: the chest wall's mean depth around the nipple against the unshifted one; point "
+                      "orders: as ingested, reversed, two shuffles (unshifted).")
     for r in rows:
         table.add_row(r["case"], r["side"], " ".join(f"{v:.0f}" for v in r["volumes_cc"]), f"{r['spread_pct']:.1f} %",
-                      " ".join(f"{w:+.1f}" for w in r["wall_offsets_mm"]))
+                      " ".join(f"{w:+.1f}" for w in r["wall_offsets_mm"]),
+                      " ".join(f"{v:.0f}" for v in r["order_volumes_cc"]), f"{r['order_spread_pct']:.1f} %")
     console.print(table)
     real = [r["spread_pct"] for r in rows if r["kind"] == "realistic"]
     chen = [r["spread_pct"] for r in rows if r["kind"] == "chen"]
@@ -104,6 +131,12 @@ def main() -> None:
                       "baseline_median": round(statistics.median(chen), 2), "baseline_worst": round(max(chen), 2),
                       "breasts": len(real), "baseline_breasts": len(chen), "shifts_mm": SHIFTS_MM,
                       "rows": [{k: (round(v, 2) if isinstance(v, float) else v) for k, v in r.items()} for r in rows]}))
+    real = [r["order_spread_pct"] for r in rows if r["kind"] == "realistic"]
+    chen = [r["order_spread_pct"] for r in rows if r["kind"] == "chen"]
+    print(json.dumps({"benchmark": "bench_repeatability", "figure": "volume_spread_under_point_order_pct",
+                      "median": round(statistics.median(real), 2), "worst": round(max(real), 2), "target": None,
+                      "baseline_median": round(statistics.median(chen), 2), "baseline_worst": round(max(chen), 2),
+                      "orders": 4}))
 
 
 if __name__ == "__main__":
