@@ -93,7 +93,7 @@ def load_npz(path: str | Path, schema: str, spec: Spec | None = None, meta_spec:
     if not isinstance(art.meta, dict):
         raise ArtefactError(path, f"has metadata that is {_json_name(art.meta)}, not a JSON object")
     if spec:
-        _check_spec(path, art, spec)
+        check_arrays(path, art, spec)
     if meta_spec:
         _check_meta(path, art.meta, meta_spec)
     return art
@@ -121,22 +121,33 @@ def _split_schema(schema: str) -> tuple[str, int | None]:
     return name, int(ver) if ver.isdigit() else None
 
 
-def _check_spec(path: Path, art: Artefact, spec: Spec) -> None:
+def check_arrays(path: Path, arrays: dict, spec: Spec) -> dict[str, int]:
+    """ArtefactError naming `path` unless each array of `spec` is present with its dtype kind and shape
+    (named sizes consistent across arrays, floats finite); the named sizes. Floats become float64 and
+    integers int64 in `arrays`, so that no reader meets float16 or an unsigned wrap-around."""
     sizes: dict[str, int] = {}
     for key, (kinds, shape) in spec.items():
-        if key not in art:
+        if key not in arrays:
             raise ArtefactError(path, f"lacks the array '{key}'")
-        a = art[key]
+        a = arrays[key]
         if a.dtype.kind not in kinds:
             raise ArtefactError(path, f"has array '{key}' of dtype {a.dtype}, expected kind '{kinds}'")
         if a.ndim != len(shape):
             raise ArtefactError(path, f"has array '{key}' of shape {a.shape}, expected {len(shape)} dimensions")
         for dim, want in zip(a.shape, shape):
-            want = sizes.setdefault(want, dim) if isinstance(want, str) else want
-            if dim != want:
-                raise ArtefactError(path, f"has array '{key}' of shape {a.shape}, inconsistent with the rest")
-        if a.dtype.kind == "f" and not np.isfinite(a).all():
-            raise ArtefactError(path, f"has NaN or infinite values in '{key}'")
+            size = sizes.setdefault(want, dim) if isinstance(want, str) else want
+            if dim != size:
+                named = f" ({want} = {size})" if isinstance(want, str) else ""
+                raise ArtefactError(path, f"has array '{key}' of shape {a.shape}, inconsistent with the rest{named}")
+        if a.dtype.kind == "f":
+            a = arrays[key] = a.astype(np.float64)
+            if not np.isfinite(a).all():
+                raise ArtefactError(path, f"has NaN or infinite values in '{key}'")
+        elif a.dtype.kind in "iu":
+            if a.size and a.dtype.kind == "u" and a.max() > np.iinfo(np.int64).max:
+                raise ArtefactError(path, f"has values in '{key}' beyond the range of integers it may hold")
+            arrays[key] = a.astype(np.int64)
+    return sizes
 
 
 def _check_meta(path: Path, meta: dict, spec: MetaSpec, where: str = "") -> None:

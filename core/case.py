@@ -38,6 +38,8 @@ CAMERA_FRAME = "frame camera-opencv"
 RESIDUAL_STATS = ("mean", "rms", "p95", "max")
 POSE = "pose (primitive frame to breast frame, mm)"
 """Start of the PLY header comment that carries a fitted model's pose (16 numbers, row-major)."""
+NIPPLE_FOUND = ("areola", "apex", "given")
+"""How a scan's nipple was found: the centre of the raised nipple-areola disc, the mound's apex, or given."""
 
 
 def sha256(path: str | Path) -> str:
@@ -250,6 +252,9 @@ class Case:
             wall = ChestWall.from_array(art["chest_wall"])
         except ValueError as e:
             raise ArtefactError(npz, f"has a 'chest_wall' {e}") from None
+        found = art.meta.get("nipple_found", "apex")
+        if found not in NIPPLE_FOUND:
+            raise ArtefactError(npz, f"says its nipple was found by '{found}', not one of {', '.join(NIPPLE_FOUND)}")
         plumb = art.meta.get("plumb_camera")
         if plumb is not None and not _is_unit_vector(plumb):
             raise ArtefactError(npz, "has a 'plumb_camera' that is not a unit vector")
@@ -270,7 +275,7 @@ class Case:
                     mound_centre_view_mm=art["crop_mound_centre_view_mm"],
                     mound_radius_mm=float(art["crop_mound_radius_mm"]), crop_height_mm=float(art["crop_height_mm"]),
                     roi_camera_mm=None if not roi.any() else roi, voxel_mm=float(art["voxel_mm"]), source=source,
-                    nipple_found=str(art.meta.get("nipple_found", "apex")),
+                    nipple_found=found,
                     plumb_camera=None if plumb is None else np.asarray(plumb, float),
                     timings_ms=dict(art.meta.get("timings_ms", {})), provenance=Provenance.from_meta(art.meta))
 

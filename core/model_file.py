@@ -32,6 +32,7 @@ import numpy as np
 from scipy.special import expit
 
 from breastplan import ArtefactError, load_npz, save_npz
+from breastplan.artefacts import check_arrays
 
 SCHEMA = "breastplan.model/1"
 KERNELS = ("linear", "poly", "rbf")
@@ -273,22 +274,9 @@ def _spec(a: Mapping) -> dict[str, tuple[str, tuple]]:
     return spec
 
 
-def _check(path: Path, a: Mapping[str, np.ndarray]) -> None:
+def _check(path: Path, a: dict[str, np.ndarray]) -> None:
     """ArtefactError naming `path` unless the arrays form a consistent model."""
-    sizes: dict[str, int] = {}
-    for key, (kinds, shape) in _spec(a).items():
-        if key not in a:
-            raise ArtefactError(path, f"lacks the array '{key}'")
-        v = a[key]
-        if v.dtype.kind not in kinds or v.ndim != len(shape):
-            raise ArtefactError(path, f"has array '{key}' of dtype {v.dtype} and shape {v.shape}, "
-                                      f"expected dtype kind '{kinds}' and {len(shape)} dimensions")
-        for dim, name in zip(v.shape, shape):
-            if sizes.setdefault(name, dim) != dim:
-                raise ArtefactError(path, f"has array '{key}' of shape {v.shape}, inconsistent with the "
-                                          f"other arrays ({name} = {sizes[name]})")
-        if v.dtype.kind == "f" and not np.isfinite(v).all():
-            raise ArtefactError(path, f"has NaN or infinite values in '{key}'")
+    sizes = check_arrays(path, a, _spec(a))
     problems = {
         f"has unknown model kind '{a['kind']}'": str(a["kind"]) not in _PREDICT,
         f"has out_ndim {a['out_ndim']} with {sizes['out']} outputs; expected 2, or 1 for a single output":

@@ -120,6 +120,12 @@ def _parse_header(path: Path, data: bytes):
         raise ArtefactError(path, "is not a valid PLY file: its header has no 'format' line")
     if any(e.count < 0 for e in elements):
         raise ArtefactError(path, "is not a valid PLY file: an element has a negative count")
+    for e in elements:
+        names = [p[0] for p in e.props]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ArtefactError(path, f"is not a valid PLY file: its element '{e.name}' declares the property "
+                                      f"'{twice[0]}' more than once")
     return fmt, elements, comments, start
 
 

@@ -58,6 +58,9 @@ CASES = {  # name → (file name, builder(path) → path, command, extra options
         "has a face with 1 vertex; faces need at least 3"),
     "ascii ply of 1 vertex and no data (fit)": ("short1.ply", lambda p: p.write_bytes(ply_header(1, "ascii")), FIT, [],
                                                 "its header declares 1 'vertex' element but the file ends"),
+    "ply declaring x twice (deform)": ("twice.ply", lambda p: p.write_bytes(ply_header(3).replace(
+        b"property float z", b"property float z\nproperty float x") + bytes(48)), DEFORM, [],
+        "its element 'vertex' declares the property 'x' more than once"),
     "text file named .npz (deform)": ("text.npz", lambda p: p.write_text("not an archive\n"), DEFORM, [],
                                       "is neither a PLY file nor a fit.npz or case folder holding a fit, which deform"),
     "folder without a fit (deform)": ("case", lambda p: p.mkdir(), DEFORM, [],

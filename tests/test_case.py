@@ -2,6 +2,7 @@
 breast model in one place; options; errors named at the boundary."""
 import dataclasses
 import hashlib
+import json
 import os
 import stat
 
@@ -266,6 +267,29 @@ def test_a_scan_whose_frames_or_chest_wall_cannot_be_used_is_refused_by_name(tmp
     with pytest.raises(ArtefactError, match=problem) as err:
         case.load_scan()
     assert err.value.path == case.path(Case.SCAN_NPZ)
+
+
+def test_a_scan_written_by_another_tool_in_other_number_types_is_read_as_float64_and_int64(tmp_path):
+    """Truth: an identity stored in float16 is still the identity, and an 800×600 image in uint16 still
+    800×600; readers get float64 and int64, which linear algebra and arithmetic take without wrapping."""
+    case = Case(tmp_path / "case")
+    case.save_scan(dataclasses.replace(a_scan(), view_from_camera=np.eye(4)))
+    _rewrite_npz(case.path(Case.SCAN_NPZ), view_from_camera=np.eye(4, dtype=np.float16),
+                 image_size=np.array([800, 600], np.uint16))
+    scan = case.load_scan()
+    assert scan.view_from_camera.dtype == np.float64 and np.array_equal(scan.view_from_camera, np.eye(4))
+    assert scan.source.image_size.dtype == np.int64 and (scan.source.image_size - 1000).tolist() == [-200, -400]
+
+
+def test_a_scan_saying_its_nipple_was_found_some_other_way_is_refused_by_name(tmp_path):
+    case = Case(tmp_path / "case")
+    case.save_scan(a_scan())
+    npz = case.path(Case.SCAN_NPZ)
+    with np.load(npz) as z:
+        meta = json.loads(str(z["meta"]))
+    _rewrite_npz(npz, meta=json.dumps({**meta, "nipple_found": "elbow"}))
+    with pytest.raises(ArtefactError, match="says its nipple was found by 'elbow', not one of areola, apex, given"):
+        case.load_scan()
 
 
 def _rewrite_npz(path, **changes):
