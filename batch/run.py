@@ -42,6 +42,8 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
     """Plan every scan and recording under `folder` into `out` (docs/cli.md, `batch`)."""
     folder, out = Path(folder), Path(out)
     require_folder(folder, "folder")
+    if not find_inputs(folder, out):
+        raise BadInputError(folder, "holds no file to plan (no scan or recording)")
     if options.executor == "dask" and options.scheduler is not None:
         dask_client(options.scheduler).close()           # unreachable: said before anything is written
     out.mkdir(parents=True, exist_ok=True)

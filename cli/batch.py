@@ -75,8 +75,6 @@ def batch(
                 "failed": {r.input: r.error for r in manifest.rows if r.status == "failed"}}, True, "")
     else:
         _print_summary(out, manifest)
-    if not manifest.rows:
-        raise BadInputError(input, "holds no file to plan (no scan or recording)")
     if not manifest.succeeded():
         raise BadInputError(input, f"no input was planned ({summary['failed']} failed, {summary['skipped']} "
                                    f"skipped; see {out / 'manifest.csv'})")

@@ -5,6 +5,7 @@ JSON values (`as_dict`) for an artefact's provenance.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass
 
 SIDES = ("left", "right")
@@ -168,6 +169,8 @@ class PlanOptions:
 
 
 EXECUTORS = ("local", "dask")
+_SCHEDULER = re.compile(r"((tcp|tls|ws|wss|ucx)://)?(\[[0-9A-Fa-f:.]+\]|[^\s/:\[\]]+):([1-9][0-9]{0,4})")
+"""A Dask scheduler's address: an optional protocol, a host (an IPv6 one in brackets) and a port."""
 """Where a batch's cases run: local worker processes, or the workers of a Dask cluster."""
 
 
@@ -191,6 +194,10 @@ class BatchOptions:
             raise OptionError("executor", f"'{self.executor}' is not an executor; choose {' or '.join(EXECUTORS)}")
         if self.scheduler is not None and self.executor != "dask":
             raise OptionError("scheduler", "a scheduler address needs --executor dask")
+        address = None if self.scheduler is None else _SCHEDULER.fullmatch(self.scheduler)
+        if self.scheduler is not None and (address is None or int(address[4]) > 65535):
+            raise OptionError("scheduler", f"'{self.scheduler}' is not a scheduler address; give "
+                                           "[PROTOCOL://]HOST:PORT, e.g. tcp://host:8786")
 
     def as_dict(self) -> dict:
         return {"plan": self.plan.as_dict(), "jobs": self.jobs, "executor": self.executor, "scheduler": self.scheduler,

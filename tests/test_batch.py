@@ -221,11 +221,11 @@ def test_a_batch_where_every_input_fails_exits_3(cli, tmp_path):
     assert sorted(p.name for p in (tmp_path / "cases").iterdir()) == [".batch.lock", "manifest.csv", "manifest.json"]
 
 
-def test_an_empty_folder_exits_3_with_an_empty_manifest(cli, tmp_path):
-    (tmp_path / "empty").mkdir()
+def test_an_empty_folder_exits_3_and_writes_nothing(cli, tmp_path):
+    (tmp_path / "empty" / ".hidden").mkdir(parents=True)
     res = run(cli, "batch", tmp_path / "empty", "--out", tmp_path / "cases")
-    assert res.returncode == 3 and "holds no file to plan" in res.stderr
-    assert _manifest(tmp_path / "cases") == {}
+    assert res.returncode == 3 and f"{tmp_path / 'empty'}: holds no file to plan" in res.stderr
+    assert not (tmp_path / "cases").exists()
 
 
 def test_a_missing_folder_exits_3_naming_it(cli, tmp_path):
@@ -238,6 +238,9 @@ def test_a_missing_folder_exits_3_naming_it(cli, tmp_path):
     (["--jobs", "0"], "at least 1"),
     (["--executor", "spark"], "not an executor"),
     (["--scheduler", "tcp://127.0.0.1:8786"], "needs --executor dask"),
+    (["--executor", "dask", "--scheduler", "not a url"], "is not a scheduler address"),
+    (["--executor", "dask", "--scheduler", "tcp://host"], "is not a scheduler address"),
+    (["--executor", "dask", "--scheduler", "host:65536"], "is not a scheduler address"),
     (["--deform", "ptosis"], "KIND:DEGREE"),
     (["--deform", "ptosis:9"], "1..8"),
     (["--method", "fast"], "not a method"),
@@ -252,6 +255,8 @@ def test_batch_options_check_themselves():
     with pytest.raises(OptionError):
         BatchOptions(jobs=0)
     assert BatchOptions(jobs=2, executor="dask").as_dict()["executor"] == "dask"
+    for address in ("tcp://10.0.0.7:8786", "clinic-dask:8786", "tls://[::1]:8786"):
+        assert BatchOptions(executor="dask", scheduler=address).scheduler == address
 
 
 def _children(pid: int) -> set[int]:
