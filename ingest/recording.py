@@ -28,6 +28,8 @@ recorder has taken it from its input, every real frame before it is written."""
 DRAIN_POLL_S = 0.002
 UNPACED_FPS = 1e6
 """Replay rate asked of ReplayMessage: far above any camera's, so replay is not paced."""
+MAX_SIDE_PX = 4096
+"""The largest depth image side replayed: depth cameras give at most 1280×800."""
 
 
 def depthai():
@@ -151,7 +153,7 @@ def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFram
         if seq <= last:
             raise BadInputError(path, f"is a recording whose frame {frames} has sequence number {seq}, not after "
                                       f"{last}: its frames repeat or run backwards")
-        depth = np.asarray(msg.getFrame(), dtype=np.uint16)
+        depth = _depth_of(path, msg, frames)
         if stack is None:
             stack = np.empty((min(count, max_frames or count), *depth.shape), np.uint16)
             K = np.array(msg.getTransformation().getIntrinsicMatrix(), dtype=float)
@@ -175,6 +177,19 @@ def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFram
     _check_intrinsics(path, K, depth.shape[2], depth.shape[1])
     return DepthFrames(depth, K, f"{path.name}: depthai recording, {frames} frames "
                                  f"{depth.shape[2]}x{depth.shape[1]}")
+
+
+def _depth_of(path: Path, msg, index: int) -> np.ndarray:
+    """The (H, W) uint16 depth image of RAW16 frame `index`; BadInputError if its header's size, row
+    stride and data disagree (depthai would refuse it, or read past the data)."""
+    w, h, stride, size = msg.getWidth(), msg.getHeight(), msg.getStride(), len(msg.getData())
+    if not (0 < w <= MAX_SIDE_PX and 0 < h <= MAX_SIDE_PX):
+        raise BadInputError(path, f"its depth frame {index + 1} is {w}×{h} pixels; a depth camera's are "
+                                  f"1 to {MAX_SIDE_PX} a side")
+    if stride != 2 * w or size < 2 * w * h:
+        raise BadInputError(path, f"its depth frame {index + 1} ({w}×{h}) holds {size:,} bytes in rows of "
+                                  f"{stride} where RAW16 needs {2 * w * h:,} in rows of {2 * w} (a damaged frame)")
+    return np.asarray(msg.getFrame(), dtype=np.uint16)
 
 
 def _replay(path: Path, count: int):

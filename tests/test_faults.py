@@ -196,6 +196,30 @@ def test_frames_are_replayed_once_each_in_sequence_and_repeats_are_refused(tmp_p
         read_recording(tmp_path / "twice.mcap")
 
 
+def damaged_frame(dai, width, height, data, stride):
+    f = frame(dai, 600, 0)
+    f.setWidth(width)
+    f.setHeight(height)
+    f.setData(data)
+    f.setStride(stride)
+    return f
+
+
+@pytest.mark.parametrize("width, height, data, stride, problem", [
+    (8, 4, bytes(10), 16, r"its depth frame 1 \(8×4\) holds 10 bytes in rows of 16 where RAW16 needs 64 in rows"),
+    (8, 4, bytes(64), 4, r"its depth frame 1 \(8×4\) holds 64 bytes in rows of 4 where RAW16 needs 64 in rows of 16"),
+    (0, 4, bytes(64), 0, r"its depth frame 1 is 0×4 pixels; a depth camera's are 1 to 4096 a side"),
+    (2**31, 4, bytes(64), 16, r"its depth frame 1 is 2147483648×4 pixels"),
+])
+def test_a_frame_whose_size_stride_and_data_disagree_is_refused_not_decoded(tmp_path, width, height, data, stride,
+                                                                             problem):
+    """Truth: a RAW16 image of W×H pixels is W·H·2 bytes in rows of 2·W; a frame saying otherwise is damaged
+    (depthai itself would refuse it, or read past its data)."""
+    record_messages(tmp_path / "damaged.mcap", [damaged_frame(depthai(), width, height, data, stride)])
+    with pytest.raises(BadInputError, match=r"damaged\.mcap: " + problem):
+        read_recording(tmp_path / "damaged.mcap")
+
+
 # --- a full disk, a file-size limit ------------------------------------------------
 def test_ingest_on_a_full_disk_names_the_file_and_writes_nothing(cli, made, small_disk):
     disk = small_disk()
