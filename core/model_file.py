@@ -36,6 +36,9 @@ from breastplan.artefacts import check_arrays
 
 SCHEMA = "breastplan.model/1"
 KERNELS = ("linear", "poly", "rbf")
+MAX_POWER = 16
+"""The largest polynomial power (a feature's, or an SVR's degree) a model file may hold: a power
+beyond it is no trained model's, and makes a prediction's cost or value explode."""
 ACTIVATIONS = {"identity": lambda z: z, "relu": lambda z: np.maximum(z, 0, out=z),
                "tanh": lambda z: np.tanh(z, out=z), "logistic": lambda z: expit(z, out=z)}
 EXTRA = "extra_"
@@ -126,6 +129,7 @@ class ModelFile:
     n_features: int
     n_outputs: int
     arrays: dict[str, np.ndarray] = field(repr=False)
+    path: Path | None = None
 
     @property
     def kinds(self) -> list[str]:
@@ -133,7 +137,15 @@ class ModelFile:
         return list(self.meta.get("kinds") or [self.meta.get("kind")])
 
     def predict(self, X) -> np.ndarray:
-        """Predictions for the rows of X: shape (n,) or (n, n_outputs), as the estimator's."""
+        """Predictions for the rows of X: shape (n,) or (n, n_outputs), as the estimator's; ArtefactError
+        naming the file if they are not finite (a damaged model, or inputs far outside its training)."""
+        Z = self._predict(X)
+        if not np.isfinite(Z).all():
+            raise ArtefactError(self.path, "predicts values that are not finite for this breast (a damaged model, "
+                                           "or one trained far from such breasts)")
+        return Z
+
+    def _predict(self, X) -> np.ndarray:
         a = self.arrays
         X = np.array(X, dtype=np.float64, ndmin=2)            # a copy, scaled in place
         if X.ndim != 2 or X.shape[1] != self.n_features:
@@ -159,7 +171,7 @@ def load_model(path: str | Path) -> ModelFile:
         if v.dtype.kind == "f" and not np.isfinite(v).all():
             raise ArtefactError(Path(path), f"has NaN or infinite values in '{EXTRA}{key}'")
     return ModelFile(meta=art.meta, extra=extra, n_features=arrays["x_min"].size,
-                     n_outputs=arrays["y_min"].size, arrays=arrays)
+                     n_outputs=arrays["y_min"].size, arrays=arrays, path=Path(path))
 
 
 def _poly(X: np.ndarray, powers: np.ndarray) -> np.ndarray:
@@ -282,12 +294,18 @@ def _check(path: Path, a: dict[str, np.ndarray]) -> None:
         f"has out_ndim {a['out_ndim']} with {sizes['out']} outputs; expected 2, or 1 for a single output":
             a["out_ndim"] not in (1, 2) or (a["out_ndim"] == 1 and sizes["out"] != 1),
         "has a zero in 'y_scale'": not np.all(a["y_scale"]),
-        "has negative 'poly_powers'": "poly_powers" in a and (a["poly_powers"] < 0).any(),
+        f"has 'poly_powers' outside 0..{MAX_POWER}": "poly_powers" in a and not _within(a["poly_powers"], 0, MAX_POWER),
         f"has unknown SVR kernel '{a.get('svr_kernel')}'": "svr_kernel" in a and str(a["svr_kernel"]) not in KERNELS,
-        "has a negative 'svr_degree'": "svr_degree" in a and (a["svr_degree"] < 0).any(),
+        f"has an 'svr_degree' outside 0..{MAX_POWER}": "svr_degree" in a and not _within(a["svr_degree"], 0, MAX_POWER),
+        "has a negative kernel 'svr_gamma' or 'krr_gamma'": any((a[k] < 0).any() for k in ("svr_gamma", "krr_gamma")
+                                                                if k in a),
         f"has unknown MLP activation '{a.get('mlp_activation')}'":
             "mlp_activation" in a and str(a["mlp_activation"]) not in ACTIVATIONS,
     }
     for problem, found in problems.items():
         if found:
             raise ArtefactError(path, problem)
+
+
+def _within(values: np.ndarray, low: int, high: int) -> bool:
+    return bool(((values >= low) & (values <= high)).all())

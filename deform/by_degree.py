@@ -86,7 +86,7 @@ def degree_model(model: ModelFile, path: Path) -> ModelFile:
 def learnt_position(model: ModelFile, points_mm, kind: str, degree: float) -> float:
     """The model's position t on its condition's line for this breast and degree, clipped to [0, 1]."""
     features = np.concatenate([[degree], breast_scalars(points_mm, kind, model.meta["feature_set"])])
-    return float(np.clip(model.predict(features[None, :])[0], 0.0, 1.0))
+    return float(np.clip(model.predict(features[None, :]).reshape(-1)[0], 0.0, 1.0))   # (1,) or (1, 1)
 
 
 def deform_by_degree(points_mm, kind: str, degree: float, *, condition: str | None = None,

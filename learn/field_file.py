@@ -85,7 +85,8 @@ def field_file(model: ModelFile, path: Path) -> FieldFile:
         raise ArtefactError(path, "is a parametric model, not a statistical one (train-statistical writes those)")
     mean, components = model.extra.get("mean"), model.extra.get("components")
     n = model.meta.get("lattice")
-    if (mean is None or components is None or not isinstance(n, int) or mean.shape != (3 * n ** 3,)
+    if (mean is None or components is None or not isinstance(n, int) or mean.dtype.kind not in "fiu"
+            or components.dtype.kind not in "fiu" or mean.shape != (3 * n ** 3,)
             or components.shape != (model.n_outputs, mean.size) or not set(model.meta.get("kinds", ())) <= set(KINDS)
             or not model.meta.get("kinds")):
         raise ArtefactError(path, "holds an inconsistent statistical model (its modes, lattice or types)")

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from sklearn.compose import TransformedTargetRegressor
 from sklearn.exceptions import ConvergenceWarning, DataConversionWarning
+from sklearn.kernel_ridge import KernelRidge
 from sklearn.linear_model import Lasso, LinearRegression
 from sklearn.multioutput import MultiOutputRegressor
 from sklearn.neural_network import MLPRegressor
@@ -191,6 +192,44 @@ def test_unsupported_estimators_are_refused(make):
 def test_unfitted_estimators_are_refused():
     with pytest.raises(ValueError, match="fitted"):
         export_arrays(model(LinearRegression()))
+
+
+@pytest.mark.parametrize("make, change, says", [
+    (lambda: model(LinearRegression(), 2), {"poly_powers": lambda p: p * 10**9}, "'poly_powers' outside 0..16"),
+    (lambda: model(LinearRegression(), 2), {"poly_powers": lambda p: p.astype(np.uint64) + np.uint64(2**63)},
+     "beyond the range of integers"),
+    (lambda: model(svr("poly")), {"svr_degree": lambda d: d + 10**9}, "'svr_degree' outside 0..16"),
+    (lambda: model(svr("rbf")), {"svr_gamma": lambda g: -g}, "negative kernel"),
+    (lambda: model(KernelRidge(kernel="rbf", gamma=0.5)), {"krr_gamma": lambda g: -g}, "negative kernel"),
+], ids=["huge-power", "unsigned-wrap", "huge-svr-degree", "negative-svr-gamma", "negative-krr-gamma"])
+def test_a_model_whose_powers_or_kernels_no_training_gives_is_refused(tmp_path, make, change, says):
+    """Truth: PolynomialFeatures' powers and an SVR's degree are small non-negative integers and an RBF
+    kernel's γ is non-negative; a file saying otherwise would make a prediction explode or never end."""
+    arrays = export_arrays(fit(make(), Y_TRAIN[:, 0]))
+    arrays.update({k: f(arrays[k]) for k, f in change.items()})
+    path = save_npz(tmp_path / "bad.npz", SCHEMA, arrays)
+    with pytest.raises(ArtefactError, match=re.escape(str(path))) as err:
+        load_model(path)
+    assert says in str(err.value)
+
+
+def test_a_prediction_that_is_not_finite_is_refused_naming_the_file(tmp_path):
+    arrays = export_arrays(fit(model(LinearRegression()), Y_TRAIN[:, 0]))
+    arrays["x_scale"] = arrays["x_scale"] * 1e307                 # finite, but its products overflow
+    m = load_model(save_npz(tmp_path / "far.npz", SCHEMA, arrays))
+    with pytest.raises(ArtefactError, match=r"far\.npz: predicts values that are not finite"):
+        m.predict(X_FRESH * 1000)
+
+
+def test_a_single_output_kept_as_a_column_gives_one_position(tmp_path):
+    """A model of one output saved with out_ndim 2 predicts (n, 1); a position on a condition is its one value."""
+    from breastplan.deform.by_degree import learnt_position
+
+    est = model(LinearRegression()).fit(X_TRAIN[:, :2], Y_TRAIN[:, :1])      # the degree and v0
+    m = load_model(save_model(tmp_path / "m.npz", est, meta={"feature_set": "FS1"}))
+    assert m.predict(X_FRESH[:1, :2]).shape == (1, 1)
+    cube = np.mgrid[0:2, 0:2, 0:2].reshape(3, -1).T * 10.0
+    assert 0.0 <= learnt_position(m, cube, "ptosis", 3.0) <= 1.0
 
 
 def test_predict_checks_the_input_width(tmp_path):

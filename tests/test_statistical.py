@@ -331,6 +331,8 @@ def test_a_model_file_whose_parts_disagree_is_refused_before_any_plan(cli, train
                extra=learnt.extra)
     cases = [
         (_edited(tmp / "model.npz", tmp_path / "nan.npz", extra_mean=np.full(3 * 5 ** 3, np.nan)), "'extra_mean'"),
+        (_edited(tmp / "model.npz", tmp_path / "text.npz", extra_mean=np.full(3 * 5 ** 3, "a")),
+         "holds an inconsistent statistical model"),
         (tmp_path / "feat.npz", "takes 4 features, where a model of 1 type(s) takes 5"),
         (_edited(shipped, tmp_path / "cond.npz", meta={"condition": "ptosis sideways"}), "names no known condition"),
         (_edited(shipped, tmp_path / "kind.npz", meta={"kind": "turn"}), "is a model of turn"),
