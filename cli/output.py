@@ -70,13 +70,19 @@ def cache_folder(cache: Path | None) -> Path | None:
         return None
 
 
+def real(path: Path) -> Path:
+    """`path`, absolute, with its links followed as far as they lead (where `Path.resolve` raises on a
+    looping link, this leaves it as it is)."""
+    return Path(os.path.realpath(path))
+
+
 def apart(out: Path, input: Path, option: str = "--out") -> Path:
     """`out` unless writing it would replace what the command reads: `input` itself (by whatever path or
     link), or one of the files of the case folder it is in; a usage error (exit 2) then."""
     from breastplan.case import Case
 
     try:
-        same = out.resolve() == input.resolve() or (_exists(out) and _exists(input) and os.path.samefile(out, input))
+        same = real(out) == real(input) or (_exists(out) and _exists(input) and os.path.samefile(out, input))
         owned = Case.owns(out)
     except OSError:                          # a name too long to be either: `writable` says so
         return out

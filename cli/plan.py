@@ -11,7 +11,7 @@ from breastplan.errors import require_file
 from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, OptionError, PlanOptions
 
 from .app import JSON, UNITS_HELP, UP_HELP, command, scan_file_options
-from .output import report, stderr, usage_error, writable
+from .output import real, report, stderr, usage_error, writable
 
 FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method", "units": "--units", "up": "--up"}
 
@@ -50,7 +50,7 @@ def plan(
     scan_file_options(input, units, up)
     if out is None:
         out = input if input is not None and input.is_dir() else Path(f"{(input or Path('sample')).stem}-plan")
-    if wall_from is not None and out.resolve() in (wall_from.resolve(), wall_from.resolve().parent):
+    if wall_from is not None and real(out) in (real(wall_from), real(wall_from).parent):
         raise usage_error(f"it names the case folder this plan writes ({out}); give the earlier visit's",
                           "--wall-from")
     writable(out, folder=True)

@@ -42,7 +42,8 @@ def require_file(path: str | Path, kind: str, error: type[BadInputError] = BadIn
     """`path` as a Path if it is an existing, non-empty regular file; else `error` saying why."""
     path = Path(path)
     if not path.exists():
-        raise error(path, "no such file")
+        raise error(path, "is a symbolic link to no file (it loops, or its target is gone)" if path.is_symlink()
+                    else "no such file")
     if path.is_dir():
         raise error(path, f"is a folder, not a {kind}")
     if not path.is_file():

@@ -133,6 +133,16 @@ def test_an_unreadable_file_is_bad_input_not_a_usage_error(cli, tmp_path, comman
     assert "cannot be read (Permission denied)" in res.stderr
 
 
+@pytest.mark.parametrize("command", [DEFORM, FIT, INGEST, ["plan"], ["dataset", "--condition", "ptosis b0", "--db"],
+                                     ["batch"]])
+def test_a_symbolic_link_that_loops_is_named_as_such(cli, tmp_path, command):
+    path = tmp_path / "loop.ply"
+    path.symlink_to(path.name)
+    res = run(cli, *command, path, "--out", tmp_path / "out")
+    assert_bad_input(res, path, tmp_path)
+    assert ("is a symbolic link to no file (it loops" if command[0] != "batch" else "is not a folder") in res.stderr
+
+
 @pytest.mark.parametrize("command", [DEFORM, FIT, INGEST, ["plan"], ["filter", "get_breast_measures"]])
 @pytest.mark.parametrize("name", ["scan.ply", "scan.mcap"])
 def test_a_named_pipe_is_refused_not_waited_on(cli, tmp_path, command, name):
