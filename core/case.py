@@ -252,6 +252,12 @@ class Case:
             wall = ChestWall.from_array(art["chest_wall"])
         except ValueError as e:
             raise ArtefactError(npz, f"has a 'chest_wall' {e}") from None
+        nipple_view = transform_points(art["view_from_camera"], art["nipple_camera_mm"])
+        with np.errstate(all="ignore"):
+            depth = float(wall.height(nipple_view))
+        if not 0 <= depth <= BREAST_EXTENT_MM[1]:
+            raise ArtefactError(npz, f"has a 'chest_wall' that does not lie behind its nipple (the nipple stands "
+                                     f"{depth:.4g} mm in front of it; a breast projects 0–{BREAST_EXTENT_MM[1]:g})")
         found = art.meta.get("nipple_found", "apex")
         if found not in NIPPLE_FOUND:
             raise ArtefactError(npz, f"says its nipple was found by '{found}', not one of {', '.join(NIPPLE_FOUND)}")

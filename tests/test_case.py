@@ -31,7 +31,7 @@ def a_scan(n=60, provenance=Provenance()):
     return Scan(points=rng.normal(size=(n, 3)) * 30, normals=normals / np.linalg.norm(normals, axis=1, keepdims=True),
                 torso_camera=rng.normal(size=(5 * n, 3)) * 200, camera_to_breast=T, view_from_camera=np.eye(4),
                 side="right", nipple_camera_mm=np.array([-100.0, 0.0, 650.0]),
-                chest_wall=ChestWall.from_array(np.r_[2.0, 0.0, 0.0, 1.0, np.arange(6.0)]),
+                chest_wall=ChestWall.from_array(np.r_[2.0, 0.0, 0.0, 1.0, 700.0, np.arange(1.0, 6.0)]),  # 52 mm behind
                 mound_centre_view_mm=np.array([-90.0, 5.0]), mound_radius_mm=80.0, crop_height_mm=2.0,
                 roi_camera_mm=None, voxel_mm=2.0,
                 source=Source("recording", "rec.mcap: 3 frames", 3, np.diag([450.0, 450.0, 1.0]), np.array([640, 400])),
@@ -258,10 +258,13 @@ MISMATCHED_WALL = "'chest_wall' whose coefficients do not match its degree"
     ("chest_wall", ChestWall(np.arange(6.0), 3, np.zeros(2), 1.0), MISMATCHED_WALL),
     ("chest_wall", ChestWall(np.arange(6.0), 2.5, np.zeros(2), 1.0), MISMATCHED_WALL),
     ("chest_wall", ChestWall(np.r_[np.nan, np.zeros(5)], 2, np.zeros(2), 1.0), "NaN or infinite values in 'chest_wall'"),
+    ("chest_wall", ChestWall(np.r_[700.0, np.zeros(5)], 2, np.array([1e300, 0.0]), 1.0), "does not lie behind its nipple"),
+    ("chest_wall", ChestWall(np.r_[600.0, np.zeros(5)], 2, np.zeros(2), 1.0), "the nipple stands -50 mm in front"),
 ])
 def test_a_scan_whose_frames_or_chest_wall_cannot_be_used_is_refused_by_name(tmp_path, field, value, problem):
     """Truth: the fit inverts the scan's transforms and evaluates its chest wall; a scan.npz whose
-    transforms are not rigid or whose wall's coefficients do not match its degree is damaged."""
+    transforms are not rigid, whose wall's coefficients do not match its degree, or whose wall does
+    not lie behind the nipple (at 650 mm, 600 mm is in front of it) is damaged."""
     case = Case(tmp_path / "case")
     case.save_scan(dataclasses.replace(a_scan(), **{field: value}))
     with pytest.raises(ArtefactError, match=problem) as err:
