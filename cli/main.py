@@ -30,17 +30,18 @@ def main() -> None:
     for stream in (sys.stdout, sys.stderr):      # a terminal that is not UTF-8, a file name that is not
         stream.reconfigure(errors="backslashreplace")           # UTF-8: shown escaped, never a crash
     sys.stdout = _Stdout(sys.stdout)
-    with warnings.catch_warnings(record=True) as held:
-        try:
+    held: list[warnings.WarningMessage] = []
+    try:
+        with warnings.catch_warnings(record=True) as held:     # shown after it, where showing is no recording
             _run()
-        except SystemExit as exc:
-            if exc.code not in REFUSED:
-                _show(held)
-            raise
-        except BaseException:
+    except SystemExit as exc:
+        if exc.code not in REFUSED:
             _show(held)
-            raise
+        raise
+    except BaseException:
         _show(held)
+        raise
+    _show(held)
 
 
 class _Stdout:

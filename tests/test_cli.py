@@ -1,4 +1,5 @@
 """The `breastplan` command end to end through files, as a user runs it (docs/cli.md exit codes)."""
+import contextlib
 import json
 import os
 import subprocess
@@ -238,3 +239,25 @@ def test_a_default_cache_that_cannot_be_written_is_no_cache_and_a_given_one_is_r
     assert cache_folder(None) == tmp_path / "cache"
     with pytest.raises(BadInputError, match="is a file, not a folder"):
         cache_folder(tmp_path / "file")
+
+
+@pytest.mark.parametrize("ending", [None, SystemExit(0), RuntimeError("a bug")])
+def test_a_warning_raised_on_the_way_is_shown_once_after_the_command(monkeypatch, ending):
+    """A warning held during a command is shown when it ends (successfully, or not by a refusal), once;
+    showing it must not be recorded again (showing while recording appended to the list being shown,
+    for ever)."""
+    import warnings
+
+    import breastplan.cli.main as cli_main
+
+    def command():
+        warnings.warn("numpy said so", RuntimeWarning)
+        if ending is not None:
+            raise ending
+    shown = []
+    monkeypatch.setattr(cli_main, "_run", command)
+    monkeypatch.setattr(cli_main.sys, "stdout", cli_main.sys.stdout)   # main() wraps stdout; undone after
+    monkeypatch.setattr(warnings, "showwarning", lambda message, *rest: shown.append(str(message)))
+    with pytest.raises(type(ending)) if ending is not None else contextlib.nullcontext():
+        cli_main.main()
+    assert shown == ["numpy said so"]
