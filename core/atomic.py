@@ -121,7 +121,7 @@ def atomic_set() -> Iterator[Stage]:
         if committed:                             # the journal stands: `recover` completes the set
             raise
         for tmp in journal + [tmp for tmp, _ in staged]:   # the journal first: it must never outlive a file
-            with contextlib.suppress(FileNotFoundError):
+            with contextlib.suppress(FileNotFoundError, IsADirectoryError):   # a folder in its place is not ours
                 os.unlink(tmp)
         _remove_folders(made)
         names = {str(tmp): path for tmp, path in staged}

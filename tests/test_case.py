@@ -141,6 +141,16 @@ def test_a_failed_write_leaves_the_previous_set_whole_and_no_part_file(tmp_path,
     assert case.load_fit().normalised_residual == 0.001
 
 
+def test_a_folder_where_the_journal_goes_fails_the_write_and_leaves_no_part_file(tmp_path):
+    case = Case(tmp_path)
+    case.save_fit(a_fit())
+    (tmp_path / ".fit.npz.commit").mkdir()                            # not a journal: nothing to recover
+    before = {p.name: p.is_dir() or p.read_bytes() for p in tmp_path.iterdir()}
+    with pytest.raises(OSError):
+        case.save_fit(a_fit(normalised_residual=0.002))
+    assert {p.name: p.is_dir() or p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
 def test_atomic_set_renames_in_staging_order_only_on_success(tmp_path):
     with atomic_set() as stage:
         first, second = stage(tmp_path / "a.txt"), stage(tmp_path / "sub" / "b.txt")
