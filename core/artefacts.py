@@ -20,6 +20,9 @@ from .errors import ArtefactError, NewerArtefactError, require_file
 from .json_text import from_json
 
 RESERVED = ("schema", "units", "frame", "version", "meta")
+MAX_BYTES = 256 << 20
+"""Bytes of arrays an artefact may declare: breastplan's largest, a database, holds tens of MB; more
+(a small file that inflates to gigabytes) is refused before anything is unpacked."""
 
 Spec = Mapping[str, tuple[str, tuple]]
 """name → (dtype kinds, shape); shape entries are ints, or names bound to one size across arrays."""
@@ -103,6 +106,10 @@ def _check_sizes(path: Path) -> None:
     """ArtefactError for an array whose header declares more data than its member holds: read
     before loading, so that a forged header cannot make numpy allocate what the file never held."""
     with zipfile.ZipFile(path) as archive:
+        total = sum(info.file_size for info in archive.infolist())
+        if total > MAX_BYTES:
+            raise ArtefactError(path, f"unpacks to {total:,} bytes, more than any breastplan artefact holds "
+                                      f"({MAX_BYTES >> 20} MiB)")
         for info in archive.infolist():
             if not info.filename.endswith(".npy"):
                 continue

@@ -47,3 +47,17 @@ def forged_npz(path):
     with zipfile.ZipFile(path, "a") as archive:
         archive.writestr("points.npy", header.getvalue() + b"\0" * 24)
     return path
+
+
+def inflating_npz(path, mib=300):
+    """A small NPZ (deflated) one of whose members unpacks to `mib` MiB of zeros, its header true to them."""
+    np.savez(path, grid=np.zeros(2))
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False,
+                                                  "shape": (mib << 17,)})
+    with zipfile.ZipFile(path, "a", compression=zipfile.ZIP_DEFLATED) as archive:
+        with archive.open("points.npy", "w", force_zip64=True) as member:
+            member.write(header.getvalue())
+            for _ in range(mib):
+                member.write(bytes(1 << 20))
+    return path

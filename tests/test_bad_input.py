@@ -12,7 +12,7 @@ import pytest
 
 from breastplan import read_ply, write_ply
 
-from bad_inputs import PLY_XYZ, breast_mm, forged_npz, four_numbers_ply, ply_header, sparse
+from bad_inputs import PLY_XYZ, breast_mm, forged_npz, four_numbers_ply, inflating_npz, ply_header, sparse
 from clitools import assert_bad_input, run
 
 
@@ -73,6 +73,8 @@ CASES = {  # name → (file name, builder(path) → path, command, extra options
                                                 [-1.7e308] * 3]]), FIT, [], "a point lies far from the others"),
     "npz member declaring 10^12 × 3 values (dataset)": ("db.npz", forged_npz, ["dataset", "--condition", "ptosis b0",
                                                         "--db"], [], "declares 1000000000000×3 values"),
+    "npz of 300 kB unpacking to 300 MiB (dataset)": ("bomb.npz", inflating_npz, ["dataset", "--condition", "ptosis b0",
+                                                     "--db"], [], "more than any breastplan artefact holds (256 MiB)"),
     "2 GB of zeros as .ply (deform)": ("zero.ply", lambda p: sparse(p, b"", GB2), DEFORM, [], "is not a PLY file"),
     "2 GB of zeros as .xyz (ingest)": ("zero.xyz", lambda p: sparse(p, b"", GB2), INGEST, [], "it is not text"),
     "2 GB of zeros as .obj (ingest)": ("zero.obj", lambda p: sparse(p, b"", GB2), INGEST, [], "it is not text"),
