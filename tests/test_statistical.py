@@ -208,6 +208,12 @@ def test_bad_model_files_and_pairs_folders_exit_3(cli, trained, tmp_path):
     broken.write_bytes(b"PK\x03\x04 not really")
     res = run(cli, "deform", before, "--kind", "ptosis", "--degree", 3, "--model", broken, "--out", tmp_path / "out.ply")
     assert_bad_input(res, broken, tmp_path)
+    with np.load(tmp / "model.npz") as npz:
+        components = npz["extra_components"]
+    wild = _edited(tmp / "model.npz", tmp_path / "wild.npz", extra_components=components * 1e6)
+    res = run(cli, "deform", before, "--kind", "ptosis", "--degree", 3, "--model", wild, "--out", tmp_path / "out.ply")
+    assert_bad_input(res, wild, tmp_path)                     # the model is named, not her breast
+    assert "more than any breast spans (600 mm): a damaged model" in res.stderr
     (tmp_path / "pairs").mkdir()
     (tmp_path / "pairs" / "pairs.csv").write_text("before,after,type,degree\nmissing.ply,also.ply,ptosis,3\n")
     res = run(cli, "train-statistical", "--pairs", tmp_path / "pairs", "--out", tmp_path / "out.npz")
