@@ -139,7 +139,8 @@ class ModelFile:
     def predict(self, X) -> np.ndarray:
         """Predictions for the rows of X: shape (n,) or (n, n_outputs), as the estimator's; ArtefactError
         naming the file if they are not finite (a damaged model, or inputs far outside its training)."""
-        Z = self._predict(X)
+        with np.errstate(over="ignore", invalid="ignore"):         # what overflows is refused below
+            Z = self._predict(X)
         if not np.isfinite(Z).all():
             raise ArtefactError(self.path, "predicts values that are not finite for this breast (a damaged model, "
                                            "or one trained far from such breasts)")

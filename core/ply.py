@@ -121,6 +121,9 @@ def _parse_header(path: Path, data: bytes):
     if any(e.count < 0 for e in elements):
         raise ArtefactError(path, "is not a valid PLY file: an element has a negative count")
     for e in elements:
+        if e.name == "face" and any("f" in (t[0], count_t[0]) for _, t, count_t in e.props if count_t is not None):
+            raise ArtefactError(path, "is not a valid PLY file: its faces' vertex counts or indices are declared as "
+                                      "floats, not integers")
         names = [p[0] for p in e.props]
         twice = sorted({n for n in names if names.count(n) > 1})
         if twice:

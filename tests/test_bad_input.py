@@ -61,6 +61,9 @@ CASES = {  # name → (file name, builder(path) → path, command, extra options
     "ply declaring x twice (deform)": ("twice.ply", lambda p: p.write_bytes(ply_header(3).replace(
         b"property float z", b"property float z\nproperty float x") + bytes(48)), DEFORM, [],
         "its element 'vertex' declares the property 'x' more than once"),
+    "ply whose face indices are floats (deform)": ("floatfaces.ply", lambda p: p.write_bytes(ply_header(3, "ascii").replace(
+        b"end_header", b"element face 1\nproperty list uchar float vertex_indices\nend_header")
+        + b"0 0 0\n1 0 0\n0 1 0\n3 0.5 1.5 2.5\n"), DEFORM, [], "vertex counts or indices are declared as floats"),
     "text file named .npz (deform)": ("text.npz", lambda p: p.write_text("not an archive\n"), DEFORM, [],
                                       "is neither a PLY file nor a fit.npz or case folder holding a fit, which deform"),
     "folder without a fit (deform)": ("case", lambda p: p.mkdir(), DEFORM, [],
