@@ -252,6 +252,11 @@ class Case:
             wall = ChestWall.from_array(art["chest_wall"])
         except ValueError as e:
             raise ArtefactError(npz, f"has a 'chest_wall' {e}") from None
+        for key in ("crop_mound_radius_mm", "voxel_mm"):
+            if not art[key] > 0:
+                raise ArtefactError(npz, f"has a '{key}' of {float(art[key]):g}, not a positive length")
+        if wall.scale_mm < 0 or art["crop_height_mm"] < 0:
+            raise ArtefactError(npz, "has a negative spread of its chest wall or crop height")
         nipple_view = transform_points(art["view_from_camera"], art["nipple_camera_mm"])
         with np.errstate(all="ignore"):
             depth = float(wall.height(nipple_view))

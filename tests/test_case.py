@@ -270,11 +270,15 @@ MISMATCHED_WALL = "'chest_wall' whose coefficients do not match its degree"
     ("chest_wall", ChestWall(np.r_[np.nan, np.zeros(5)], 2, np.zeros(2), 1.0), "NaN or infinite values in 'chest_wall'"),
     ("chest_wall", ChestWall(np.r_[700.0, np.zeros(5)], 2, np.array([1e300, 0.0]), 1.0), "does not lie behind its nipple"),
     ("chest_wall", ChestWall(np.r_[600.0, np.zeros(5)], 2, np.zeros(2), 1.0), "the nipple stands -50 mm in front"),
+    ("chest_wall", ChestWall(np.r_[700.0, np.zeros(5)], 2, np.zeros(2), -1.0), "negative spread of its chest wall"),
+    ("mound_radius_mm", -5.0, "'crop_mound_radius_mm' of -5, not a positive length"),
+    ("voxel_mm", 0.0, "'voxel_mm' of 0, not a positive length"),
 ])
 def test_a_scan_whose_frames_or_chest_wall_cannot_be_used_is_refused_by_name(tmp_path, field, value, problem):
     """Truth: the fit inverts the scan's transforms and evaluates its chest wall; a scan.npz whose
-    transforms are not rigid, whose wall's coefficients do not match its degree, or whose wall does
-    not lie behind the nipple (at 650 mm, 600 mm is in front of it) is damaged."""
+    transforms are not rigid, whose wall's coefficients do not match its degree, whose wall does
+    not lie behind the nipple (at 650 mm, 600 mm is in front of it), or whose lengths are not
+    positive is damaged."""
     case = Case(tmp_path / "case")
     case.save_scan(dataclasses.replace(a_scan(), **{field: value}))
     with pytest.raises(ArtefactError, match=problem) as err:
