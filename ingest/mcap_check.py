@@ -198,21 +198,16 @@ def _opcodes(data: bytes):
 
 def _decompress(compression: str, data, size: int, path: Path) -> bytes:
     """At most `size` + 1 bytes of a chunk's data; ValueError if it cannot be decompressed."""
-    if compression not in ("", "lz4", "zstd"):
+    if compression == "zstd":
+        raise BadInputError(path, "is an MCAP recording compressed with 'zstd', which depthai's replay cannot read; "
+                                  "record it (or write it again) with lz4 or no compression")
+    if compression not in ("", "lz4"):
         raise BadInputError(path, f"is an MCAP recording compressed with '{compression}', which breastplan "
                                   f"cannot read")
     try:
         if compression == "lz4":
             import lz4.frame
             return lz4.frame.LZ4FrameDecompressor().decompress(bytes(data), max_length=size + 1)
-        if compression == "zstd":
-            import zstandard
-            with zstandard.ZstdDecompressor().stream_reader(bytes(data)) as reader:
-                parts, got = [], 0
-                while got <= size and (part := reader.read(size + 1 - got)):
-                    parts.append(part)
-                    got += len(part)
-                return b"".join(parts)
         return bytes(data)
-    except Exception as exc:                               # lz4 raises RuntimeError, zstandard ZstdError
+    except Exception as exc:                               # lz4 raises RuntimeError
         raise ValueError("its data cannot be decompressed") from exc

@@ -165,6 +165,14 @@ def test_a_chunk_declaring_a_huge_size_is_refused_before_it_is_decompressed(tmp_
         read_recording(path)
 
 
+def test_a_recording_compressed_with_zstd_is_refused_saying_depthai_cannot_replay_it(tmp_path):
+    """A valid MCAP whose chunks are zstd-compressed: depthai's replay reads none of its messages."""
+    path = plain_mcap(tmp_path / "zstd.mcap", [b"\0" * 1000] * 3, compression=CompressionType.ZSTD)
+    with pytest.raises(BadInputError, match=r"zstd\.mcap: is an MCAP recording compressed with 'zstd', which "
+                                            r"depthai's replay cannot read; record it .* with lz4"):
+        read_recording(path)
+
+
 def test_more_messages_than_a_body_scan_holds_are_refused_whatever_the_summary_says(tmp_path):
     path = forge_count(plain_mcap(tmp_path / "many.mcap", [b"x"] * 3_500), tmp_path / "lying.mcap", 11)
     with pytest.raises(BadInputError, match=r"lying\.mcap: is an MCAP recording of more than 3,000 messages"):
