@@ -22,7 +22,7 @@ from breastplan import PARAM_NAMES, Primitive, load_npz, save_npz, transform_poi
 from breastplan.chest_wall import ChestWall
 from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.global_deformations import Deformation
-from breastplan.deform.names import KIND_PARAMS
+from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
 from breastplan.meshes import volume_below_base
 from breastplan.options import SIDES
 
@@ -136,7 +136,15 @@ def default_breast(rng: np.random.Generator, overrides: dict[str, float] | None 
                   g0=rng.uniform(0.0, 0.3))
     for name, value in (overrides or {}).items():
         (values if name in PARAM_NAMES else deform)[name] = float(value)
-    return Breast(Primitive(**{k: float(v) for k, v in values.items()}), Deformation.from_vector([deform[n] for n in DEFORMATION_NAMES]))
+    primitive = Primitive(**{k: float(v) for k, v in values.items()})
+    problem = primitive.breast_problem()
+    if problem:
+        raise ValueError(f"the breast {problem}")
+    outside = {n: v for n, v in deform.items() if not PLAUSIBLE[n][0] <= v <= PLAUSIBLE[n][1]}
+    if outside:
+        raise ValueError("deformation parameters outside what a breast shows: " + ", ".join(
+            f"{n} = {v:g} (range {PLAUSIBLE[n][0]:g}..{PLAUSIBLE[n][1]:g})" for n, v in outside.items()))
+    return Breast(primitive, Deformation.from_vector([deform[n] for n in DEFORMATION_NAMES]))
 
 
 def make_scene(seed: int = 0, tilt_deg: float = 0.0, distance_mm: float | None = None, noise_mm: float = 1.0,

@@ -141,6 +141,9 @@ def test_live_device_absent_exits_3(cli, tmp_path):
     ["ingest", "--side", "left", "--out", "o"],
     ["ingest", "x.mcap", "--side", "left", "--out", "o", "--roi", "1,2,3"],
     ["scan-synth", "--out", "r.mcap", "--truth", "t.npz", "--side-params", "left:a9=3"],
+    ["scan-synth", "--out", "r.mcap", "--truth", "t.npz", "--side-params", "left:a1=1e9"],
+    ["scan-synth", "--out", "r.mcap", "--truth", "t.npz", "--side-params", "left:b0=1e6"],
+    ["scan-synth", "--out", "r.mcap", "--truth", "t.npz", "--side-params", "right:s0=nan"],
     ["scan-synth", "--out", "r.mcap", "--truth", "t.npz", "--frames", "0"],
 ])
 def test_ingest_usage_errors_exit_2(cli, tmp_path, args):
