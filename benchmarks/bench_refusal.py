@@ -32,7 +32,7 @@ from rich.table import Table
 from breastplan import write_ply
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
-from bad_inputs import breast_mm, forged_npz, four_numbers_ply, ply_header, sparse  # noqa: E402
+from bad_inputs import breast_mm, forged_npz, four_numbers_ply, inflating_npz, ply_header, sparse  # noqa: E402
 from faulty_recordings import RECORDINGS  # noqa: E402  (damaged and forged MCAP recordings)
 
 BREASTPLAN = str(Path(sys.executable).with_name("breastplan"))
@@ -108,6 +108,7 @@ CASES = [
     Case("one coordinate 1e30, --units mm (ingest)", ingest(points("far.ply", FAR), "--units", "mm")),
     Case("coordinates ±1.7e308 (fit)", fit(points("inf.ply", np.r_[breast_mm(), [[1.7e308] * 3, [-1.7e308] * 3]]))),
     Case("NPZ member declaring 10^12 × 3 values (dataset)", dataset(lambda d: forged_npz(d / "db.npz"))),
+    Case("NPZ of 3 MB unpacking to 3 GiB (dataset)", dataset(lambda d: inflating_npz(d / "db.npz", 3072))),
     Case("synth --points 10^8", lambda d: ["synth", "--db", "S", "--points", 10**8, "--out", d / "out"], 2),
     Case("synth --seed -1", lambda d: ["synth", "--db", "S", "--seed", -1, "--out", d / "out"], 2),
     Case("dataset --dd 100000", dataset(lambda d: forged_npz(d / "db.npz"), 100_000), 2),

@@ -69,9 +69,10 @@ def by_degree(points_mm, kind: str, degree: float, *, method: str = "exact", pri
     with np.errstate(over="ignore", invalid="ignore"):
         shift = np.linalg.norm(moved - points_mm, axis=1).max()
     if not shift <= BREAST_EXTENT_MM[1]:
-        raise ArtefactError(Path(method), f"moves her breast's points by {shift:.3g} mm for {kind} at degree "
-                                          f"{degree:g}, more than any breast spans ({BREAST_EXTENT_MM[1]:g} mm): "
-                                          "a damaged model, or one trained on other breasts")
+        how = f"by {shift:.3g} mm" if np.isfinite(shift) else "to infinity"
+        raise ArtefactError(Path(method), f"moves her breast's points {how} for {kind} at degree {degree:g}, more "
+                                          f"than any breast spans ({BREAST_EXTENT_MM[1]:g} mm): a damaged model, or "
+                                          "one trained on other breasts")
     reached = degree_reached(cond, to_model_units(points_mm), to_model_units(moved), primitive)
     return ByDegree(moved, cond, str(method), float("nan"), np.zeros(0), reached, lattice)
 
