@@ -169,9 +169,9 @@ class PlanOptions:
 
 
 EXECUTORS = ("local", "dask")
+"""Where a batch's cases run: local worker processes, or the workers of a Dask cluster."""
 _SCHEDULER = re.compile(r"((tcp|tls|ws|wss|ucx)://)?(\[[0-9A-Fa-f:.]+\]|[^\s/:\[\]]+):([1-9][0-9]{0,4})")
 """A Dask scheduler's address: an optional protocol, a host (an IPv6 one in brackets) and a port."""
-"""Where a batch's cases run: local worker processes, or the workers of a Dask cluster."""
 
 
 @dataclass(frozen=True)

@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from breastplan import ArtefactError, BadInputError, to_model_units
-from breastplan.units import BREAST_EXTENT_MM
 from breastplan.deform.by_degree import ByDegree, check_degree, deform_by_degree, degree_reached, pick_condition
 from breastplan.deform.lattice import Lattice
 from breastplan.model_file import ModelFile, load_model
+from breastplan.units import BREAST_EXTENT_MM
 
 from .displacements import (KINDS, FitCache, PairOptions, feature_names, field_lattice, fit_before, fit_pair,
                             pair_features)
