@@ -363,3 +363,10 @@ def test_a_fit_from_a_newer_breastplan_is_refused_not_refitted_over(tmp_path):
 def test_a_breast_model_refuses_a_pose_that_is_no_rigid_transform(pose):
     with pytest.raises(ValueError, match="rigid 4×4 transform"):
         BreastModel(Primitive(), pose=pose)
+
+
+def test_the_report_words_every_way_a_nipple_is_found():
+    from breastplan.case import NIPPLE_FOUND
+    from breastplan.plan.report import NIPPLE_FOUND as WORDS
+
+    assert set(WORDS) == set(NIPPLE_FOUND)
