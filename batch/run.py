@@ -20,7 +20,7 @@ from breastplan.errors import Interrupted, require_folder
 from breastplan.options import BatchOptions
 
 from .executors import dask_client, run_dask, run_local
-from .inputs import find_inputs
+from .inputs import Input, find_inputs
 from .manifest import Manifest, Row
 from .task import Task, finished, remove_leftovers
 
@@ -42,14 +42,15 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
     """Plan every scan and recording under `folder` into `out` (docs/cli.md, `batch`)."""
     folder, out = Path(folder), Path(out)
     require_folder(folder, "folder")
-    if not find_inputs(folder, out):
+    inputs = find_inputs(folder, out)
+    if not inputs:
         raise BadInputError(folder, "holds no file to plan (no scan or recording)")
     if options.executor == "dask" and options.scheduler is not None:
         dask_client(options.scheduler).close()           # unreachable: said before anything is written
     out.mkdir(parents=True, exist_ok=True)
     with _locked(out):
         removed = remove_leftovers(out)
-        rows, tasks = _rows_and_tasks(folder, out, options)
+        rows, tasks = _rows_and_tasks(inputs, out, options)
         about = {"version": __version__, "input_folder": str(folder), "options": options.as_dict()}
         manifest = Manifest(out, about, rows)
         manifest.write()
@@ -87,11 +88,11 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
     return Batch(manifest, tuple(removed))
 
 
-def _rows_and_tasks(folder: Path, out: Path, options: BatchOptions) -> tuple[list[Row], list[Task]]:
+def _rows_and_tasks(inputs: list[Input], out: Path, options: BatchOptions) -> tuple[list[Row], list[Task]]:
     """A row for every input (settled for the skipped, unreadable and reused) and a task for the rest
     (with `wall_from`, a follow-up of the earlier batch's case of the same name)."""
     rows, tasks = [], []
-    for i in find_inputs(folder, out):
+    for i in inputs:
         row = Row(i.name, i.case)
         rows.append(row)
         if i.skipped:
