@@ -51,7 +51,7 @@ def deform(
 
     from breastplan import to_mm, to_model_units, transform_points, write_ply
     from breastplan.case import pose_comment
-    from breastplan.units import BREAST_EXTENT_MM, breast_points_problem
+    from breastplan.units import breast_points_problem, displacement_problem
 
     given = _parse_primitive(primitive)
     params = parse_pairs(param, f"parameters of {kind}", "--param")
@@ -113,13 +113,9 @@ def deform(
                  "degree_reached": round(result.degree_reached, 4)}
         if model is None:                                       # a statistical model has no parameters
             extra.update(t=round(result.t, 6), params={k: round(float(v), 6) for k, v in params.items()})
-    with np.errstate(over="ignore", invalid="ignore"):
-        shift = np.linalg.norm(moved - local, axis=1)          # the pose is rigid: the same in the breast frame
-    if not np.isfinite(shift).all():
-        raise BadInputError(input, f"{kind} with these parameters sends points to infinity")
-    if shift.max() > BREAST_EXTENT_MM[1]:
-        raise BadInputError(input, f"{kind} with these parameters moves points by {shift.max():.3g} mm, more than "
-                                   f"any breast spans ({BREAST_EXTENT_MM[1]:g} mm)")
+    shift, problem = displacement_problem(local, moved)      # the pose is rigid: the same in the breast frame
+    if problem:
+        raise BadInputError(input, f"{kind} with these parameters {problem}")
     after = transform_points(pose, moved)
     carry = [] if prim is None else [prim.comment(), pose_comment(pose)]
     how = " ".join([kind, *(f"{k}={v:g}" for k, v in params.items())])

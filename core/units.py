@@ -71,3 +71,15 @@ def breast_points_problem(points_mm) -> str | None:
     if np.median(p[:, 2]) < 0.0:
         return "lies mostly below z = 0: a breast rises from its base along +z (is its z axis reversed?)"
     return None
+
+
+def displacement_problem(before_mm, after_mm) -> tuple[np.ndarray, str | None]:
+    """Each point's displacement (mm) from `before_mm` to `after_mm` (..., 3), and why they cannot be a
+    change of a breast (points sent to infinity, or moved further than any breast spans), or None."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        shift = np.linalg.norm(np.asarray(after_mm, float) - before_mm, axis=-1)
+    if not np.isfinite(shift).all():
+        return shift, "sends points to infinity"
+    if shift.max() > BREAST_EXTENT_MM[1]:
+        return shift, f"moves points by {shift.max():.3g} mm, more than any breast spans ({BREAST_EXTENT_MM[1]:g} mm)"
+    return shift, None

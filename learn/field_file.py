@@ -18,7 +18,7 @@ from breastplan import ArtefactError, BadInputError, to_model_units
 from breastplan.deform.by_degree import ByDegree, check_degree, deform_by_degree, degree_reached, pick_condition
 from breastplan.deform.lattice import Lattice
 from breastplan.model_file import ModelFile, load_model
-from breastplan.units import BREAST_EXTENT_MM
+from breastplan.units import displacement_problem
 
 from .displacements import (KINDS, FitCache, PairOptions, feature_names, field_lattice, fit_before, fit_pair,
                             pair_features)
@@ -66,13 +66,10 @@ def by_degree(points_mm, kind: str, degree: float, *, method: str = "exact", pri
     points_mm = np.asarray(points_mm, dtype=float)
     lattice = field_file(model, Path(method)).deformation(points_mm, kind, degree)
     moved = lattice(points_mm)
-    with np.errstate(over="ignore", invalid="ignore"):
-        shift = np.linalg.norm(moved - points_mm, axis=1).max()
-    if not shift <= BREAST_EXTENT_MM[1]:
-        how = f"by {shift:.3g} mm" if np.isfinite(shift) else "to infinity"
-        raise ArtefactError(Path(method), f"moves her breast's points {how} for {kind} at degree {degree:g}, more "
-                                          f"than any breast spans ({BREAST_EXTENT_MM[1]:g} mm): a damaged model, or "
-                                          "one trained on other breasts")
+    problem = displacement_problem(points_mm, moved)[1]
+    if problem:
+        raise ArtefactError(Path(method), f"for {kind} at degree {degree:g}, {problem}: a damaged "
+                                          "model, or one trained on other breasts")
     reached = degree_reached(cond, to_model_units(points_mm), to_model_units(moved), primitive)
     return ByDegree(moved, cond, str(method), float("nan"), np.zeros(0), reached, lattice)
 
