@@ -78,6 +78,8 @@ def read_ply(path: str | Path) -> Geometry:
     return _to_geometry(path, elements, arrays, comments)
 
 
+# words on a header line, by (keyword, second word is "list"); other keywords are refused
+_WORDS = {("format", False): 3, ("element", False): 3, ("property", False): 3, ("property", True): 5}
 _END_HEADER = re.compile(rb"^end_header[ \t\r]*$", re.MULTILINE)
 
 
@@ -100,20 +102,24 @@ def _parse_header(path: Path, data: bytes):
         words = line.split()
         if not words:
             continue
+        if words[0] in ("comment", "obj_info"):
+            comments.append(line.split(None, 1)[1] if len(words) > 1 else "")
+            continue
         try:
+            if len(words) != _WORDS[words[0], words[1] == "list"]:
+                raise ValueError
             if words[0] == "format":
                 if words[1] not in _FORMATS:
                     raise ArtefactError(path, f"has an unsupported PLY format '{words[1]}'")
+                if words[2] != "1.0":
+                    raise ArtefactError(path, f"has PLY version {words[2]}; only version 1.0 exists")
                 fmt = _FORMATS[words[1]]
             elif words[0] == "element":
                 elements.append(_Element(words[1], int(words[2])))
-            elif words[0] == "property":
-                if words[1] == "list":
-                    elements[-1].props.append((words[4], _TYPES[words[3]], _TYPES[words[2]]))
-                else:
-                    elements[-1].props.append((words[2], _TYPES[words[1]], None))
-            elif words[0] in ("comment", "obj_info"):
-                comments.append(line.split(None, 1)[1] if len(words) > 1 else "")
+            elif words[1] == "list":
+                elements[-1].props.append((words[4], _TYPES[words[3]], _TYPES[words[2]]))
+            else:
+                elements[-1].props.append((words[2], _TYPES[words[1]], None))
         except (IndexError, KeyError, ValueError):
             raise ArtefactError(path, f"is not a valid PLY file: bad header line '{line.strip()}'") from None
     if fmt == "missing":

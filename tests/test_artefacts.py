@@ -63,6 +63,15 @@ def test_ply_ascii_big_endian_and_quads(tmp_path):
     (b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
      b"0 zero 0\n", "not a number"),
     (b"ply\nformat binary_middle_endian 1.0\nend_header\n", "unsupported PLY format"),
+    (b"ply\nformat ascii 2.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+     b"0 0 0\n", "version 2.0"),
+    (b"ply\nformat ascii 1.0\nelement vertex 1 extra\nproperty float x\nproperty float y\nproperty float z\n"
+     b"end_header\n0 0 0\n", "bad header line 'element vertex 1 extra'"),
+    (b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x y\nproperty float z\nend_header\n0 0 0\n",
+     "bad header line 'property float x y'"),
+    (b"ply\nformat ascii 1.0\nelement vertex 1\nproprety float x\nproperty float y\nproperty float z\n"
+     b"end_header\n0 0 0\n", "bad header line 'proprety float x'"),
+    (b"ply\nformat ascii 1.0\nproperty float x\nend_header\n", "bad header line 'property float x'"),
     (b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float u\nend_header\n1\n", "x, y and z"),
 ])
 def test_bad_ply_is_refused_with_the_file_name(tmp_path, content, message):
