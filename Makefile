@@ -8,7 +8,7 @@ DEMO   := out/demo
 TOUR   := out/tour
 export PATH := $(PATH):/sbin:/usr/sbin
 
-.PHONY: demo tour test bench libusb chromium clean
+.PHONY: demo tour test bench screenshot libusb chromium clean
 
 $(STAMP): pyproject.toml
 	@$(MAKE) --no-print-directory libusb
@@ -64,6 +64,11 @@ tour: $(STAMP)
 
 test: $(STAMP) chromium
 	$(BIN)/python -m pytest -q
+
+# The README's picture of the report: the sample patient's plan in headless Chromium, front view.
+screenshot: $(STAMP) chromium
+	BREASTPLAN_SCREENSHOT=$(abspath docs/report.png) $(BIN)/python -m pytest -q -n 0 \
+	    tests/test_plan.py -k "slider_and_views"
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_cli.py

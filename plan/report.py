@@ -328,8 +328,8 @@ traces.push({type:'scatter3d',mode:'markers+text',name:'sternal notch',legendgro
 traces.push({type:'scatter3d',mode:'markers',name:'nipples (found)',legendgroup:'landmarks',x:col('nipples')[0],
  y:col('nipples')[1],z:col('nipples')[2],marker:{...mark,size:3.5,symbol:'diamond'},hoverinfo:'skip'});
 const views={front:{eye:{x:0,y:-1.9,z:0.15},up:{x:0,y:0,z:1}},side:{eye:{x:1.9,y:-0.3,z:0.1},up:{x:0,y:0,z:1}},top:{eye:{x:0,y:-0.2,z:1.9},up:{x:0,y:1,z:0}}};
-const layout={margin:{l:0,r:0,t:0,b:0},showlegend:true,legend:{x:0,y:1},hovermode:false,
- scene:{aspectmode:'data',xaxis:{visible:false},yaxis:{visible:false},zaxis:{visible:false},camera:views.front}};
+const layout={margin:{l:0,r:0,t:0,b:0},showlegend:true,legend:{x:0,y:1},hovermode:false,   // the legend beside the body, not over it
+ scene:{domain:{x:[0.26,1],y:[0,1]},aspectmode:'data',xaxis:{visible:false},yaxis:{visible:false},zaxis:{visible:false},camera:views.front}};
 const gd=document.getElementById('plot');
 function arrays(state){   // the moving traces' coordinates (and the surface's colours) in `state`; null: the original
  const upd={x:[],y:[],z:[],'marker.color':[]};

@@ -3,6 +3,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+from scipy import ndimage
+
 from breastplan import transform_points
 
 from .job import Plan
@@ -10,13 +13,31 @@ from .measures import measure_label
 from .views import VIEW_TO_DISPLAY
 
 DPI = 110
+SKIN = "#e3a47c"
+BEFORE = {"colors": "#2b2b2b", "linestyles": "dashed", "linewidths": 1.0}
+PLANNED = {"colors": "#b5522a", "linestyles": "solid", "linewidths": 1.4}
+CELL_MM = 2.0
+"""Cell of the grid on which a view's outline is drawn; points about 2 mm apart close it."""
+
+
+def outline(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x, y, occupancy) of (N, 2) projected points (mm) on a CELL_MM grid, closed and filled, for
+    `contour(..., levels=[0.5])`: the outline of the region they cover."""
+    lo = xy.min(axis=0) - 3 * CELL_MM
+    cells = np.floor((xy - lo) / CELL_MM).astype(np.int64)
+    grid = np.zeros(cells.max(axis=0) + 4, bool)
+    grid[cells[:, 0], cells[:, 1]] = True
+    grid = ndimage.binary_fill_holes(ndimage.binary_closing(grid, iterations=2))
+    x, y = (lo[i] + CELL_MM * (np.arange(grid.shape[i]) + 0.5) for i in (0, 1))
+    return x, y, grid.T.astype(float)
 
 
 def summary_png(plan: Plan, record: dict, path: Path) -> Path:
-    """Front and side views of each side's breast before (dark) and after the combination as planned
-    (skin), with the measures beside them."""
+    """Front and side views of each side's breast, outlined before (dashed) and after the combination
+    as planned (solid, over the planned surface in skin colour), with the measures beside them."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
 
     sides = list(plan.sides)
     fig = Figure(figsize=(12, 3.6 * len(sides)), dpi=DPI)
@@ -29,11 +50,11 @@ def summary_png(plan: Plan, record: dict, path: Path) -> Path:
         before = transform_points(show, verts)
         after = transform_points(show, sp.planned(sp.changes[-1]).model(verts))
         for ax, (u, v, title) in zip(row[:2], ((0, 2, "front"), (1, 2, "side"))):
-            ax.scatter(after[:, u], after[:, v], s=4, linewidths=0, c="#e3a47c", label="planned")
-            ax.scatter(before[:, u], before[:, v], s=0.4, linewidths=0, c="#2b2b2b", label="before")
+            ax.scatter(after[:, u], after[:, v], s=4, linewidths=0, c=SKIN, alpha=0.35)
+            for xy, style in ((before[:, [u, v]], BEFORE), (after[:, [u, v]], PLANNED)):
+                ax.contour(*outline(xy), levels=[0.5], **style)
             ax.set_aspect("equal")
             ax.set_title(f"{side} breast, {title} view (mm)")
-            ax.legend(loc="upper right", fontsize=7, markerscale=8)
         text = [f"{side}: " + ", ".join(c["name"] for c in record["sides"][side]["changes"][-1:])]
         for name, value in record["measures"]["before"][side].items():
             text.append(f"{measure_label(name)}: {value} → {record['measures']['after'][side][name]}")
@@ -50,7 +71,10 @@ def summary_png(plan: Plan, record: dict, path: Path) -> Path:
                         f"({since['earlier_volume_cc']:.1f} → {fit['volume_cc']:.1f} cc)")
         row[2].axis("off")
         row[2].text(0, 1, "\n".join(text), va="top", family="monospace", fontsize=8)
-    fig.tight_layout()
+    fig.legend(handles=[Line2D([], [], color=BEFORE["colors"], linestyle=BEFORE["linestyles"], label="before"),
+                        Line2D([], [], color=PLANNED["colors"], label="planned (the combination)")],
+               loc="lower center", ncol=2, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
     with open(path, "wb") as fh:
         fig.savefig(fh, format="png", pil_kwargs={"compress_level": 3})
     return Path(path)

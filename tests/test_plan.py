@@ -480,6 +480,7 @@ def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(pl
         assert b.js("window.breastplanDrawn") == "combined"
         assert b.js("document.getElementById('poster')") is None              # the 3-D, not the poster
         box = b.rect("#plot")
+        assert b.rect("#plot g.legend")[2] <= b.rect("#plot #scene")[0]       # the legend beside her, not over her
         first = _plot_pixels(b.screenshot(tmp_path / "combined.png"), box)
         assert len(np.unique(first.reshape(-1, 3), axis=0)) > 200          # a 3-D drawing, not a blank canvas
         b.js("(s => { s.value = s.max; s.dispatchEvent(new Event('input')); })(document.getElementById('slider-ptosis'))")
@@ -563,3 +564,22 @@ def test_a_plan_removes_the_build_folders_of_killed_plans_and_no_other(tmp_path)
         os.close(fd)
     assert (tmp_path / "case" / "plan.json").read_text() == "{}"
     assert sorted(p.name for p in tmp_path.iterdir()) == [".case.plan-89abcdef", ".cases.plan-00000000", "case"]
+
+
+@settings(max_examples=30, deadline=None)
+@given(radius=st.floats(15.0, 80.0), hole=st.floats(0.0, 0.6), centre=st.tuples(st.floats(-500, 500), st.floats(-500, 500)))
+def test_summary_outline_covers_a_sampled_disc_and_fills_its_hole(radius, hole, centre):
+    """summary.png's outline of points 1 mm apart over a disc (with a hole in it, as a view of a breast
+    can leave) covers the disc: its area is πr² within a cell's width around the rim."""
+    from breastplan.plan.summary import CELL_MM, outline
+
+    g = np.arange(-radius, radius + 1.0, 1.0)
+    xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    r = np.linalg.norm(xy, axis=1)
+    xy = xy[(r <= radius) & (r >= hole * radius)] + centre
+    x, y, occupied = outline(xy)
+    assert occupied.shape == (len(y), len(x)) and set(np.unique(occupied)) <= {0.0, 1.0}
+    area = occupied.sum() * CELL_MM**2
+    assert abs(area - np.pi * radius**2) <= 2 * np.pi * radius * CELL_MM
+    inside = occupied[np.searchsorted(y, centre[1]), np.searchsorted(x, centre[0])]
+    assert inside == 1.0                                                    # the hole is filled
