@@ -73,6 +73,7 @@ screenshot: $(STAMP) chromium
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_cli.py
 	$(BIN)/python benchmarks/bench_model.py
+	$(BIN)/python benchmarks/bench_lattice.py
 	$(BIN)/python benchmarks/bench_ingest.py
 	$(BIN)/python benchmarks/bench_fit.py
 	$(BIN)/python benchmarks/bench_learn.py
@@ -84,6 +85,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_shifted_pairs.py
 	$(BIN)/python benchmarks/bench_refusal.py
 	$(BIN)/python benchmarks/bench_plan.py
+	$(BIN)/python benchmarks/bench_batch.py
 
 clean:
 	rm -rf $(VENV) out

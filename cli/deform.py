@@ -34,7 +34,7 @@ def deform(
                                          "inverse solver, the default) or learnt (the shipped regression models)."),
     model: Optional[Path] = typer.Option(None, "--model", help="A statistical model (train-statistical's .npz) that "
                                          "deforms by --degree instead: it moves the points by its learnt FFD field; "
-                                         "it has no condition and no parameters."),
+                                         "it sets no parameters and takes no --condition."),
     primitive: Optional[str] = typer.Option(None, "--primitive", help="a1=..,a2=..,a3=..,a4=..,a5=..[,eps1=..,eps2=..] "
                                             "in model units (1 mu = 6 mm); needed by top-shape, flatten-side, turn-top "
                                             "when INPUT carries none; overrides the one it carries."),

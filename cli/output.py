@@ -115,7 +115,8 @@ def progress(label: str, total: int) -> Iterator[Any]:
 
 
 def report(result: dict, as_json: bool, title: str) -> None:
-    """Print the result: one JSON object on stdout, or a two-column table."""
+    """Print the result: one JSON object on stdout, or a two-column table (without the rows whose
+    value is None, which JSON keeps as null)."""
     if as_json:
         print(to_json(result))
         return
@@ -123,7 +124,8 @@ def report(result: dict, as_json: bool, title: str) -> None:
 
     table = Table(title=title, show_header=False, title_justify="left")
     for key, value in result.items():
-        table.add_row(key, _human(value))
+        if value is not None:
+            table.add_row(key, _human(value))
     stdout.print(table)
 
 
