@@ -130,7 +130,7 @@ class Fit:
     residuals_mm: dict               # data ↔ surface distance: mean, rms, p95, max
     normalised_residual: float       # mean ‖d − m‖ / ‖d‖ (docs/model.md §6)
     volume_cc_primitive: float
-    volume_cc_mesh: float            # the closed surface (flat base)
+    volume_cc_mesh: float            # the closed surface (base cap near z = 0)
     volume_cc_below_base: float      # between its base and the curved chest wall beneath
     iterations: tuple[int, int]      # superquadric evaluations, FFD iterations
     seconds: tuple[float, float]

@@ -2,7 +2,7 @@
 
 `fit_breast` runs the two stages of docs/model.md §2–§3 and §6; `BreastFit.artefact` gives the
 case's `Fit` (`breastplan.case`), which the case writes as fit.npz and fit.ply (the fitted closed
-surface: mm, breast frame, its flat base cap in the chest wall's tangent plane z = 0; the
+surface: mm, breast frame, its base cap held near the chest wall's tangent plane z = 0; the
 breast's volume adds the gap between that cap and the chest wall beneath, `BreastFit.below_base_cc`).
 """
 from __future__ import annotations
@@ -62,7 +62,7 @@ class BreastFit:
 
     @cached_property
     def mesh_volume_cc(self) -> float:
-        """Volume enclosed by the fitted closed surface (cc): the model above its flat base."""
+        """Volume enclosed by the fitted closed surface (cc): the model above its base cap."""
         return mesh_volume(self.vertices, self.faces) / 1000.0
 
     @property
