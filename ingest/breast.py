@@ -31,19 +31,18 @@ MERGE_MM = 6.0
 """Basins whose saddle lies within this of the lower summit are one mound."""
 OFF_MIDLINE_MM = (35.0, 140.0)
 """A breast mound's centre lies this far from the trunk's midline (a chin or a belly nearer,
-a shoulder further; breasts of the realistic test bodies 42–129) …"""
+a shoulder further; docs/isolation.md §4 gives what the test bodies measure) …"""
 BELOW_TOP_MM = (85.0, 340.0)
-"""… and this far below the shoulders (a shoulder's own mound higher; breasts 100–300) …"""
+"""… and this far below the shoulders (a shoulder's own mound higher) …"""
 RISE = (0.5, 3.0)
-"""… and rises this share of its footprint's radius (`Mound.rise`; breasts 0.56–1.29, a back's
-shoulder blades where breasts would be 0.29–0.46, a hand standing out from the hips 5 and more).
-Small flat breasts rise 0.45–0.5 …"""
+"""… and rises this share of its footprint's radius (`Mound.rise`; a back's shoulder blades rise
+less, a hand standing out from the hips far more). Small flat breasts rise a little less …"""
 LOW_RISE = 0.4
 """… so a mound rising from this share up is a breast too when no mound on its side rises as
 breasts do (`Mound.low`), but only if a nipple stands on it …"""
 LOW_NIPPLE_MM = 2.0
-"""… its nipple-areola disc raised this far over the breast's smooth surface (the test bodies'
-3.7–4.7 mm; on a back's shoulder blades, skin noise gives 'discs' of 1.1 mm)."""
+"""… its nipple-areola disc raised this far over the breast's smooth surface (on a back's shoulder
+blades, skin noise gives 'discs' of about 1 mm)."""
 MAX_LEVEL_MM = 110.0
 """The two breasts' centres differ in height by at most this much."""
 PAIR_MM = (100.0, 420.0)
