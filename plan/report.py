@@ -34,6 +34,8 @@ from .views import State, Views, build_views, quantise
 
 SKIN_RGB = (236, 188, 160)
 SKIN = "rgb({},{},{})".format(*SKIN_RGB)
+SCAN = "#2b2b2b"
+"""Colour of a breast's scanned points (before the plan)."""
 LANDMARK = "#c0392b"
 """The colour of the landmarks the measures start from: sternal notch, midline, the nipples found."""
 UP_FROM_TEXT = {
@@ -89,7 +91,7 @@ def page_data(plan: Plan, views: Views) -> dict:
             "earlier": {s: _mesh(*views.earlier[s]) for s in views.earlier},
             "landmarks": {k: v.round(2).tolist() for k, v in views.landmarks.items()},
             "states": states, "sliders": sliders, "cmax": cmax(views), "first": first_state(plan, views).key,
-            "skin": SKIN, "landmark": LANDMARK}
+            "skin": SKIN, "scan": SCAN, "landmark": LANDMARK}
 
 
 def cmax(views: Views) -> float:
@@ -122,7 +124,7 @@ def poster_png(views: Views, state: State, top: float) -> bytes:
     ax.scatter(state.torso[:, 0], state.torso[:, 2], s=5.0, c=moved, cmap="viridis", vmin=0.0, vmax=top,
                linewidths=0)
     for side, scan in views.scans.items():
-        ax.scatter(scan[:, 0], scan[:, 2], s=3.0, c="#2b2b2b", linewidths=0)
+        ax.scatter(scan[:, 0], scan[:, 2], s=3.0, c=SCAN, linewidths=0)
         ax.add_collection(_surface(state.mesh[side], views.meshes[side][1]))
     marks = views.landmarks
     ax.plot(marks["midline"][:, 0], marks["midline"][:, 2], "--", color=LANDMARK, linewidth=1.5)
@@ -306,7 +308,7 @@ traces.push({type:'scatter3d',mode:'markers',name:'moved surface',
 const meshBase={};
 for(const s of P.sides){
  const sc=pts(P.scans[s]);
- traces.push({type:'scatter3d',mode:'markers',name:s+' breast (scan)',x:sc[0],y:sc[1],z:sc[2],marker:{size:1.6,color:'#2b2b2b'},hoverinfo:'skip'});
+ traces.push({type:'scatter3d',mode:'markers',name:s+' breast (scan)',x:sc[0],y:sc[1],z:sc[2],marker:{size:1.6,color:P.scan},hoverinfo:'skip'});
  const m=P.meshes[s]; meshBase[s]=b64(m.xyz,Float32Array);
  const f=split(b64(m.faces,Int32Array),m.m,Int32Array);
  idx[s]=traces.length;

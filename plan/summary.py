@@ -10,11 +10,11 @@ from breastplan import transform_points
 
 from .job import Plan
 from .measures import measure_label
+from .report import SCAN, SKIN_RGB
 from .views import VIEW_TO_DISPLAY
 
 DPI = 110
-SKIN = "#e3a47c"
-BEFORE = {"colors": "#2b2b2b", "linestyles": "dashed", "linewidths": 1.0}
+BEFORE = {"colors": SCAN, "linestyles": "dashed", "linewidths": 1.0}
 PLANNED = {"colors": "#b5522a", "linestyles": "solid", "linewidths": 1.4}
 CELL_MM = 2.0
 """Cell of the grid on which a view's outline is drawn; points about 2 mm apart close it."""
@@ -50,7 +50,7 @@ def summary_png(plan: Plan, record: dict, path: Path) -> Path:
         before = transform_points(show, verts)
         after = transform_points(show, sp.planned(sp.changes[-1]).model(verts))
         for ax, (u, v, title) in zip(row[:2], ((0, 2, "front"), (1, 2, "side"))):
-            ax.scatter(after[:, u], after[:, v], s=4, linewidths=0, c=SKIN, alpha=0.35)
+            ax.scatter(after[:, u], after[:, v], s=4, linewidths=0, c=[np.array(SKIN_RGB) / 255], alpha=0.35)
             for xy, style in ((before[:, [u, v]], BEFORE), (after[:, [u, v]], PLANNED)):
                 ax.contour(*outline(xy), levels=[0.5], **style)
             ax.set_aspect("equal")
