@@ -1,0 +1,229 @@
+"""Each breast's volume measured on her skin: its footprint, the chest wall beneath, and how sure it is.
+
+The fitted model plans a change of shape; this is the ruler. Clinics measure a breast as the tissue in
+front of the chest wall inside the breast's footprint, and so does `measure_breasts`, from the torso's
+points alone (docs/volume.md):
+
+1. **Her body frame** from the body landmarks (`plan.measures.find_landmarks`): x to her left, y up,
+   z anterior, origin the sternal notch, mm. The skin is a height field over (x, y): the median
+   anterior coordinate of the points in each CELL_MM cell.
+2. **One chest wall for both breasts**, the same on both sides (her mirror symmetry): a cubic height
+   field in (|x| − cx, y − cy) around the breasts' mean place (cx, cy), fitted to the chest within
+   WALL_REACH · cx of it — both sides' skin together — by trimmed least squares, the breasts left out
+   (first a disc round each, then their footprints widened by FOOT_MARGIN cells; ROUNDS rounds).
+3. **The footprint**: the skin standing more than FOOT_MM in front of the wall, connected to the
+   nipple, in her half, no higher than UPPER · cx above the nipples and within REACH · cx of the
+   nipple; holes filled. The two sides' outlines are joined, each with the other's mirror image:
+   both breasts are measured inside one outline, mirrored, so that a left − right difference is a
+   difference of tissue, not of outline.
+4. **The volume**: the height of the skin above the wall, summed over the footprint's cells.
+   Cells of the footprint the camera did not see take the mirror cell's height (estimated; zero
+   where neither side was seen).
+5. **Its uncertainty** (± cc): twice the wall's standard error (its residuals' robust σ times
+   √(terms / cells fitted)) over the footprint's area, plus the volume of the cells estimated rather
+   than seen, plus FLOOR_PCT of the volume for what moves with the landmarks between scans.
+
+The points are put in a canonical order first, so the result depends on her surface alone.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from breastplan import transform_points
+
+from .measures import BodyLandmarks, find_landmarks
+
+CELL_MM = 5.0
+"""Side of the square cells of the skin's height field."""
+MIN_POINTS = 2
+"""A cell with fewer points is unseen."""
+WALL_DEGREE = 3
+WALL_REACH = 1.9
+"""The wall is fitted within this many times the nipples' distance from the midline of their mean place."""
+DISC = 0.75
+"""The first round leaves out a disc of this many times that distance round each breast."""
+ROUNDS = 3
+FOOT_MARGIN = 2
+"""Cells round the footprints also left out of the wall's support."""
+FOOT_MM = 5.0
+"""The footprint's skin stands at least this far in front of the wall."""
+UPPER, REACH = 1.2, 1.2
+"""The footprint reaches at most UPPER · cx above the nipples' mean height, and REACH · cx from its nipple."""
+TRIM_KEEP, TRIM_FRONT_MM, TRIM_BACK_MM, TRIM_ITERATIONS = 0.5, 3.0, 6.0, 12
+"""The wall's robust fit: the first half of the iterations keep the TRIM_KEEP share of cells nearest the
+wall, the rest those within max(3σ, TRIM_FRONT_MM) in front of it and max(3σ, TRIM_BACK_MM) behind."""
+FLOOR_PCT = 3.0
+"""Share of the volume added to its ± for what moves between two scans of her (the landmarks, her
+outline): set so that nine re-scans in ten fall within it (benchmarks/bench_volume_repeat.py)."""
+
+
+@dataclass(frozen=True, eq=False)
+class BreastVolume:
+    """One breast measured on her skin: volume and its ± (cc), its footprint (a closed curve on her
+    skin, input frame, mm), the footprint's area (cm², seen from the front) and the share of the volume
+    estimated where the camera did not see her (%)."""
+
+    volume_cc: float
+    uncertainty_cc: float
+    footprint_input_mm: np.ndarray      # (K, 3), closed: the last point is the first
+    area_cm2: float
+    unseen_pct: float
+
+    def as_dict(self) -> dict:
+        return {"volume_cc": round(self.volume_cc, 1), "uncertainty_cc": round(self.uncertainty_cc, 1),
+                "footprint_area_cm2": round(self.area_cm2, 1), "unseen_pct": round(self.unseen_pct, 1)}
+
+
+@dataclass(frozen=True, eq=False)
+class BreastVolumes:
+    """Both breasts (or one) measured on one torso, with the landmarks and frame they were measured in."""
+
+    sides: dict[str, BreastVolume]
+    landmarks: BodyLandmarks
+    body_from_input: np.ndarray         # (4, 4) input frame → her body frame, mm
+
+
+def body_frame(landmarks: BodyLandmarks) -> np.ndarray:
+    """(4, 4) input frame → her body frame: x her left, y up, z anterior, origin the sternal notch (mm)."""
+    R = np.vstack([landmarks.left_axis, landmarks.up_axis, landmarks.anterior_axis])
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, -R @ landmarks.sternal_notch
+    return T
+
+
+def measure_breasts(torso_mm, nipples: dict, view_from_input=None, plumb=None) -> BreastVolumes:
+    """Each breast's volume between her skin and the chest wall, inside its footprint (module docstring).
+
+    torso_mm: (M, 3) the body's points without background, input frame, mm; nipples: side → (3,)
+    input frame; view_from_input, plumb: as `find_landmarks` takes them."""
+    P = np.asarray(torso_mm, float)
+    P = P[np.lexsort(P.T[::-1])]                       # a canonical order: the result is the surface's
+    landmarks = find_landmarks(P, nipples, view_from_input, plumb)
+    T = body_frame(landmarks)
+    grid = _SkinGrid(transform_points(T, P), {s: transform_points(T, np.asarray(n, float)[None])[0]
+                                             for s, n in nipples.items()})
+    (wall, se_mm), footprint = grid.wall_and_footprint(grid.seen & grid.near & ~grid.disc)
+    height = grid.filled_height(wall)
+    sides = {}
+    for side in grid.nipples:
+        mask = footprint & grid.half(side)
+        volume = grid.volume(height, mask)
+        unseen = grid.volume(height, mask & ~grid.seen)
+        area_cm2 = float(mask.sum() * CELL_MM ** 2 / 100.0)
+        sides[side] = BreastVolume(
+            volume, float(2.0 * se_mm * area_cm2 / 10.0 + unseen + FLOOR_PCT / 100.0 * volume),
+            transform_points(np.linalg.inv(T), grid.outline(mask, wall)), area_cm2,
+            100.0 * unseen / volume if volume > 0 else 0.0)
+    return BreastVolumes(sides, landmarks, T)
+
+
+class _SkinGrid:
+    """Her skin as a height field on CELL_MM cells of her body frame, symmetric about x = 0, around the
+    breasts' mean place (cx, cy)."""
+
+    def __init__(self, points: np.ndarray, nipples: dict[str, np.ndarray]):
+        self.nipples = nipples
+        self.cx = float(np.mean([abs(n[0]) for n in nipples.values()]))
+        self.cy = float(np.mean([n[1] for n in nipples.values()]))
+        reach = WALL_REACH * self.cx
+        half = np.ceil((self.cx + reach) / CELL_MM)
+        lo = np.array([-half * CELL_MM, np.floor((self.cy - reach) / CELL_MM) * CELL_MM])
+        shape = (int(2 * half), max(1, int(np.ceil((min(self.cy + reach, 0.0) - lo[1]) / CELL_MM))))
+        self.lo = lo
+        xs, ys = lo[0] + (np.arange(shape[0]) + 0.5) * CELL_MM, lo[1] + (np.arange(shape[1]) + 0.5) * CELL_MM
+        self.X, self.Y = np.meshgrid(xs, ys, indexing="ij")
+        self.skin = _median_heights(points, lo, shape)
+        self.seen = np.isfinite(self.skin)
+        r2 = (np.abs(self.X) - self.cx) ** 2 + (self.Y - self.cy) ** 2
+        self.near, self.disc = r2 < reach ** 2, r2 < (DISC * self.cx) ** 2
+        uv = np.stack([(np.abs(self.X) - self.cx) / 100.0, (self.Y - self.cy) / 100.0], -1)
+        e = np.array([(i, d - i) for d in range(WALL_DEGREE + 1) for i in range(d, -1, -1)])
+        self.basis = uv[..., :1] ** e[:, 0] * uv[..., 1:] ** e[:, 1]
+
+    def half(self, side: str) -> np.ndarray:
+        return self.X > 0 if side == "left" else self.X < 0
+
+    def fit_wall(self, support: np.ndarray) -> tuple[np.ndarray, float]:
+        """The wall's anterior coordinate on every cell, fitted robustly to the skin of `support`, and
+        the mean standard error of a fitted value, σ √(terms / inliers), mm."""
+        A, z = self.basis[support], self.skin[support]
+        inlier = np.ones(len(z), bool)
+        for it in range(TRIM_ITERATIONS):
+            coef = np.linalg.lstsq(A[inlier], z[inlier], rcond=None)[0]
+            r = z - A @ coef                                     # > 0: in front of the wall
+            if it < TRIM_ITERATIONS // 2:
+                new = np.abs(r) <= np.quantile(np.abs(r), TRIM_KEEP)
+            else:
+                sigma = max(1.4826 * float(np.median(np.abs(r[inlier]))), 0.5)
+                new = (r < max(3 * sigma, TRIM_FRONT_MM)) & (r > -max(3 * sigma, TRIM_BACK_MM))
+                if (new == inlier).all():
+                    break
+            inlier = new
+        sigma = 1.4826 * float(np.median(np.abs(r[inlier])))
+        return self.basis @ coef, sigma * np.sqrt(A.shape[1] / inlier.sum())
+
+    def wall_and_footprint(self, support: np.ndarray) -> tuple[tuple[np.ndarray, float], np.ndarray]:
+        """The wall (as `fit_wall` gives it) and the joined, mirrored footprint, after ROUNDS rounds of each
+        leaving the other out."""
+        for _ in range(ROUNDS):
+            fitted = self.fit_wall(support)
+            wall = fitted[0]
+            footprint = np.zeros(self.X.shape, bool)
+            for side, nipple in self.nipples.items():
+                own = self._footprint(wall, side, nipple)
+                footprint |= own | own[::-1]
+            support = self.seen & self.near & ~ndimage.binary_dilation(footprint, iterations=FOOT_MARGIN)
+        return fitted, footprint
+
+    def _footprint(self, wall: np.ndarray, side: str, nipple: np.ndarray) -> np.ndarray:
+        rises = np.where(self.seen, self.skin - wall, -np.inf) > FOOT_MM
+        rises &= self.half(side) & (self.Y < self.cy + UPPER * self.cx)
+        rises &= (self.X - nipple[0]) ** 2 + (self.Y - nipple[1]) ** 2 < (REACH * self.cx) ** 2
+        labels, _ = ndimage.label(rises)
+        i, j = np.floor((nipple[:2] - self.lo) / CELL_MM).astype(int)
+        inside = 0 <= i < self.X.shape[0] and 0 <= j < self.X.shape[1]
+        if not inside or labels[i, j] == 0:
+            return np.zeros(self.X.shape, bool)
+        return ndimage.binary_fill_holes(labels == labels[i, j])
+
+    def filled_height(self, wall: np.ndarray) -> np.ndarray:
+        """Skin above the wall on every cell: seen, else the mirror cell's, else 0 (mm)."""
+        h = self.skin - wall
+        return np.nan_to_num(np.where(self.seen, h, h[::-1]), nan=0.0)
+
+    def volume(self, height: np.ndarray, mask: np.ndarray) -> float:
+        """cc of the heights above 0 over the cells of `mask`."""
+        return float(np.clip(height[mask], 0.0, None).sum()) * CELL_MM ** 2 / 1000.0
+
+    def outline(self, mask: np.ndarray, wall: np.ndarray) -> np.ndarray:
+        """(K, 3) the longest closed boundary of `mask`, on the skin (the wall where unseen), body frame."""
+        import contourpy
+
+        if not mask.any():
+            return np.zeros((0, 3))
+        padded = np.pad(mask, 1).astype(float).T
+        xs = self.lo[0] + (np.arange(-1, mask.shape[0] + 1) + 0.5) * CELL_MM
+        ys = self.lo[1] + (np.arange(-1, mask.shape[1] + 1) + 0.5) * CELL_MM
+        lines = contourpy.contour_generator(xs, ys, padded, name="serial").lines(0.5)
+        xy = max(lines, key=len)
+        surface = np.where(self.seen, self.skin, wall)
+        ij = np.clip(np.floor((xy - self.lo) / CELL_MM).astype(int), 0, np.array(mask.shape) - 1)
+        return np.column_stack([xy, surface[ij[:, 0], ij[:, 1]]])
+
+
+def _median_heights(points: np.ndarray, lo: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """(shape) the median anterior coordinate (z) of the points in each cell, NaN with under MIN_POINTS."""
+    ij = np.floor((points[:, :2] - lo) / CELL_MM).astype(np.int64)
+    ok = (ij >= 0).all(1) & (ij[:, 0] < shape[0]) & (ij[:, 1] < shape[1])
+    cell, z = ij[ok, 0] * shape[1] + ij[ok, 1], points[ok, 2]
+    order = np.lexsort((z, cell))
+    cell, z = cell[order], z[order]
+    counts = np.bincount(cell, minlength=shape[0] * shape[1])
+    start = np.cumsum(counts) - counts
+    out = np.full(counts.size, np.nan)
+    seen = counts >= MIN_POINTS
+    out[seen] = 0.5 * (z[start[seen] + (counts[seen] - 1) // 2] + z[start[seen] + counts[seen] // 2])
+    return out.reshape(shape)
