@@ -78,12 +78,32 @@ class BreastVolume:
 
 
 @dataclass(frozen=True, eq=False)
+class SkinCells:
+    """Her skin over the cells it was measured on, body frame: cell centres x (nx,) and y (ny,), mm; the
+    height of her skin above the chest wall (nx, ny), mm (a cell unseen: its mirror cell's, else 0);
+    which cells were seen; and the footprint, both sides' (her left: x > 0). The grid is symmetric:
+    cell [i, j]'s mirror image is [nx − 1 − i, j]."""
+
+    x: np.ndarray
+    y: np.ndarray
+    height_mm: np.ndarray
+    seen: np.ndarray
+    footprint: np.ndarray
+
+    def side(self, side: str) -> np.ndarray:
+        """(nx, ny) the footprint's cells on one side."""
+        return self.footprint & ((self.x > 0) if side == "left" else (self.x < 0))[:, None]
+
+
+@dataclass(frozen=True, eq=False)
 class BreastVolumes:
-    """Both breasts (or one) measured on one torso, with the landmarks and frame they were measured in."""
+    """Both breasts (or one) measured on one torso, with the landmarks and frame they were measured in
+    and her skin's cells."""
 
     sides: dict[str, BreastVolume]
     landmarks: BodyLandmarks
     body_from_input: np.ndarray         # (4, 4) input frame → her body frame, mm
+    cells: SkinCells
 
 
 def body_frame(landmarks: BodyLandmarks) -> np.ndarray:
@@ -117,7 +137,7 @@ def measure_breasts(torso_mm, nipples: dict, view_from_input=None, plumb=None) -
             volume, float(2.0 * se_mm * area_cm2 / 10.0 + unseen + FLOOR_PCT / 100.0 * volume),
             transform_points(np.linalg.inv(T), grid.outline(mask, wall)), area_cm2,
             100.0 * unseen / volume if volume > 0 else 0.0)
-    return BreastVolumes(sides, landmarks, T)
+    return BreastVolumes(sides, landmarks, T, SkinCells(grid.X[:, 0], grid.Y[0], height, grid.seen, footprint))
 
 
 class _SkinGrid:
