@@ -102,16 +102,53 @@ def fit(
         stderr.print(f"warning: {source}: the fitted {', '.join(at_bounds)} reached the end of their plausible range: "
                      f"the breast model holds this breast only roughly.", markup=False, soft_wrap=True)
     stats = fit.residuals_mm
+    if scan is None:
+        volume = {"volume_cc": round(fit.volume_cc, 2), "volume_from": "model"}
+    else:
+        with about(folder):
+            measured, both = measured_volume(scan, folder)
+        if not both:
+            stderr.print(f"note: {folder}: her volume is measured from this side's scan alone; a plan of both sides "
+                         "measures both breasts on one chest wall, inside one mirrored outline, and its figure is the "
+                         "one to compare.", markup=False, soft_wrap=True)
+        volume = {**measured.as_dict(), "volume_from": "skin" if both else "skin, one side",
+                  "model_differs_pct":
+                  round(100.0 * (fit.volume_cc - measured.volume_cc) / measured.volume_cc, 1)
+                  if measured.volume_cc > 0 else None}
+    from breastplan.plan.report import MODEL_DIFFERS_PCT
+
+    if abs(volume.get("model_differs_pct") or 0) > MODEL_DIFFERS_PCT:
+        stderr.print(f"warning: {source}: the fitted model holds {volume['model_differs_pct']:+.0f} % of the volume "
+                     "measured on her skin: the model describes this breast only roughly.", markup=False, soft_wrap=True)
     report({"fit": str(paths[Case.FIT_NPZ]), "mesh": str(paths[Case.FIT_PLY]), "points": len(points),
-            "volume_cc": round(fit.volume_cc, 2), "volume_cc_mesh": round(fit.volume_cc_mesh, 2),
-            "volume_cc_below_base": round(fit.volume_cc_below_base, 2),
-            "volume_cc_primitive": round(fit.volume_cc_primitive, 2),
+            **volume, "model_volume_cc": round(fit.volume_cc, 2), "model_volume_cc_mesh": round(fit.volume_cc_mesh, 2),
+            "model_volume_cc_below_base": round(fit.volume_cc_below_base, 2),
+            "model_volume_cc_primitive": round(fit.volume_cc_primitive, 2),
             "rms_mm": round(stats["rms"], 4), "residuals_mm": {k: round(v, 4) for k, v in stats.items()},
             "normalised_residual": round(fit.normalised_residual, 6), "stopping_rule": STOP_RESIDUAL,
             "stopping_rule_met": fit.stopping_rule_met, "converged": fit.converged, "at_bounds": at_bounds,
             "iterations": {"superquadric": fit.iterations[0], "ffd": fit.iterations[1]},
             "params": {k: round(v, 5) for k, v in result.params().items()}, **carried,
             "seconds": clock.seconds}, as_json, f"fit → {paths[Case.FIT_PLY]}")
+
+
+def measured_volume(scan: Scan, folder: Path):
+    """The breast's `BreastVolume` measured on her skin, and whether both sides were: with the other
+    side's nipple when a case of it made from the same torso stands beside this one (a plan's case folder)."""
+    import numpy as np
+
+    from breastplan.case import Case
+    from breastplan.options import SIDES
+    from breastplan.plan.breast_volume import measure_breasts
+
+    nipples = {scan.side: scan.nipple_camera_mm}
+    other = Path(folder).resolve().parent / next(s for s in SIDES if s != scan.side)
+    if Path(folder).resolve().name == scan.side and Case.holds(other):
+        twin = Case(other).load_scan()
+        if twin.side != scan.side and np.array_equal(twin.torso_camera, scan.torso_camera):
+            nipples[twin.side] = twin.nipple_camera_mm
+    measured = measure_breasts(scan.torso_camera, nipples, scan.view_from_camera, scan.plumb_camera)
+    return measured.sides[scan.side], len(nipples) == 2
 
 
 def _breast_points(input: Path) -> tuple[np.ndarray, Scan | None, Path, Path]:

@@ -57,11 +57,13 @@ def plan(
 
     from breastplan.plan.changes import short_of
     from breastplan.plan.job import run_plan
+    from breastplan.plan.report import MODEL_DIFFERS_PCT
 
     with _progress() as step:
         result = run_plan(input, out, options, step)
     record = _read_record(out)
-    sides = {s: {"volume_cc": r["fit"]["volume_cc"], "stopping_rule_met": r["fit"]["stopping_rule_met"],
+    sides = {s: {"volume_cc": r["volume"]["volume_cc"], "uncertainty_cc": r["volume"]["uncertainty_cc"],
+                 "model_volume_cc": r["volume"]["model_volume_cc"], "stopping_rule_met": r["fit"]["stopping_rule_met"],
                  "changes": [c["name"] for c in r["changes"]], "reused": r["reused"],
                  **({"wall_from": r["wall_from"]} if "wall_from" in r else {})}
              for s, r in record["sides"].items()}
@@ -72,6 +74,10 @@ def plan(
     else:
         _print_plan(result, record)
     for s, r in record["sides"].items():
+        differs = r["volume"]["model_differs_pct"]
+        if differs is not None and abs(differs) > MODEL_DIFFERS_PCT:
+            stderr.print(f"note: the {s} breast's fitted model holds {differs:+.0f} % of the volume measured on her "
+                         "skin; the report says so.", markup=False, soft_wrap=True)
         if not r["fit"]["stopping_rule_met"]:
             stderr.print(f"note: the {s} breast's fit ends above the stopping rule (normalised residual "
                          f"{r['fit']['normalised_residual']:.4f}); the report says so.", markup=False, soft_wrap=True)
@@ -112,16 +118,18 @@ def _print_plan(result: dict, record: dict) -> None:
         table.add_row(*row)
     stdout.print(table)
     for s in sides:
-        fit = record["sides"][s]["fit"]
+        fit, volume = record["sides"][s]["fit"], record["sides"][s]["volume"]
         reused = record["sides"][s]["reused"]
-        below = fit["volume_cc_below_base"]
-        stdout.print(f"{s} fit: {fit['volume_cc']:.1f} cc down to the chest wall ({fit['volume_cc'] - below:.1f} above "
-                     f"the base + {below:.1f} below it), "
+        stdout.print(f"{s} volume: {volume['volume_cc']:.1f} ± {volume['uncertainty_cc']:.1f} cc on her skin "
+                     f"(footprint {volume['footprint_area_cm2']:.0f} cm²"
+                     + (f", {volume['unseen_pct']:.0f} % estimated where unseen" if volume["unseen_pct"] >= 1 else "")
+                     + ")")
+        stdout.print(f"{s} fit: the model's volume {fit['model_volume_cc']:.1f} cc down to the chest wall, "
                      f"rms {fit['rms_mm']:.2f} mm, normalised residual "
                      f"{fit['normalised_residual']:.4f}" + (f"; reused: {', '.join(reused)}" if reused else ""))
         since = record["sides"][s].get("wall_from")
         if since:
-            stdout.print(f"{s} since {since['case']}: {since['volume_change_cc']:+.1f} cc "
+            stdout.print(f"{s} since {since['case']}: the model {since['volume_change_cc']:+.1f} cc "
                          f"({since['volume_change_pct']:+.1f} %; then {since['earlier_volume_cc']:.1f} cc, measured "
                          f"down to its chest wall, registered at rms {since['rms_mm']:.2f} mm)")
     stdout.print(f"report → {result['report']}  ({result['seconds']:.1f} s)")

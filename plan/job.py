@@ -31,6 +31,7 @@ from breastplan.errors import about
 from breastplan.json_text import from_json
 from breastplan.options import FitOptions, IngestOptions, PlanOptions
 
+from .breast_volume import BreastVolumes, measure_breasts
 from .changes import Change, combine, solve_change
 from .surface import PlannedChange
 
@@ -121,6 +122,7 @@ class Plan:
     input: Path
     options: PlanOptions
     sides: dict[str, SidePlan]
+    volumes: BreastVolumes
     timings_ms: dict = field(default_factory=dict)
 
 
@@ -135,11 +137,21 @@ def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Prog
     clock = Clock()
     with _building(out) as folder:
         sides = _sides(source, folder, options, clock, progress)
+        with clock("volumes on her skin"):
+            progress("volumes")
+            volumes = measure_sides(sides)
         with clock("report"):
             progress("report")
-            write_plan(Plan(out, source, options, sides, clock.ms), folder)
+            write_plan(Plan(out, source, options, sides, volumes, clock.ms), folder)
     moved = {s: replace(sp, case=Case(out / sp.case.folder.relative_to(folder))) for s, sp in sides.items()}
-    return Plan(out, source, options, moved, clock.ms)
+    return Plan(out, source, options, moved, volumes, clock.ms)
+
+
+def measure_sides(sides: dict[str, SidePlan]) -> BreastVolumes:
+    """Both breasts measured on her skin (`plan.breast_volume`), from the torso the sides share."""
+    first = next(iter(sides.values())).scan
+    return measure_breasts(first.torso_camera, {s: sp.scan.nipple_camera_mm for s, sp in sides.items()},
+                           first.view_from_camera, first.plumb_camera)
 
 
 @contextlib.contextmanager

@@ -309,10 +309,9 @@ def breast_measures(landmarks: BodyLandmarks, nipple_mm, vertices_mm, faces, bas
 
 
 def measure_label(name: str) -> str:
-    """A measure's name as the terminal, the report and the summary show it: its words, with
-    volume_cc shown as the volume above the base (the fitted surface's; the fit's own volume also
-    counts the gap between that base and the chest wall)."""
-    return "volume above base cc" if name == "volume_cc" else name.replace("_", " ")
+    """A measure's name as the terminal, the report and the summary show it: its words (volume_cc, in a
+    plan, is her volume measured on her skin, `plan.breast_volume`)."""
+    return name.replace("_", " ")
 
 
 def asymmetry(measures_by_side: dict) -> dict[str, dict[str, float]]:

@@ -20,7 +20,7 @@ from breastplan.fitting.ffd import STOP_RESIDUAL
 from breastplan.options import SIDES
 
 from .job import PLAN_SCHEMA, Plan, SidePlan, input_record
-from .measures import asymmetry, breast_measures, find_landmarks
+from .measures import asymmetry, breast_measures
 
 SUMMARY = "summary.png"
 
@@ -36,7 +36,7 @@ def write_plan(plan: Plan, folder: Path) -> dict:
         for side, sp in plan.sides.items():
             sides[side] = {"nipple_input_mm": [round(float(v), 2) for v in sp.scan.nipple_camera_mm],
                            "nipple_found": sp.scan.nipple_found,
-                           "fit": fit_record(sp), "reused": list(sp.reused),
+                           "volume": volume_record(plan, side), "fit": fit_record(sp), "reused": list(sp.reused),
                            "changes": [_save_change(sp, c, folder, stage) for c in sp.changes]}
             if sp.follow_up is not None:
                 sides[side]["wall_from"] = sp.follow_up.record(sp.fit.volume_cc)
@@ -73,9 +73,19 @@ def _remove_earlier_plans(folder: Path, record: dict) -> None:
                 path.unlink()
 
 
+def volume_record(plan: Plan, side: str) -> dict:
+    """plan.json's `volume` of a side: measured on her skin (`plan.breast_volume`), its footprint (input
+    frame, mm), and how far the fitted model's volume lies from it."""
+    measured, model = plan.volumes.sides[side], plan.sides[side].fit.volume_cc
+    return {**measured.as_dict(), "model_volume_cc": round(model, 1),
+            "model_differs_pct": round(100.0 * (model - measured.volume_cc) / measured.volume_cc, 1)
+            if measured.volume_cc > 0 else None,
+            "footprint_input_mm": np.round(measured.footprint_input_mm, 1).tolist()}
+
+
 def fit_record(sp: SidePlan) -> dict:
     f = sp.fit
-    return {"volume_cc": round(f.volume_cc, 2), "volume_cc_below_base": round(f.volume_cc_below_base, 2),
+    return {"model_volume_cc": round(f.volume_cc, 2), "model_volume_cc_below_base": round(f.volume_cc_below_base, 2),
             "rms_mm": round(f.residuals_mm["rms"], 4),
             "normalised_residual": round(f.normalised_residual, 6), "stopping_rule_met": f.stopping_rule_met,
             "converged": f.converged, "at_bounds": at_bounds(dict(zip(PARAM_NAMES, map(float, f.deformation)))),
@@ -102,16 +112,18 @@ def _save_change(sp: SidePlan, change, folder: Path, stage: Stage) -> dict:
 
 def plan_measures(plan: Plan) -> dict:
     """Each side's measures before and after (the last change: the combination as planned, or the
-    single change), and their asymmetry (left − right); lengths mm, volumes cc, input frame."""
-    first = next(iter(plan.sides.values()))
-    landmarks = find_landmarks(first.scan.torso_camera, {s: sp.scan.nipple_camera_mm for s, sp in plan.sides.items()},
-                               first.scan.view_from_camera, first.scan.plumb_camera)
+    single change), and their asymmetry (left − right); lengths mm, volumes cc, input frame. The volume
+    is hers, measured on her skin; after, it changes by as much as the fitted model's does."""
+    landmarks = plan.volumes.landmarks
     before, after = {}, {}
     for side, sp in plan.sides.items():
         verts, nipple = sp.surface_input, sp.scan.nipple_camera_mm
         planned = sp.planned(sp.changes[-1])
         before[side] = breast_measures(landmarks, nipple, verts, sp.fit.faces)
         after[side] = breast_measures(landmarks, planned.model(nipple[None])[0], planned.model(verts), sp.fit.faces)
+        measured = plan.volumes.sides[side].volume_cc              # her volume, and after: changed as the model is
+        after[side]["volume_cc"] = measured + after[side]["volume_cc"] - before[side]["volume_cc"]
+        before[side]["volume_cc"] = measured
     asym = {when: {k: v["left_minus_right"] for k, v in asymmetry(m).items()} for when, m in
             (("before", before), ("after", after))}
     return _finite({"before": before, "after": after, "asymmetry": asym if len(before) == 2 else {},

@@ -38,6 +38,8 @@ SCAN = "#2b2b2b"
 """Colour of a breast's scanned points (before the plan)."""
 LANDMARK = "#c0392b"
 """The colour of the landmarks the measures start from: sternal notch, midline, the nipples found."""
+FOOTPRINT = "#1f5fbf"
+"""The colour of each breast's footprint, the outline her volume is measured inside."""
 UP_FROM_TEXT = {
     "wall": "Up (which divides the poles and gives the drop below the notch) is the vertical of the wall "
             "seen behind her.",
@@ -56,6 +58,18 @@ AT_BOUNDS_TEXT = ('<p id="at-bounds">A fitted parameter at an end of its plausib
                   'was built on span) means the breast asked for more: the model holds it only roughly, and its '
                   'lattice carries the rest.</p>')
 """Said under the fit's table when a parameter of either side is at an end of its plausible range."""
+VOLUME_TEXT = ('<p id="volume-how">Her volume is the tissue between her skin and the chest wall beneath it, inside '
+               'the footprint drawn on her (the outline where her skin rises from her chest). One chest wall, the '
+               'same on both sides, is inferred from her chest around both breasts, and both breasts are measured '
+               'inside one outline, mirrored, so that a difference between them is a difference of tissue. The ± '
+               'holds nine re-scans in ten. Where the camera did not see her, the other side\'s mirror image stands '
+               'in, and the ± grows by what it adds. The fitted model, which plans the change, has a volume of its '
+               'own; it is shown as a cross-check.</p>')
+MODEL_DIFFERS_PCT = 25.0
+"""The report says so when the model's volume lies further than this from hers (%)."""
+DIFFERS_TEXT = ('<p class="differs">The fitted model of her {side} breast holds {pct:+.0f} % of the volume measured '
+                'on her skin: the model describes her breast only roughly, and its planned change is best read as '
+                'a shape, not a volume.</p>')
 
 
 def _b64(array: np.ndarray, dtype: str) -> str:
@@ -90,8 +104,9 @@ def page_data(plan: Plan, views: Views) -> dict:
             "meshes": {s: _mesh(*views.meshes[s]) for s in sides},
             "earlier": {s: _mesh(*views.earlier[s]) for s in views.earlier},
             "landmarks": {k: v.round(2).tolist() for k, v in views.landmarks.items()},
+            "footprints": {s: v.round(2).tolist() for s, v in views.footprints.items()},
             "states": states, "sliders": sliders, "cmax": cmax(views), "first": first_state(plan, views).key,
-            "skin": SKIN, "scan": SCAN, "landmark": LANDMARK}
+            "skin": SKIN, "scan": SCAN, "landmark": LANDMARK, "footprint": FOOTPRINT}
 
 
 def cmax(views: Views) -> float:
@@ -110,7 +125,8 @@ def first_state(plan: Plan, views: Views) -> State:
 def poster_png(views: Views, state: State, top: float) -> bytes:
     """PNG (POSTER_PX) of `state` seen from the front (x right, z up, equal mm scales): the torso grey,
     the surface the plan moves coloured by how far (viridis, 0..`top` mm), each scanned breast dark
-    and each planned breast a shaded skin-coloured surface over it, the landmarks red."""
+    and each planned breast a shaded skin-coloured surface over it, the landmarks red, each breast's
+    footprint blue."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -130,6 +146,8 @@ def poster_png(views: Views, state: State, top: float) -> bytes:
     ax.plot(marks["midline"][:, 0], marks["midline"][:, 2], "--", color=LANDMARK, linewidth=1.5)
     ax.scatter(*marks["sternal notch"][:, [0, 2]].T, s=30.0, c=LANDMARK)
     ax.scatter(*marks["nipples"][:, [0, 2]].T, s=24.0, c=LANDMARK, marker="D")
+    for outline in views.footprints.values():
+        ax.plot(outline[:, 0], outline[:, 2], color=FOOTPRINT, linewidth=1.5)
     ax.set_aspect("equal")
     ax.autoscale_view()
     out = io.BytesIO()
@@ -217,20 +235,28 @@ def tables(record: dict) -> str:
             rows.append(row)
         parts.append("<h2>Measures (after: the combination as planned)</h2>" + _table(head, rows, "measures")
                      + f'<p id="up-from">{UP_FROM_TEXT[measures["landmarks"].get("up_from", "midline profile")]}</p>')
-    rows = [[s, r["fit"]["volume_cc"], r["fit"]["volume_cc_below_base"], r["fit"]["rms_mm"],
+    rows = [[s, f"{r['volume']['volume_cc']:.1f} ± {r['volume']['uncertainty_cc']:.1f}", r["volume"]["footprint_area_cm2"],
+             r["volume"]["unseen_pct"], r["volume"]["model_volume_cc"], r["volume"]["model_differs_pct"]]
+            for s, r in record["sides"].items()]
+    parts.append("<h2>Volume, measured on her skin</h2>" + _table(
+        ["side", "volume cc", "footprint cm²", "estimated where unseen %", "the model's volume cc",
+         "the model differs by %"], rows, "volume") + VOLUME_TEXT
+        + "".join(DIFFERS_TEXT.format(side=s, pct=r["volume"]["model_differs_pct"]) for s, r in record["sides"].items()
+                  if abs(r["volume"]["model_differs_pct"] or 0) > MODEL_DIFFERS_PCT))
+    rows = [[s, r["fit"]["model_volume_cc"], r["fit"]["model_volume_cc_below_base"], r["fit"]["rms_mm"],
              r["fit"]["normalised_residual"], "met" if r["fit"]["stopping_rule_met"] else "not met", r["fit"]["points"],
              NIPPLE_FOUND[r.get("nipple_found", "apex")], ", ".join(r["fit"]["at_bounds"]) or "none"]
             for s, r in record["sides"].items()]
     parts.append("<h2>Fit quality</h2>" + _table(
-        ["side", "volume cc down to the chest wall", "of it below the base cc", "rms mm", "normalised residual",
+        ["side", "model volume cc down to the chest wall", "of it below the base cc", "rms mm", "normalised residual",
          f"stopping rule {record['stopping_rule']}", "points", "nipple found", "at an end of its plausible range"],
         rows, "fit") + AT_BOUNDS_TEXT * any(r["fit"]["at_bounds"] for r in record["sides"].values()))
     since = {s: r["wall_from"] for s, r in record["sides"].items() if "wall_from" in r}
     if since:
-        rows = [[s, f["case"], f["earlier_volume_cc"], record["sides"][s]["fit"]["volume_cc"],
+        rows = [[s, f["case"], f["earlier_volume_cc"], record["sides"][s]["fit"]["model_volume_cc"],
                  f"{f['volume_change_cc']:+.1f}", f"{f['volume_change_pct']:+.1f}", f["rms_mm"],
                  f"{100 * f['agreement']:.0f} %"] for s, f in since.items()]
-        parts.append("<h2>Since the earlier scan (measured down to its chest wall)</h2>" + _table(
+        parts.append("<h2>Since the earlier scan (the model, measured down to its chest wall)</h2>" + _table(
             ["side", "earlier case", "volume then cc", "volume now cc", "change cc", "change %",
              "chests registered, rms mm", "chest agreeing"], rows, "since"))
     method = record["options"]["method"]
@@ -329,6 +355,11 @@ traces.push({type:'scatter3d',mode:'markers+text',name:'sternal notch',legendgro
  textfont:{...mark,size:11},marker:{...mark,size:4},hoverinfo:'skip'});
 traces.push({type:'scatter3d',mode:'markers',name:'nipples (found)',legendgroup:'landmarks',x:col('nipples')[0],
  y:col('nipples')[1],z:col('nipples')[2],marker:{...mark,size:3.5,symbol:'diamond'},hoverinfo:'skip'});
+for(const s of Object.keys(P.footprints)){   // the outline each breast's volume is measured inside
+ const F=P.footprints[s];
+ traces.push({type:'scatter3d',mode:'lines',name:s+' footprint',legendgroup:'footprints',x:F.map(p=>p[0]),
+  y:F.map(p=>p[1]),z:F.map(p=>p[2]),line:{color:P.footprint,width:6},hoverinfo:'skip'});
+}
 const views={front:{eye:{x:0,y:-1.9,z:0.15},up:{x:0,y:0,z:1}},side:{eye:{x:1.9,y:-0.3,z:0.1},up:{x:0,y:0,z:1}},top:{eye:{x:0,y:-0.2,z:1.9},up:{x:0,y:1,z:0}}};
 const layout={margin:{l:0,r:0,t:0,b:0},showlegend:true,legend:{x:0,y:1},hovermode:false,   // the legend beside the body, not over it
  scene:{domain:{x:[0.26,1],y:[0,1]},aspectmode:'data',xaxis:{visible:false},yaxis:{visible:false},zaxis:{visible:false},camera:views.front}};

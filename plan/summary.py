@@ -58,9 +58,9 @@ def summary_png(plan: Plan, record: dict, path: Path) -> Path:
         text = [f"{side}: " + ", ".join(c["name"] for c in record["sides"][side]["changes"][-1:])]
         for name, value in record["measures"]["before"][side].items():
             text.append(f"{measure_label(name)}: {value} → {record['measures']['after'][side][name]}")
-        fit = record["sides"][side]["fit"]
-        text.append(f"fit: {fit['volume_cc']:.1f} cc down to the chest wall "
-                    f"({fit['volume_cc_below_base']:.1f} below the base)")
+        fit, volume = record["sides"][side]["fit"], record["sides"][side]["volume"]
+        text.append(f"volume on her skin: {volume['volume_cc']:.1f} ± {volume['uncertainty_cc']:.1f} cc "
+                    f"(the model's: {fit['model_volume_cc']:.1f})")
         text.append(f"fit residual {fit['normalised_residual']:.4f} (rule "
                     f"{'met' if fit['stopping_rule_met'] else 'not met'})")
         if fit["at_bounds"]:
@@ -68,7 +68,8 @@ def summary_png(plan: Plan, record: dict, path: Path) -> Path:
         since = record["sides"][side].get("wall_from")
         if since:
             text.append(f"since the earlier scan: {since['volume_change_cc']:+.1f} cc "
-                        f"({since['earlier_volume_cc']:.1f} → {fit['volume_cc']:.1f} cc)")
+                        f"of the model on the earlier wall ({since['earlier_volume_cc']:.1f} → "
+                        f"{fit['model_volume_cc']:.1f} cc)")
         row[2].axis("off")
         row[2].text(0, 1, "\n".join(text), va="top", family="monospace", fontsize=8)
     fig.legend(handles=[Line2D([], [], color=BEFORE["colors"], linestyle=BEFORE["linestyles"], label="before"),

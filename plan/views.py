@@ -39,6 +39,9 @@ class State:
     mesh: dict[str, np.ndarray]       # side → (V, 3) planned breast vertices, display frame
     torso: np.ndarray                  # (P, 3) the moved torso patch, display frame
 
+FOOTPRINT_LIFT_MM = 4.0
+"""Each footprint is drawn this far in front of her skin (along her anterior axis), over the points on it."""
+
 
 @dataclass(frozen=True)
 class Views:
@@ -50,6 +53,7 @@ class Views:
     earlier: dict[str, tuple[np.ndarray, np.ndarray]]  # side → a follow-up's earlier fitted breast (V, 3), (F, 3)
     landmarks: dict[str, np.ndarray]    # what the measures start from: "sternal notch" (1, 3), "midline" (K, 3)
                                         # her skin on the mid-sagittal plane, "nipples" (sides, 3) as found
+    footprints: dict[str, np.ndarray]   # side → (K, 3) the closed outline her volume is measured inside
 
 
 def slider_degrees(requested: float) -> list[float]:
@@ -84,7 +88,9 @@ def build_views(plan: Plan, landmarks: dict) -> Views:
                  meshes=meshes, states=states,
                  earlier={s: (show(sp.follow_up.earlier_surface_input), sp.follow_up.earlier_faces)
                           for s, sp in plan.sides.items() if sp.follow_up is not None},
-                 landmarks=_landmarks(plan, landmarks, show))
+                 landmarks=_landmarks(plan, landmarks, show),
+                 footprints={s: show(v.footprint_input_mm + FOOTPRINT_LIFT_MM * plan.volumes.landmarks.anterior_axis)
+                             for s, v in plan.volumes.sides.items()})
 
 
 def _landmarks(plan: Plan, landmarks: dict, show) -> dict[str, np.ndarray]:

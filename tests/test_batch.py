@@ -144,7 +144,8 @@ def test_a_batch_case_is_the_plan_of_its_input(batched, cli, tmp_path):
     assert batch["measures"] == alone["measures"]
     for side in ("left", "right"):
         assert batch["sides"][side]["nipple_input_mm"] == alone["sides"][side]["nipple_input_mm"]
-        assert batch["sides"][side]["fit"]["volume_cc"] == alone["sides"][side]["fit"]["volume_cc"]
+        assert batch["sides"][side]["volume"] == alone["sides"][side]["volume"]
+        assert batch["sides"][side]["fit"]["model_volume_cc"] == alone["sides"][side]["fit"]["model_volume_cc"]
 
 
 def test_a_batch_again_reuses_every_finished_case_and_retries_the_failed(batched, cli, patients):

@@ -150,7 +150,7 @@ def test_plan_wall_from_reports_each_sides_change_since_the_earlier_plan(cli, ca
     for side in ("left", "right"):
         since, true = sides[side]["wall_from"], _true_change(cases, side)
         assert since["case"] == str(earlier_plan / side)
-        assert since["earlier_volume_cc"] == before[side]["fit"]["volume_cc"]      # the earlier plan's own fit
+        assert since["earlier_volume_cc"] == before[side]["fit"]["model_volume_cc"]      # the earlier plan's own fit
         assert abs(since["volume_change_cc"] - true) <= 0.10 * true, (side, since, true)
     page = (out / "report.html").read_text()
     assert "Since the earlier scan" in page and '"earlier":{"left":' in page       # its table, the earlier breasts

@@ -124,28 +124,33 @@ def test_the_report_names_a_fitted_parameter_at_an_end_of_its_plausible_range(pl
         assert ("<td>b0, b1</td>" in html) == bool(named) and ("<td>none</td>" in html) == (not named)
 
 
-def test_the_volume_measured_is_the_fitted_surface_above_its_base_and_the_terminal_says_so(cli, planned, monkeypatch):
-    """The measures' volume is what fit.ply encloses (divergence theorem, here in numpy), the fit's
-    volume down to the chest wall that and the gap below the base; the terminal names both."""
+def test_one_volume_leads_everywhere_and_the_models_is_named_as_the_models(cli, planned, monkeypatch, tmp_path):
+    """Her volume measured on her skin is the same number in plan.json's side and measures, on the
+    terminal and from `fit` on the side's case; the model's volume is what fit.ply encloses (divergence
+    theorem, here in numpy) and the gap below its base, named as the model's."""
     case, record, _ = planned
     for side in ("left", "right"):
         fit = read_ply(case / side / "fit.ply")
         tri = fit.points[fit.faces]
         enclosed_cc = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6000.0
-        measured, fitted = record["measures"]["before"][side], record["sides"][side]["fit"]
-        assert measured["volume_cc"] == pytest.approx(enclosed_cc, abs=0.01)
-        assert fitted["volume_cc"] == pytest.approx(enclosed_cc + fitted["volume_cc_below_base"], abs=0.02)
-    monkeypatch.setenv("COLUMNS", "160")                                   # one line per fit
+        volume, fitted = record["sides"][side]["volume"], record["sides"][side]["fit"]
+        assert fitted["model_volume_cc"] == pytest.approx(enclosed_cc + fitted["model_volume_cc_below_base"], abs=0.02)
+        assert volume["model_volume_cc"] == pytest.approx(fitted["model_volume_cc"], abs=0.06)
+        assert record["measures"]["before"][side]["volume_cc"] == pytest.approx(volume["volume_cc"], abs=0.06)
+        assert 0 < volume["uncertainty_cc"] < 0.5 * volume["volume_cc"]
+    monkeypatch.setenv("COLUMNS", "160")                                   # one line per side
     res = run(cli, "plan", "--out", case, *[a for c in CHANGES for a in ("--deform", c)])
     assert res.returncode == 0, res.stderr[-3000:]
-    assert "volume above base cc" in res.stdout
     for side in ("left", "right"):
-        line = re.search(rf"^{side} fit: ([\d.]+) cc down to the chest wall \(([\d.]+) above the base \+ ([\d.]+) "
-                         r"below it\)", res.stdout, re.M)
-        total, above, below = map(float, line.groups())
-        assert total == pytest.approx(record["sides"][side]["fit"]["volume_cc"], abs=0.06)
-        assert above == pytest.approx(record["measures"]["before"][side]["volume_cc"], abs=0.07)
-        assert above + below == pytest.approx(total, abs=0.11)
+        line = re.search(rf"^{side} volume: ([\d.]+) ± ([\d.]+) cc on her skin", res.stdout, re.M)
+        assert tuple(map(float, line.groups())) == (record["sides"][side]["volume"]["volume_cc"],
+                                                    record["sides"][side]["volume"]["uncertainty_cc"])
+        assert re.search(rf"^{side} fit: the model's volume {record['sides'][side]['fit']['model_volume_cc']:.1f} cc",
+                         res.stdout, re.M)
+    copy_of = tmp_path / "case"
+    shutil.copytree(case, copy_of)
+    out = json.loads(run(cli, "fit", copy_of / "left", "--json").stdout)
+    assert (out["volume_cc"], out["volume_from"]) == (record["sides"]["left"]["volume"]["volume_cc"], "skin")
 
 
 @pytest.mark.parametrize("name", NAMES[:3])
