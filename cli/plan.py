@@ -124,6 +124,11 @@ def _print_plan(result: dict, record: dict) -> None:
                      f"(footprint {volume['footprint_area_cm2']:.0f} cm²"
                      + (f", {volume['unseen_pct']:.0f} % estimated where unseen" if volume["unseen_pct"] >= 1 else "")
                      + ")")
+        grade = m["ptosis"]["before"][s]
+        stdout.print(f"{s} ptosis: grade {grade['grade']} → {m['ptosis']['after'][s]['grade']} as planned"
+                     + (f" (nipple {abs(grade['nipple_to_fold_mm']):.0f} mm "
+                        f"{'above' if grade['nipple_to_fold_mm'] >= 0 else 'below'} the fold, the fold "
+                        f"{grade['fold_from']})" if grade["nipple_to_fold_mm"] is not None else ""))
         stdout.print(f"{s} fit: the model's volume {fit['model_volume_cc']:.1f} cc down to the chest wall, "
                      f"rms {fit['rms_mm']:.2f} mm, normalised residual "
                      f"{fit['normalised_residual']:.4f}" + (f"; reused: {', '.join(reused)}" if reused else ""))
@@ -131,7 +136,14 @@ def _print_plan(result: dict, record: dict) -> None:
         if since:
             stdout.print(f"{s} since {since['case']}: the model {since['volume_change_cc']:+.1f} cc "
                          f"({since['volume_change_pct']:+.1f} %; then {since['earlier_volume_cc']:.1f} cc, measured "
-                         f"down to its chest wall, registered at rms {since['rms_mm']:.2f} mm)")
+                         f"down to its chest wall, registered at rms {since['rms_mm']:.2f} mm)"
+                         + (f"; on her skin, each visit on its own wall: {since['skin_volume_change_cc']:+.1f} cc"
+                            if "skin_volume_change_cc" in since else ""))
+    if m["symmetry"]["before"]:
+        sym = {w: m["symmetry"][w] for w in ("before", "after")}
+        stdout.print("symmetry: " + ", ".join(f"{k.replace('_pct', '')} {sym['before'][k]:.1f} → {sym['after'][k]:.1f} %"
+                                             for k in ("pBRA_pct", "pLBC_pct", "pUNR_pct", "overlap_pct")
+                                             if sym["before"].get(k) is not None and sym["after"].get(k) is not None))
     stdout.print(f"report → {result['report']}  ({result['seconds']:.1f} s)")
 
 

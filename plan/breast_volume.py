@@ -8,9 +8,10 @@ points alone (docs/volume.md):
    z anterior, origin the sternal notch, mm. The skin is a height field over (x, y): the median
    anterior coordinate of the points in each CELL_MM cell.
 2. **One chest wall for both breasts**, the same on both sides (her mirror symmetry): a cubic height
-   field in (|x| − cx, y − cy) around the breasts' mean place (cx, cy), fitted to the chest within
-   WALL_REACH · cx of it — both sides' skin together — by trimmed least squares, the breasts left out
-   (first a disc round each, then their footprints widened by FOOT_MARGIN cells; ROUNDS rounds).
+   field in (|x| − cx, y − cy) around the breasts' mean place (cx, cy), with ODD_TERMS for the frame's
+   own small turns, fitted to the chest within WALL_REACH · cx of it (WALL_ABOVE as far above it) —
+   both sides' skin together — by trimmed least squares, the breasts left out (first a disc round
+   each, then their footprints widened by FOOT_MARGIN cells; ROUNDS rounds).
 3. **The footprint**: the skin standing more than FOOT_MM in front of the wall, connected to the
    nipple, in her half, no higher than UPPER · cx above the nipples and within REACH · cx of the
    nipple; holes filled. The two sides' outlines are joined, each with the other's mirror image:
@@ -38,11 +39,18 @@ from .measures import BodyLandmarks, find_landmarks
 
 CELL_MM = 5.0
 """Side of the square cells of the skin's height field."""
-MIN_POINTS = 2
-"""A cell with fewer points is unseen."""
+MIN_POINTS = 4
+"""A cell with fewer points is unseen (a cell seen at a grazing angle holds one or two points of a steep
+surface, whose median is no height of her skin)."""
 WALL_DEGREE = 3
-WALL_REACH = 1.9
-"""The wall is fitted within this many times the nipples' distance from the midline of their mean place."""
+WALL_REACH, WALL_ABOVE = 1.9, 0.8
+"""The wall is fitted within WALL_REACH times the nipples' distance from the midline of their mean place,
+and above that place only WALL_ABOVE as far: the clavicles and shoulders bend her chest otherwise than
+the wall beneath the breasts, and a frame tilted by a degree or two then moved the wall."""
+ODD_TERMS = "x, x (y − cy)"
+"""Two terms of the wall odd in x: they take up a body frame turned by a degree about her vertical or her
+anterior axis (which a mirror-symmetric wall cannot follow: it set one breast's side 3 mm higher than the
+other's), and leave the wall otherwise the same on both sides."""
 DISC = 0.75
 """The first round leaves out a disc of this many times that distance round each breast."""
 ROUNDS = 3
@@ -55,7 +63,7 @@ UPPER, REACH = 1.2, 1.2
 TRIM_KEEP, TRIM_FRONT_MM, TRIM_BACK_MM, TRIM_ITERATIONS = 0.5, 3.0, 6.0, 12
 """The wall's robust fit: the first half of the iterations keep the TRIM_KEEP share of cells nearest the
 wall, the rest those within max(3σ, TRIM_FRONT_MM) in front of it and max(3σ, TRIM_BACK_MM) behind."""
-FLOOR_PCT = 3.0
+FLOOR_PCT = 2.0
 """Share of the volume added to its ± for what moves between two scans of her (the landmarks, her
 outline): set so that nine re-scans in ten fall within it (benchmarks/bench_volume_repeat.py)."""
 
@@ -89,6 +97,14 @@ class SkinCells:
     height_mm: np.ndarray
     seen: np.ndarray
     footprint: np.ndarray
+    wall_mm: np.ndarray                 # (nx, ny) the chest wall's anterior coordinate
+
+    def moved(self, points_body: np.ndarray) -> "SkinCells":
+        """These cells with her skin moved to `points_body` (the torso's points as planned, body frame, mm):
+        the same cells, wall and footprint; heights measured again as `measure_breasts` measures them."""
+        lo = np.array([self.x[0], self.y[0]]) - 0.5 * CELL_MM
+        skin = _median_heights(np.asarray(points_body, float), lo, self.height_mm.shape)
+        return SkinCells(self.x, self.y, _filled(skin, self.wall_mm), np.isfinite(skin), self.footprint, self.wall_mm)
 
     def side(self, side: str) -> np.ndarray:
         """(nx, ny) the footprint's cells on one side."""
@@ -137,7 +153,7 @@ def measure_breasts(torso_mm, nipples: dict, view_from_input=None, plumb=None) -
             volume, float(2.0 * se_mm * area_cm2 / 10.0 + unseen + FLOOR_PCT / 100.0 * volume),
             transform_points(np.linalg.inv(T), grid.outline(mask, wall)), area_cm2,
             100.0 * unseen / volume if volume > 0 else 0.0)
-    return BreastVolumes(sides, landmarks, T, SkinCells(grid.X[:, 0], grid.Y[0], height, grid.seen, footprint))
+    return BreastVolumes(sides, landmarks, T, SkinCells(grid.X[:, 0], grid.Y[0], height, grid.seen, footprint, wall))
 
 
 class _SkinGrid:
@@ -157,11 +173,13 @@ class _SkinGrid:
         self.X, self.Y = np.meshgrid(xs, ys, indexing="ij")
         self.skin = _median_heights(points, lo, shape)
         self.seen = np.isfinite(self.skin)
-        r2 = (np.abs(self.X) - self.cx) ** 2 + (self.Y - self.cy) ** 2
-        self.near, self.disc = r2 < reach ** 2, r2 < (DISC * self.cx) ** 2
+        dx, dy = np.abs(self.X) - self.cx, self.Y - self.cy
+        self.near = dx ** 2 + (dy / np.where(dy > 0, WALL_ABOVE, 1.0)) ** 2 < reach ** 2
+        self.disc = dx ** 2 + dy ** 2 < (DISC * self.cx) ** 2
         uv = np.stack([(np.abs(self.X) - self.cx) / 100.0, (self.Y - self.cy) / 100.0], -1)
         e = np.array([(i, d - i) for d in range(WALL_DEGREE + 1) for i in range(d, -1, -1)])
-        self.basis = uv[..., :1] ** e[:, 0] * uv[..., 1:] ** e[:, 1]
+        odd = np.stack([self.X / 100.0, self.X * (self.Y - self.cy) / 1e4], -1)    # see ODD_TERMS
+        self.basis = np.concatenate([uv[..., :1] ** e[:, 0] * uv[..., 1:] ** e[:, 1], odd], -1)
 
     def half(self, side: str) -> np.ndarray:
         return self.X > 0 if side == "left" else self.X < 0
@@ -210,9 +228,7 @@ class _SkinGrid:
         return ndimage.binary_fill_holes(labels == labels[i, j])
 
     def filled_height(self, wall: np.ndarray) -> np.ndarray:
-        """Skin above the wall on every cell: seen, else the mirror cell's, else 0 (mm)."""
-        h = self.skin - wall
-        return np.nan_to_num(np.where(self.seen, h, h[::-1]), nan=0.0)
+        return _filled(self.skin, wall)
 
     def volume(self, height: np.ndarray, mask: np.ndarray) -> float:
         """cc of the heights above 0 over the cells of `mask`."""
@@ -232,6 +248,12 @@ class _SkinGrid:
         surface = np.where(self.seen, self.skin, wall)
         ij = np.clip(np.floor((xy - self.lo) / CELL_MM).astype(int), 0, np.array(mask.shape) - 1)
         return np.column_stack([xy, surface[ij[:, 0], ij[:, 1]]])
+
+
+def _filled(skin: np.ndarray, wall: np.ndarray) -> np.ndarray:
+    """Skin above the wall on every cell: seen, else the mirror cell's, else 0 (mm)."""
+    h = skin - wall
+    return np.nan_to_num(np.where(np.isfinite(skin), h, h[::-1]), nan=0.0)
 
 
 def _median_heights(points: np.ndarray, lo: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

@@ -124,6 +124,7 @@ class Plan:
     sides: dict[str, SidePlan]
     volumes: BreastVolumes
     timings_ms: dict = field(default_factory=dict)
+    earlier_volumes: BreastVolumes | None = None     # a follow-up: the earlier visit's, measured on its own skin
 
 
 Progress = Callable[[str], None]
@@ -140,18 +141,31 @@ def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Prog
         with clock("volumes on her skin"):
             progress("volumes")
             volumes = measure_sides(sides)
+            earlier = None if options.wall_from is None else _earlier_volumes(Path(options.wall_from))
         with clock("report"):
             progress("report")
-            write_plan(Plan(out, source, options, sides, volumes, clock.ms), folder)
+            write_plan(Plan(out, source, options, sides, volumes, clock.ms, earlier), folder)
     moved = {s: replace(sp, case=Case(out / sp.case.folder.relative_to(folder))) for s, sp in sides.items()}
-    return Plan(out, source, options, moved, volumes, clock.ms)
+    return Plan(out, source, options, moved, volumes, clock.ms, earlier)
 
 
 def measure_sides(sides: dict[str, SidePlan]) -> BreastVolumes:
     """Both breasts measured on her skin (`plan.breast_volume`), from the torso the sides share."""
-    first = next(iter(sides.values())).scan
-    return measure_breasts(first.torso_camera, {s: sp.scan.nipple_camera_mm for s, sp in sides.items()},
+    return _measured({s: sp.scan for s, sp in sides.items()})
+
+
+def _measured(scans: dict[str, Scan]) -> BreastVolumes:
+    first = next(iter(scans.values()))
+    return measure_breasts(first.torso_camera, {s: scan.nipple_camera_mm for s, scan in scans.items()},
                            first.view_from_camera, first.plumb_camera)
+
+
+def _earlier_volumes(folder: Path) -> BreastVolumes:
+    """An earlier visit's breasts measured on her skin then, each visit on its own chest wall."""
+    from breastplan.ingest.follow_up import earlier_cases
+
+    with about(folder):
+        return _measured({side: case.load_scan() for side, case in earlier_cases(folder).items()})
 
 
 @contextlib.contextmanager

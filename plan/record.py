@@ -21,6 +21,7 @@ from breastplan.options import SIDES
 
 from .job import PLAN_SCHEMA, Plan, SidePlan, input_record
 from .measures import asymmetry, breast_measures
+from .symmetry import bcct_measures, ptosis_from_cells
 
 SUMMARY = "summary.png"
 
@@ -39,7 +40,7 @@ def write_plan(plan: Plan, folder: Path) -> dict:
                            "volume": volume_record(plan, side), "fit": fit_record(sp), "reused": list(sp.reused),
                            "changes": [_save_change(sp, c, folder, stage) for c in sp.changes]}
             if sp.follow_up is not None:
-                sides[side]["wall_from"] = sp.follow_up.record(sp.fit.volume_cc)
+                sides[side]["wall_from"] = {**sp.follow_up.record(sp.fit.volume_cc), **_skin_change(plan, side)}
         torso_files = {}
         record = {"schema": PLAN_SCHEMA, "version": __version__, "input": input_record(plan),
                   "options": plan.options.as_dict(), "stopping_rule": STOP_RESIDUAL, "sides": sides,
@@ -83,12 +84,24 @@ def volume_record(plan: Plan, side: str) -> dict:
             "footprint_input_mm": np.round(measured.footprint_input_mm, 1).tolist()}
 
 
+def _skin_change(plan: Plan, side: str) -> dict:
+    """A follow-up's change of her volume on her skin, each visit measured on its own chest wall from one
+    scan: beside the model's change on the earlier wall."""
+    then = plan.earlier_volumes.sides.get(side) if plan.earlier_volumes is not None else None
+    if then is None or not then.volume_cc > 0:
+        return {}
+    change = plan.volumes.sides[side].volume_cc - then.volume_cc
+    return {"skin_earlier_volume_cc": round(then.volume_cc, 1), "skin_volume_change_cc": round(change, 1),
+            "skin_volume_change_pct": round(100.0 * change / then.volume_cc, 1)}
+
+
 def fit_record(sp: SidePlan) -> dict:
     f = sp.fit
     return {"model_volume_cc": round(f.volume_cc, 2), "model_volume_cc_below_base": round(f.volume_cc_below_base, 2),
             "rms_mm": round(f.residuals_mm["rms"], 4),
             "normalised_residual": round(f.normalised_residual, 6), "stopping_rule_met": f.stopping_rule_met,
             "converged": f.converged, "at_bounds": at_bounds(dict(zip(PARAM_NAMES, map(float, f.deformation)))),
+            "ptosis_params": [round(float(f.deformation[PARAM_NAMES.index(k)]), 4) for k in ("b0", "b1")],
             "points": f.points, "iterations": list(f.iterations)}
 
 
@@ -127,8 +140,28 @@ def plan_measures(plan: Plan) -> dict:
     asym = {when: {k: v["left_minus_right"] for k, v in asymmetry(m).items()} for when, m in
             (("before", before), ("after", after))}
     return _finite({"before": before, "after": after, "asymmetry": asym if len(before) == 2 else {},
+                    **symmetry_record(plan),
                     "landmarks": {"sternal_notch_mm": landmarks.sternal_notch, "up_axis": landmarks.up_axis,
                                   "left_axis": landmarks.left_axis, "up_from": landmarks.up_from}})
+
+
+def symmetry_record(plan: Plan) -> dict:
+    """plan.json's `symmetry` (BCCT.core's measures, both sides) and `ptosis` (each side's grade), before
+    and as planned (the last change), from her skin's cells (`plan.symmetry`)."""
+    volumes = plan.volumes
+    T, cells = volumes.body_from_input, volumes.cells
+    torso = next(iter(plan.sides.values())).scan.torso_camera
+    moved, nipples = torso.copy(), {"before": {}, "after": {}}
+    for side, sp in plan.sides.items():
+        planned = sp.planned(sp.changes[-1])
+        moved += planned.displacement(torso)
+        nipples["before"][side] = transform_points(T, sp.scan.nipple_camera_mm[None])[0]
+        nipples["after"][side] = transform_points(T, planned.model(sp.scan.nipple_camera_mm[None]))[0]
+    states = {"before": cells, "after": cells.moved(transform_points(T, moved))}
+    return {"symmetry": {when: bcct_measures(nipples[when], states[when]) if len(plan.sides) == 2 else {}
+                         for when in states},
+            "ptosis": {when: {s: ptosis_from_cells(nipples[when][s], states[when], s) for s in plan.sides}
+                       for when in states}}
 
 
 def _finite(x):
@@ -137,6 +170,7 @@ def _finite(x):
         return {k: _finite(v) for k, v in x.items()}
     if isinstance(x, np.ndarray):
         return [_finite(float(v)) for v in x]
-    if isinstance(x, float):
+    if isinstance(x, (float, np.floating)):
+        x = float(x)
         return round(x, 4 if abs(x) < 10 else 2) if np.isfinite(x) else None
     return x

@@ -243,6 +243,7 @@ def tables(record: dict) -> str:
          "the model differs by %"], rows, "volume") + VOLUME_TEXT
         + "".join(DIFFERS_TEXT.format(side=s, pct=r["volume"]["model_differs_pct"]) for s, r in record["sides"].items()
                   if abs(r["volume"]["model_differs_pct"] or 0) > MODEL_DIFFERS_PCT))
+    parts.append(_symmetry_tables(record))
     rows = [[s, r["fit"]["model_volume_cc"], r["fit"]["model_volume_cc_below_base"], r["fit"]["rms_mm"],
              r["fit"]["normalised_residual"], "met" if r["fit"]["stopping_rule_met"] else "not met", r["fit"]["points"],
              NIPPLE_FOUND[r.get("nipple_found", "apex")], ", ".join(r["fit"]["at_bounds"]) or "none"]
@@ -254,11 +255,13 @@ def tables(record: dict) -> str:
     since = {s: r["wall_from"] for s, r in record["sides"].items() if "wall_from" in r}
     if since:
         rows = [[s, f["case"], f["earlier_volume_cc"], record["sides"][s]["fit"]["model_volume_cc"],
-                 f"{f['volume_change_cc']:+.1f}", f"{f['volume_change_pct']:+.1f}", f["rms_mm"],
-                 f"{100 * f['agreement']:.0f} %"] for s, f in since.items()]
+                 f"{f['volume_change_cc']:+.1f}", f"{f['volume_change_pct']:+.1f}",
+                 f"{f['skin_volume_change_cc']:+.1f} ({f['skin_volume_change_pct']:+.1f} %)" if "skin_volume_change_cc"
+                 in f else "—", f["rms_mm"], f"{100 * f['agreement']:.0f} %"] for s, f in since.items()]
         parts.append("<h2>Since the earlier scan (the model, measured down to its chest wall)</h2>" + _table(
             ["side", "earlier case", "volume then cc", "volume now cc", "change cc", "change %",
-             "chests registered, rms mm", "chest agreeing"], rows, "since"))
+             "on her skin, each visit on its own wall: change cc", "chests registered, rms mm", "chest agreeing"],
+            rows, "since"))
     method = record["options"]["method"]
     rows = [[s, c["name"], ", ".join(f"{d['kind']} {d['degree']:g} ({_how(d)})" for d in c["details"]),
              ", ".join(_reached(d, method) for d in c["details"])]
@@ -270,6 +273,36 @@ def tables(record: dict) -> str:
             ["options", json.dumps(record["options"])]] + [[k, v] for k, v in record["versions"].items()]
     parts.append("<h2>Inputs, options and versions</h2>" + _table(["", ""], rows, "about"))
     return "\n".join(parts)
+
+
+SYMMETRY_LABELS = {"pBRA_pct": "pBRA: nipples from the notch, one against the other's mirror image %",
+                   "pUNR_pct": "pUNR: nipples' heights below the notch %",
+                   "pLBC_pct": "pLBC: breasts' lowest points %", "pBCE_pct": "pBCE: nipples above their lowest points %",
+                   "BCD_mm": "BCD: outlines, one against the other's mirror image mm",
+                   "overlap_pct": "overlap of one breast with the other's mirror image %"}
+"""The symmetry measures the report shows (docs/symmetry.md), as it names them."""
+SYMMETRY_TEXT = ('<p id="symmetry-how">BCCT.core\'s measures of a frontal photograph, taken in 3-D on her '
+                 'skin: 0 % (or 100 % overlap) for a symmetric woman. The fold beneath a breast that hangs '
+                 'over it is hidden from a camera in front of her: its place is then estimated, and her '
+                 'ptosis grade rests on that estimate; confirm it by examining her.</p>')
+
+
+def _symmetry_tables(record: dict) -> str:
+    """The symmetry measures before and as planned, and each side's ptosis grade beside the fitted
+    ptosis parameters."""
+    sym, ptosis = record["measures"]["symmetry"], record["measures"]["ptosis"]
+    html = ""
+    if sym["before"]:
+        rows = [[label, sym["before"].get(k), sym["after"].get(k)] for k, label in SYMMETRY_LABELS.items()]
+        html += "<h2>Symmetry</h2>" + _table(["measure", "before", "after"], rows, "symmetry")
+    rows = []
+    for s, side in record["sides"].items():
+        before, after = ptosis["before"][s], ptosis["after"][s]
+        rows.append([s, before["grade"], after["grade"], before["nipple_to_fold_mm"], before["nipple_to_lowest_mm"],
+                     before["fold_from"], side["fit"]["ptosis_params"]])
+    return html + "<h2>Ptosis (Regnault)</h2>" + _table(
+        ["side", "grade before", "grade after", "nipple above the fold mm", "nipple above the breast's lowest point mm",
+         "fold", "fitted ptosis b0, b1"], rows, "ptosis") + SYMMETRY_TEXT
 
 
 _TEMPLATE = """<!DOCTYPE html>

@@ -1,0 +1,148 @@
+"""BCCT.core's asymmetry measures and Regnault's ptosis grade taken on her skin (plan.symmetry), on MakeHuman
+bodies whose nipples and sternal notch are known: a symmetric woman, one breast lowered by MakeHuman's
+asymmetry target, one breast moved down by a known amount, a firm and a soft breast of one size, a small
+firm one, and planned heights whose overlap is known in closed form."""
+from __future__ import annotations
+
+import dataclasses
+from functools import lru_cache
+
+import numpy as np
+import pytest
+
+from breastplan import transform_points
+from breastplan.ingest.makehuman import BodyOptions, make_body
+from breastplan.ingest.pipeline import ingest_frames
+from breastplan.ingest.realistic import BodyScene, CameraOptions, camera_pose
+from breastplan.ingest.recording import DepthFrames
+from breastplan.options import IngestOptions
+from breastplan.plan.breast_volume import measure_breasts
+from breastplan.plan.symmetry import GRADES, bcct_measures, ptosis_grade, symmetry_measures
+
+BODIES = {"symmetric": BodyOptions(cup=0.7, firmness=0.4, weight=0.6, pose="hands-on-hips"),
+          "asymmetric": BodyOptions(cup=0.85, firmness=0.2, modifiers={"asymmetry": 0.5}, pose="arms-down"),
+          "firm": BodyOptions(cup=0.8, firmness=1.0, pose="hands-on-hips"),
+          "soft": BodyOptions(cup=0.8, firmness=0.0, pose="hands-on-hips"),
+          "small": BodyOptions(cup=0.2, firmness=0.9, pose="hands-on-hips")}
+RANK = {"0": 0, "pseudoptosis": 1, "I": 1, "II": 2, "III": 3}
+"""How ptotic a grade is, for comparing two (pseudoptosis: the gland has fallen, the nipple not)."""
+
+
+@lru_cache(maxsize=None)
+def scanned(body: str):
+    """(the made body, what `plan` ingests of it: torso, nipples, view, plumb — input frame, mm)."""
+    made = make_body(BODIES[body])
+    camera = CameraOptions(650.0, 5.0, 0.0, "800x600", wall_mm=400.0)
+    target = 0.5 * (made.nipples["left"] + made.nipples["right"])
+    frames = DepthFrames(BodyScene(made, camera, camera_pose(target, camera)).frames(8, 0), camera.K, "test")
+    sides = {side: ingest_frames(frames, IngestOptions(side)) for side in ("left", "right")}
+    first = sides["left"]
+    return made, first.torso_camera, {s: i.nipple_camera for s, i in sides.items()}, first.view_from_camera, \
+        first.plumb_camera
+
+
+@lru_cache(maxsize=None)
+def measured(body: str):
+    made, torso, nipples, view_from, plumb = scanned(body)
+    return measure_breasts(torso, nipples, view_from, plumb), nipples
+
+
+def test_a_symmetric_woman_measures_symmetric():
+    m, nipples = measured("symmetric")
+    s = symmetry_measures(m, nipples)
+    for name in ("pBRA_pct", "pUNR_pct", "pLBC_pct", "pBCE_pct"):
+        assert 0.0 <= s[name] < 1.5, name
+    assert s["BCD_mm"] < 3.0                          # under one 5 mm cell
+    assert 97.0 < s["overlap_pct"] <= 100.0
+
+
+def test_a_lowered_breast_gives_the_retraction_its_true_nipples_give():
+    """MakeHuman's asymmetry target lowers the left breast: pBRA and pUNR from the scan match the same
+    measures written out here from the true nipples and notch (MakeHuman's frame: x her left, y up)."""
+    made = scanned("asymmetric")[0]
+    m, nipples = measured("asymmetric")
+    s = symmetry_measures(m, nipples)
+    rel = {side: made.nipples[side] - made.sternal_notch for side in ("left", "right")}
+    mirrored_right = rel["right"] * [-1.0, 1.0, 1.0]
+    true_pbra = 100.0 * np.linalg.norm(rel["left"] - mirrored_right) / np.mean([np.linalg.norm(v) for v in rel.values()])
+    below = {side: -v[1] for side, v in rel.items()}
+    true_punr = 100.0 * abs(below["left"] - below["right"]) / (0.5 * (below["left"] + below["right"]))
+    assert true_punr > 5.0                            # the target lowers one nipple by over a centimetre
+    assert s["pBRA_pct"] == pytest.approx(true_pbra, abs=1.0)
+    assert s["pUNR_pct"] == pytest.approx(true_punr, abs=1.0)
+    assert 80.0 < s["overlap_pct"] < 97.0             # no longer mirror twins
+
+
+def test_a_breast_moved_down_moves_its_contour_and_nipple_by_as_much():
+    """The symmetric woman's left breast, skin and nipple, moved 10 mm down her up axis (the whole breast
+    within 100 mm of its nipple, tapering to nothing at 150 mm): the nipples and the lower contours
+    differ by 10 mm, and the nipples' heights above their contours alike."""
+    made, torso, nipples, view_from, plumb = scanned("symmetric")
+    before = measured("symmetric")[0]
+    T = before.body_from_input
+    body = transform_points(T, torso)
+    nipple = transform_points(T, nipples["left"][None])[0]
+    d = np.linalg.norm(body[:, :2] - nipple[:2], axis=1)
+    shift = 10.0 * np.where(d < 100.0, 1.0, np.where(d < 150.0, 0.5 * (1.0 + np.cos(np.pi * (d - 100.0) / 50.0)), 0.0))
+    body[:, 1] -= np.where(body[:, 0] > 0, shift, 0.0)
+    moved = dict(nipples, left=transform_points(np.linalg.inv(T), (nipple - [0.0, 10.0, 0.0])[None])[0])
+    after = measure_breasts(transform_points(np.linalg.inv(T), body), moved, view_from, plumb)
+    s = symmetry_measures(after, moved)
+    assert s["UNR_mm"] == pytest.approx(10.0, abs=2.0)
+    assert s["BRA_mm"] == pytest.approx(10.0, abs=2.5)
+    assert s["LBC_mm"] == pytest.approx(10.0, abs=3.0)
+    assert s["BCE_mm"] < 3.0
+
+
+def test_a_soft_breast_hangs_at_least_as_far_as_a_firm_one():
+    """Same size, firmness 1 against 0: MakeHuman's soft breast carries its nipple 32 mm nearer its fold
+    and hangs lower; the grade is at least as ptotic, the nipple nearer the fold (or further below it)."""
+    grades = {}
+    for body in ("firm", "soft"):
+        m, nipples = measured(body)
+        grades[body] = {side: ptosis_grade(m, nipples, side) for side in ("left", "right")}
+    for side in ("left", "right"):
+        firm, soft = grades["firm"][side], grades["soft"][side]
+        assert firm["grade"] in GRADES and soft["grade"] in GRADES
+        assert RANK[soft["grade"]] >= RANK[firm["grade"]]
+        assert soft["nipple_to_fold_mm"] < firm["nipple_to_fold_mm"] - 10.0
+        assert soft["nipple_to_lowest_mm"] < firm["nipple_to_lowest_mm"] - 10.0
+        assert {firm["fold_from"], soft["fold_from"]} <= {"seen", "estimated"}
+
+
+def test_a_small_firm_breast_is_not_ptotic_and_its_fold_is_seen():
+    """A small firm breast does not hang over its fold: the camera sees the skin under the nipple come
+    down to the chest, and the nipple is well above it (MakeHuman's: 45 mm)."""
+    m, nipples = measured("small")
+    for side in ("left", "right"):
+        p = ptosis_grade(m, nipples, side)
+        assert p["grade"] in ("0", "I")
+        assert p["fold_from"] == "seen"
+        assert p["lowest_to_fold_mm"] == pytest.approx(0.0, abs=2.0)
+        assert 25.0 < p["nipple_to_fold_mm"] < 65.0
+
+
+def test_a_planned_state_is_measured_from_its_nipples_and_cells_alone():
+    """Planned heights on the scan's cells: her left breast mirrored onto her right gives mirror twins
+    (overlap 100 %, no retraction, no contour difference); the right then shrunk to 80 % of the left's
+    heights shares 0.8 of the left's volume with it, over a mean of 0.9: 88.9 %."""
+    m, nipples = measured("asymmetric")
+    cells = m.cells
+    T = m.body_from_input
+    left = transform_points(T, nipples["left"][None])[0]
+    twin = {"left": left, "right": left * [-1.0, 1.0, 1.0]}
+    half = cells.x > 0
+    h = np.where(half[:, None], cells.height_mm, cells.height_mm[::-1])
+    s = bcct_measures(twin, dataclasses.replace(cells, height_mm=h))
+    assert s["overlap_pct"] == pytest.approx(100.0, abs=1e-9)
+    for name in ("BRA_mm", "UNR_mm", "LBC_mm", "BCE_mm", "BCD_mm"):
+        assert s[name] == pytest.approx(0.0, abs=1e-9), name
+    shrunk = np.where(half[:, None], h, 0.8 * np.clip(h, 0.0, None))
+    s = bcct_measures(twin, dataclasses.replace(cells, height_mm=shrunk))
+    assert s["overlap_pct"] == pytest.approx(100.0 * 0.8 / 0.9, abs=1e-6)
+
+
+def test_one_breast_alone_has_no_symmetry_measures():
+    m, nipples = measured("symmetric")
+    assert symmetry_measures(m, {"left": nipples["left"]}) == {}
+    assert symmetry_measures(dataclasses.replace(m, sides={"left": m.sides["left"]}), nipples) == {}
