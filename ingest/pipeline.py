@@ -89,11 +89,14 @@ def ingest_frames(frames: DepthFrames, options: IngestOptions, clock: Clock | No
 
 
 def ingest_cloud(cloud: ScanCloud, options: IngestOptions, clock: Clock | None = None) -> Ingested:
-    """A scan file's points → the breast of `options.side`; the viewing direction comes from the torso's shape."""
+    """A scan file's points → the breast of `options.side`; the viewing direction comes from the torso's shape.
+    The points are put in a canonical order first (sorted by their coordinates): what is found depends on
+    her surface, not on the order a file lists its points in."""
     clock = clock or Clock()
     with clock("viewing frame"):
-        view, found = (np.eye(4), None) if cloud.frame_hint == "camera-opencv" else viewing_frame(cloud.points, options.up)
-        points = transform_points(view, cloud.points)
+        ordered = cloud.points[np.lexsort(cloud.points.T[::-1])]
+        view, found = (np.eye(4), None) if cloud.frame_hint == "camera-opencv" else viewing_frame(ordered, options.up)
+        points = transform_points(view, ordered)
         viewer = points.mean(0) - [0.0, 0.0, 2000.0]
     return isolate(points, view, options, clock, viewer=viewer, found=found,
                    up=None if cloud.frame_hint == "camera-opencv" else options.up)

@@ -1,0 +1,54 @@
+"""A plan's numbers depend on her surface alone: the same scan file with its points in another order,
+planned on one BLAS thread or two, run again, gives the same plan.json to the printed digit."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+
+import numpy as np
+import pytest
+
+from breastplan import read_ply, write_ply
+from breastplan.ingest.makehuman import BodyOptions
+from breastplan.ingest.realistic import CameraOptions, make_body_scene, write_scan_file
+
+
+def _plan(cli, scan, out, threads: int) -> dict:
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": str(threads), "OMP_NUM_THREADS": str(threads),
+           "MKL_NUM_THREADS": str(threads)}
+    res = subprocess.run([cli, "plan", str(scan), "--out", str(out), "--json"], capture_output=True, text=True,
+                         timeout=600, env=env)
+    assert res.returncode == 0, res.stderr[-2000:]
+    return json.loads((out / "plan.json").read_text())
+
+
+def _numbers(record: dict) -> dict:
+    """What plan.json says of her: measures, volumes, nipples and fits (not its timings or paths)."""
+    sides = {s: {k: r[k] for k in ("nipple_input_mm", "volume", "fit")} for s, r in record["sides"].items()}
+    for side in sides.values():
+        side["fit"] = {k: v for k, v in side["fit"].items() if k != "iterations"}
+    return {"measures": record["measures"], "sides": sides}
+
+
+@pytest.fixture(scope="module")
+def scan_files(tmp_path_factory):
+    """A MakeHuman body's scan file (1 mm of noise), and the same points shuffled."""
+    folder = tmp_path_factory.mktemp("repeats")
+    scene = make_body_scene(BodyOptions(cup=0.75, firmness=0.3, weight=0.6, pose="arms-down"),
+                            CameraOptions(680.0, 6.0, -5.0, wall_mm=None))
+    write_scan_file(folder / "clean.ply", scene)
+    points = read_ply(folder / "clean.ply").points
+    points = points + np.random.default_rng(5).normal(0.0, 1.0, points.shape)
+    write_ply(folder / "her.ply", points)
+    write_ply(folder / "shuffled.ply", points[np.random.default_rng(6).permutation(len(points))])
+    return folder
+
+
+def test_a_plan_is_the_same_for_any_order_of_the_points_any_blas_threads_and_from_run_to_run(cli, scan_files,
+                                                                                            tmp_path):
+    first = _numbers(_plan(cli, scan_files / "her.ply", tmp_path / "a", threads=1))
+    assert _numbers(_plan(cli, scan_files / "shuffled.ply", tmp_path / "b", threads=1)) == first
+    assert _numbers(_plan(cli, scan_files / "her.ply", tmp_path / "c", threads=2)) == first
+    assert _numbers(_plan(cli, scan_files / "her.ply", tmp_path / "d", threads=1)) == first
+    assert all(r["volume"]["volume_cc"] > 100 for r in first["sides"].values())
