@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from hypothesis import given, settings
+from matplotlib.path import Path as MplPath
 from scipy.spatial import cKDTree
 from hypothesis import strategies as st
 
@@ -92,6 +93,29 @@ def test_the_measures_know_her_midline_and_the_asymmetry_of_her_nipples(planned)
     true_drop = float((nipple["right"] - nipple["left"]) @ up)          # left nipple below the right one
     assert true_drop > 5.0
     assert record["measures"]["asymmetry"]["before"]["nipple_below_notch_mm"] == pytest.approx(true_drop, abs=4.0)
+
+
+def test_her_symmetry_and_ptosis_are_measured_before_and_as_planned_and_shown(planned):
+    """Against the sample's truth: the upward nipple retraction (UNR) is the true difference of her
+    nipples' heights; the grades are Regnault's; the report shows both tables and draws each footprint,
+    a closed curve round its nipple."""
+    case, record, _ = planned
+    truth = np.load(TRUTH)
+    nipple = {s: truth[f"{s}_nipple_camera_mm"] for s in ("left", "right")}
+    true_drop = float((nipple["right"] - nipple["left"]) @ truth["camera_from_body"][:3, 1])
+    symmetry, ptosis = record["measures"]["symmetry"], record["measures"]["ptosis"]
+    assert symmetry["before"]["UNR_mm"] == pytest.approx(abs(true_drop), abs=4.0)
+    assert 50.0 < symmetry["before"]["overlap_pct"] <= 100.0
+    assert set(symmetry["after"]) == set(symmetry["before"])
+    for side in ("left", "right"):
+        for when in ("before", "after"):
+            assert ptosis[when][side]["grade"] in ("0", "I", "II", "III", "pseudoptosis")
+        outline = np.array(record["sides"][side]["volume"]["footprint_input_mm"])
+        assert len(outline) > 20 and np.allclose(outline[0], outline[-1])
+        assert MplPath(outline[:, :2]).contains_point(nipple[side][:2])       # round it, seen by the camera
+    page = (case / "report.html").read_text()
+    assert "<h2>Symmetry</h2>" in page and "<h2>Ptosis (Regnault)</h2>" in page
+    assert "<h2>Volume, measured on her skin</h2>" in page and '"footprints":{"left":[[' in page
 
 
 def test_the_wall_behind_the_sample_gives_her_up_axis_and_the_report_says_so(planned):
