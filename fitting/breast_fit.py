@@ -22,6 +22,7 @@ from breastplan.meshes import mesh_volume, volume_below_base
 from breastplan.options import FitOptions
 
 from .ffd import STOP_RESIDUAL, FFDFit, fit_ffd
+from .sampling import canonical_order, one_blas_thread
 from .superquadric import SuperquadricFit, distance_stats, fit_superquadric
 
 MESH_GRID = (40, 96)
@@ -119,12 +120,23 @@ def fit_breast(points_mm: np.ndarray, options: FitOptions = FitOptions(),
     `ffd.converged` and `stopping_rule_met` say so; `ffd.residuals_mm` maps where it misses);
     BadInputError for unusable points or a fit that finds no breast surface (mean normalised
     residual above MAX_RESIDUAL, or no enclosed volume).
+
+    The fit is a function of the point set alone: any order of the same points gives the same fit,
+    bit for bit (its stages work on the points in canonical order, `sampling.canonical_order`, and
+    report the per-point residuals in the caller's order), and so does any BLAS thread count (it
+    runs on one).
     """
+    with one_blas_thread():
+        return _fit_breast(points_mm, options, chest)
+
+
+def _fit_breast(points_mm, options: FitOptions, chest: ChestBeneath | None) -> BreastFit:
     sq = fit_superquadric(points_mm, deformations=options.deformations)
     vertices, faces = model_mesh(sq)
     points = np.asarray(points_mm, float)
-    ffd = fit_ffd(points, vertices, faces, n=options.lattice, smoothness=smoothness(vertices, points),
-                  held=held_weights(vertices), max_iterations=options.max_iterations)
+    lam = smoothness(vertices, points[canonical_order(points)])
+    ffd = fit_ffd(points, vertices, faces, n=options.lattice, smoothness=lam, held=held_weights(vertices),
+                  max_iterations=options.max_iterations)
     if not ffd.residual < MAX_RESIDUAL:
         raise BadInputError(None, f"gives a fit that found no breast surface: mean normalised residual "
                                   f"{ffd.residual:.4f} after {ffd.iterations} FFD iterations "

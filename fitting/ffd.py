@@ -9,7 +9,9 @@ normal, a small weight on the tangential offset, and λ‖L(P − P0)‖² with 
 Laplacian) until the mean normalised residual ‖d − m‖/‖d‖ (docs/model.md §7's normalisation
 by ‖o‖) is below 0.0015 (thesis stopping rule), the residual stops improving, or the
 iterations run out: the budget is counted in iterations, never in seconds, so a result does not
-depend on the machine's load.
+depend on the machine's load. Nor on the order of the data points or the BLAS thread count: the fit
+works on the points in canonical order (`sampling.canonical_order`; its subset is drawn in that
+order) on one BLAS thread, and returns the residuals in the caller's order.
 
 Matching on the *closed* mesh holds the base cap to the data's base ring on the chest wall;
 the tangential weight is the Levenberg–Marquardt damping: raised after a step that made the
@@ -27,7 +29,7 @@ from scipy import sparse
 
 from breastplan.deform.lattice import Lattice
 
-from .sampling import seeded_subset
+from .sampling import canonical_order, in_caller_order, one_blas_thread, seeded_subset
 
 STOP_RESIDUAL = 0.0015
 MAX_ITERATIONS = 1000
@@ -38,7 +40,8 @@ CREEP = (20, 0.01)
 """(iterations, relative gain): a fit whose residual gained less than 1 % over its last 20
 iterations has converged too — it is creeping towards a shape the lattice cannot hold."""
 FIT_POINTS = 2000
-"""Data points per solve (a seeded subset): 2000 surface points pin 375 lattice coordinates."""
+"""Data points per solve (a seeded subset of the points in canonical order): 2000 surface points pin
+375 lattice coordinates."""
 DAMPING = (0.01, 0.03, 1.0)
 """Tangential weight: floor, start, ceiling."""
 
@@ -48,7 +51,7 @@ class FFDFit:
     lattice: Lattice           # its control points set to the fitted ones
     vertices: np.ndarray       # (V, 3) fitted surface, mm
     residual: float            # mean normalised residual of every data point at the end
-    residuals_mm: np.ndarray   # data ↔ surface distances at the end, mm
+    residuals_mm: np.ndarray   # data ↔ surface distances at the end, mm, in the order of the data
     iterations: int
     seconds: float
     converged: bool            # met the stopping rule or stopped improving (not cut by a limit)
@@ -65,6 +68,16 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
     n³ one around data and vertices). `stop`: the mean normalised residual that ends the fit.
     """
     start = time.perf_counter()
+    order = canonical_order(data)
+    with one_blas_thread():
+        lattice, current, final, dist, it, converged = _fit(np.asarray(data, float)[order], vertices, faces, n,
+                                                            smoothness, held, max_iterations, box, stop)
+    return FFDFit(lattice, current, final, in_caller_order(order, dist), it, time.perf_counter() - start, converged)
+
+
+def _fit(data, vertices, faces, n, smoothness, held, max_iterations, box, stop):
+    """`fit_ffd` on the data in canonical order: the lattice, fitted vertices, final residual, the
+    data's distances, iterations and whether it converged."""
     sub = seeded_subset(data, FIT_POINTS)
     lattice = Lattice.around(np.vstack([data, vertices]), n) if box is None else Lattice(box.lo, box.hi, box.shape)
     B = lattice.basis(vertices)
@@ -112,8 +125,7 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
             break
         target *= 0.9
     lattice.points = P.reshape(3, K).T
-    converged = final < stop or stalled
-    return FFDFit(lattice, current, final, dist, it, time.perf_counter() - start, converged)
+    return lattice, current, final, dist, it, final < stop or stalled
 
 
 def _step(match, data, damping, LL, offset, K, products=None):

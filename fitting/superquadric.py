@@ -22,11 +22,12 @@ from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
 from breastplan.errors import counted
 from breastplan.primitive import EPS_BOUNDS
 
-from .sampling import seeded_subset
+from .sampling import canonical_order, in_caller_order, one_blas_thread, seeded_subset
 
 FIT_POINTS = 3000
-"""Larger clouds are fitted on a seeded random subset of this size (the residuals of all
-points are reported): 3000 surface points pin 7 shape and 6 pose parameters to ≈ 0.1 %."""
+"""Larger clouds are fitted on a seeded random subset of this size, drawn from the points in
+canonical order (`sampling.canonical_order`: the same subset whatever the order of the points; the
+residuals of all points are reported): 3000 surface points pin 7 shape and 6 pose parameters to ≈ 0.1 %."""
 MAX_TURN_RAD = 0.35
 """Bound on each rotation-vector component (≈ 20°): the breast frame already fixes the axes, and
 a free turn about z lets the fit trade ptosis for turn (docs/model.md §6)."""
@@ -73,8 +74,9 @@ class SuperquadricFit:
 
 
 def distance_stats(distances_mm) -> dict[str, float]:
-    """mean, rms, p95 and max of |distances| (mm)."""
-    r = np.abs(distances_mm)
+    """mean, rms, p95 and max of |distances| (mm); summed in sorted order, so that any order of the
+    same distances gives the same figures to the last bit."""
+    r = np.sort(np.abs(distances_mm))
     return {"mean": float(r.mean()), "rms": float(np.sqrt(np.mean(r * r))),
             "p95": float(np.percentile(r, 95)), "max": float(r.max())}
 
@@ -222,28 +224,37 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
     (N, 3) points (mm, breast frame).
 
     The deformation parameters start from zero unless `x0` gives the whole parameter vector; with
-    top-shape, see `_fit_with_top_shape`.
+    top-shape, see `_fit_with_top_shape`. The fit is a function of the point set: it works on the
+    points in canonical order (`sampling.canonical_order`) on one BLAS thread, and returns the
+    residuals in the caller's order.
     """
     kinds = tuple(k for k in KIND_PARAMS if k in set(deformations))  # docs/model.md §3 order
     unknown = set(deformations) - set(KIND_PARAMS)
     if unknown:
         raise ValueError(f"unknown deformations {sorted(unknown)}; choose from {', '.join(KIND_PARAMS)}")
     start = time.perf_counter()
-    everything = to_model_units(_checked(points_mm))
-    p = seeded_subset(everything, FIT_POINTS)
-    solve = _Solver(chest_prior, loss, float(to_model_units(f_scale_mm)))
-    fitted = seeded_subset(p, DEFORMED_FIT_POINTS) if kinds else p
-    if x0 is None and "top-shape" in kinds:
-        sol = _fit_with_top_shape(p, fitted, kinds, solve)
-    else:
-        sol = _solve_plausibly(fitted, kinds, initial_guess(p, kinds) if x0 is None else x0, 0, solve)
+    with one_blas_thread():
+        points, order = _checked(points_mm)
+        everything = to_model_units(points)
+        sol = _fit(everything, kinds, x0, chest_prior, loss, f_scale_mm)
+        residuals = to_mm(_radial(sol.x, everything, kinds))
     a, e1, e2, rot, t = _unpack(sol.x)
     pose = np.eye(4)
     pose[:3, :3] = _rotation(rot)
     pose[:3, 3] = to_mm(t)
     return SuperquadricFit(Primitive(*map(float, a), float(e1), float(e2)), pose, _deformation(sol.x, kinds),
-                           to_mm(_radial(sol.x, everything, kinds)), int(sol.nfev), time.perf_counter() - start,
-                           sol.x)
+                           in_caller_order(order, residuals), int(sol.nfev), time.perf_counter() - start, sol.x)
+
+
+def _fit(everything: np.ndarray, kinds: tuple[str, ...], x0: np.ndarray | None, chest_prior: bool, loss: str,
+         f_scale_mm: float):
+    """The solver's end for `fit_superquadric` on every point (mu, canonical order)."""
+    p = seeded_subset(everything, FIT_POINTS)
+    solve = _Solver(chest_prior, loss, float(to_model_units(f_scale_mm)))
+    fitted = seeded_subset(p, DEFORMED_FIT_POINTS) if kinds else p
+    if x0 is None and "top-shape" in kinds:
+        return _fit_with_top_shape(p, fitted, kinds, solve)
+    return _solve_plausibly(fitted, kinds, initial_guess(p, kinds) if x0 is None else x0, 0, solve)
 
 
 def _solve_plausibly(fitted: np.ndarray, kinds: tuple[str, ...], x0: np.ndarray, nfev: int, solve: "_Solver"):
@@ -544,7 +555,9 @@ def _bounds(x0: np.ndarray, max_turn: float, bounded: tuple[str, ...]) -> tuple[
     return lower, upper
 
 
-def _checked(points_mm) -> np.ndarray:
+def _checked(points_mm) -> tuple[np.ndarray, np.ndarray]:
+    """The points (mm) in canonical order and that order (`sampling.canonical_order`); BadInputError
+    for points no surface can be fitted to."""
     p = np.asarray(points_mm, dtype=float)
     if p.ndim != 2 or p.shape[1] != 3:
         raise BadInputError(None, f"holds points of shape {p.shape}, not (N, 3)")
@@ -552,7 +565,9 @@ def _checked(points_mm) -> np.ndarray:
         raise BadInputError(None, "has NaN or infinite coordinates")
     if len(p) < 50:
         raise BadInputError(None, f"has only {counted(len(p), 'point')}; a fit needs at least 50")
+    order = canonical_order(p)
+    p = p[order]
     s = np.linalg.svd(p - p.mean(0), compute_uv=False)
     if s[2] <= 1e-6 * s[0]:                            # all three 0: the points are one point
         raise BadInputError(None, "has coplanar or collinear points: no surface to fit")
-    return p
+    return p, order
