@@ -655,9 +655,9 @@ def figure(name, value, target, baseline, unit, at_most=True, **extra) -> dict:
             "baseline": baseline, "unit": unit, "met": met, **extra}
 
 
-def print_figures(figures: list[dict], console: Console) -> None:
-    table = new_table("bench_realistic — figures (realistic bodies; baseline: the Chen torso, same run)",
-                      ("figure", "value", "target", "baseline", "met", "over"))
+def print_figures(figures: list[dict], console: Console,
+                  title: str = "bench_realistic — figures (realistic bodies; baseline: the Chen torso, same run)") -> None:
+    table = new_table(title, ("figure", "value", "target", "baseline", "met", "over"))
     for f in figures:
         unit = f["unit"]
         show = lambda v: "–" if v is None else f"{v:.3g} {unit}"  # noqa: E731

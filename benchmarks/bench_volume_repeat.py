@@ -11,8 +11,8 @@ model (`fit_scan(ingested).volume_cc` per side, BLAS on one thread as `breastpla
 1. re-scans: 4 bodies (cup 0.8 / firmness 0.3, arms down; cup 0.3 / firmness 0.8 / weight 0.8,
    hands on hips; cup 0.6 / weight 0.3 / muscle 0.7, a-pose; asymmetry +0.5), each scanned
    RESCANS times from a camera drawn per scan (seeded): distance 600–720 mm, pitch 2–10°, yaw
-   −7..7°, aimed ±25 mm above or below the nipples' midpoint, a new noise seed; a wall 400 mm behind
-   her on every other scan. Per breast:
+   −7..7°, aimed ±25 mm above or below the nipples' midpoint, a new noise seed, in the same room (a
+   wall 400 mm behind bodies 1 and 3, none behind 2 and 4). Per breast:
    * the volume's coefficient of variation (stdev / mean) — target: median over the breasts ≤ 2 %;
    * its spread (max − min) / median — target: worst ≤ 6 %;
    * the nipple spread: the largest distance of a scan's nipple (found by ingest) from the scans'
@@ -41,12 +41,20 @@ model (`fit_scan(ingested).volume_cc` per side, BLAS on one thread as `breastpla
    the vertices the cup targets move all lie within 145 mm of the nipple), 2 bodies in 2 views each:
    |error| in % of the true difference — target ≤ 10 % (bench_realistic's for a cup change).
 
+4. the other room: each re-scan body scanned once more with a wall where its re-scans had none (or
+   none where they had one), whose up axis then comes from the other source: its nipple and volume
+   against the re-scans' (no target).
+5. two visits: two women whose cup changed between visits (bench_realistic's cup pairs), one scan
+   each: her change measured on her skin from each scan alone, on each visit's own wall, as a share of
+   the true half-body change, beside the fitted model's (no target: a follow-up is measured on one
+   wall, `--wall-from`, which bench_realistic measures).
+
 A scene whose ingest, measure or fit raises is counted and listed; its breasts are left out of the
 figures they would enter. Nothing is asserted. The script prints tables, then one JSON line per figure
 ({"benchmark", "figure", "value", "target", "baseline", "unit", "met", ...}) and a last line with
 everything.
 
-Run:  .venv/bin/python benchmarks/bench_volume_repeat.py     (42 scenes, about 2.5 minutes on 2 cores)
+Run:  .venv/bin/python benchmarks/bench_volume_repeat.py     (50 scenes, about 3 minutes on 2 cores)
 """
 from __future__ import annotations
 
@@ -70,7 +78,7 @@ from breastplan.ingest.recording import DepthFrames
 from breastplan.options import SIDES, IngestOptions
 from breastplan.plan.breast_volume import measure_breasts
 
-from bench_realistic import figure, new_table
+from bench_realistic import figure, new_table, print_figures
 from timing import rounded
 
 FRAMES = 8
@@ -94,6 +102,9 @@ BODIES = {
     "A1 asym +.5 cup .3 wt .7": BodyOptions(cup=0.3, weight=0.7, modifiers={"asymmetry": 0.5}),
     "A2 asym -.5 cup .8 firm .3": BodyOptions(cup=0.8, firmness=0.3, modifiers={"asymmetry": -0.5}),
     "A3 asym -.5 trans +.5 cup .6": BodyOptions(cup=0.6, weight=0.6, modifiers={"asymmetry": -0.5, "breast_trans": 0.5}),
+    "V1 cup .3": BodyOptions(cup=0.3, pose="arms-down"), "V1 cup .8": BodyOptions(cup=0.8, pose="arms-down"),
+    "V2 cup .2": BodyOptions(cup=0.2, firmness=0.7, weight=0.8, muscle=0.4, pose="hands-on-hips"),
+    "V2 cup 1": BodyOptions(cup=1.0, firmness=0.7, weight=0.8, muscle=0.4, pose="hands-on-hips"),
 }
 HYBRIDS = {
     "C1 cup L .8 / R .4": (BodyOptions(cup=0.8), BodyOptions(cup=0.4)),
@@ -101,6 +112,8 @@ HYBRIDS = {
                                    BodyOptions(cup=0.6, firmness=0.3, weight=0.6)),
 }
 """One-sided cup bodies: (left half's body, right half's body)."""
+VISITS = {"V1": ("V1 cup .3", "V1 cup .8"), "V2": ("V2 cup .2", "V2 cup 1")}
+"""Two visits of one woman whose cup changed between them (bench_realistic's cup pairs): (before, after)."""
 RESCAN_BODIES = ("R1 cup .8 firm .3", "R2 cup .3 firm .8 wt .8", "R3 cup .6 wt .3 mus .7", "R4 asym +.5")
 SYMMETRIC_VIEWS = (   # pose, distance mm, pitch °, yaw °, wall
     ("a-pose", 650.0, 4.0, 0.0, WALL_MM), ("arms-down", 700.0, 8.0, -10.0, None),
@@ -120,7 +133,7 @@ ASYMMETRY_VIEWS = {
 class Shot:
     """One scene to scan: which set, which body in which pose, the camera, its aim and its noise seed."""
 
-    set: str            # "rescan", "symmetric", "asymmetry"
+    set: str            # "rescan", "room" (a re-scan body in the other room), "symmetric", "asymmetry", "visit"
     body: str
     pose: str
     camera: CameraOptions
@@ -140,12 +153,17 @@ def shots() -> list[Shot]:
         rng = np.random.default_rng(RESCAN_SEED + k)
         for i in range(RESCANS):
             d, p, y, dh = rng.uniform(600, 720), rng.uniform(2, 10), rng.uniform(-7, 7), rng.uniform(-25, 25)
-            cam = CameraOptions(float(d), float(p), float(y), RESOLUTION, wall_mm=WALL_MM if i % 2 == 0 else None)
+            cam = CameraOptions(float(d), float(p), float(y), RESOLUTION, wall_mm=WALL_MM if k % 2 == 0 else None)
             out.append(Shot("rescan", name, BODIES[name].pose, cam, float(dh), 100 * k + i))
+        other_room = CameraOptions(660.0, 6.0, 0.0, RESOLUTION, wall_mm=None if k % 2 == 0 else WALL_MM)
+        out.append(Shot("room", name, BODIES[name].pose, other_room, 0.0, 100 * k + 50))
     for k, name in enumerate(("S1 wt .85 cup .2", "S2 wt .5 cup .7")):
         for i, (pose, d, p, y, wall) in enumerate(SYMMETRIC_VIEWS):
             out.append(Shot("symmetric", name, pose, CameraOptions(d, p, y, RESOLUTION, wall_mm=wall), 0.0,
                             1000 + 100 * k + i))
+    for k, (before, after) in enumerate(VISITS.values()):     # a second visit: another camera, the same room
+        out.append(Shot("visit", before, BODIES[before].pose, CameraOptions(650.0, 5.0, 0.0, RESOLUTION), 0.0, 3000 + k))
+        out.append(Shot("visit", after, BODIES[after].pose, CameraOptions(690.0, 8.0, -5.0, RESOLUTION), 0.0, 3100 + k))
     for k, (name, views) in enumerate(ASYMMETRY_VIEWS.items()):
         for i, (pose, d, p, y, wall) in enumerate(views):
             out.append(Shot("asymmetry", name, pose, CameraOptions(d, p, y, RESOLUTION, wall_mm=wall), 0.0,
@@ -324,8 +342,21 @@ def rescan_rows(results: list[SceneResult]) -> list[dict]:
                 "notch_spread_mm": point_spread_mm([f["notch"] for f in frames]),
                 "up_spread_deg": angle_spread_deg([f["up"] for f in frames]),
                 "left_spread_deg": angle_spread_deg([f["left"] for f in frames]),
+                **_other_room(results, name, side, new, med),
             })
     return rows
+
+
+def _other_room(results: list[SceneResult], name: str, side: str, new: list[dict], median: float | None) -> dict:
+    """The body scanned once in the other room (a wall behind her where the re-scans had none, or none
+    where they had one): its nipple's distance from the re-scans' mean nipple in the found body frame, and
+    its volume's difference from the re-scans' median."""
+    room = [r.new[side] for r in results if r.shot.set == "room" and r.shot.body == name and side in r.new]
+    if not room or not new or not median:
+        return {}
+    mean = np.mean([n["nipple_body"] for n in new], axis=0)
+    return {"other_room_nipple_mm": float(np.linalg.norm(np.asarray(room[0]["nipple_body"]) - mean)),
+            "other_room_volume_pct": 100.0 * (room[0]["volume_cc"] - median) / median}
 
 
 def lr(d: dict) -> float | None:
@@ -375,6 +406,26 @@ def asymmetry_rows(results: list[SceneResult]) -> list[dict]:
     return rows
 
 
+def visit_rows(results: list[SceneResult]) -> list[dict]:
+    """Per woman and side: her change between two visits measured on her skin from each visit's scan alone
+    (each on its own chest wall), and the fitted model's likewise, against the true half-body change."""
+    by_body = {r.shot.body: r for r in results if r.shot.set == "visit"}
+    rows = []
+    for woman, (before, after) in VISITS.items():
+        if before not in by_body or after not in by_body:
+            continue
+        then, now = by_body[before], by_body[after]
+        for side in SIDES:
+            true = now.truth_cc[side] - then.truth_cc[side]
+            new = (now.new[side]["volume_cc"] - then.new[side]["volume_cc"]) if side in now.new and side in then.new \
+                else None
+            fit = (now.fitted[side] - then.fitted[side]) if side in now.fitted and side in then.fitted else None
+            rows.append({"woman": woman, "side": side, "true_cc": true, "new_cc": new, "fitted_cc": fit,
+                         "new_pct_of_true": None if new is None else 100.0 * new / true,
+                         "fitted_pct_of_true": None if fit is None else 100.0 * fit / true})
+    return rows
+
+
 def relative(row: dict, which: str) -> float | None:
     e = row[f"{which}_error_cc"]
     return None if e is None else 100.0 * e / abs(row["true_lr_cc"])
@@ -397,6 +448,7 @@ def worst_of(values) -> float | None:
 
 def figures_of(resc: list[dict], sym: list[dict], asym: list[dict], results: list[SceneResult]) -> list[dict]:
     poses = pose_spreads(results)
+    visits = visit_rows(results)
     T = TARGETS
     honest, measured = sum(r["honest"] for r in resc), sum(r["measured"] for r in resc)
     breasts = f"{sum(r['measured'] >= 2 for r in resc)} breasts × {RESCANS} re-scans"
@@ -425,6 +477,12 @@ def figures_of(resc: list[dict], sym: list[dict], asym: list[dict], results: lis
                T["footprint_spread_mm"], None, "mm", median=median_of(r["footprint_spread_mm"] for r in resc),
                true_frame_worst=worst_of(r["footprint_spread_true_frame_mm"] for r in resc),
                over=f"{breasts}: x–y distance from the median-volume scan's footprint, found body frame"),
+        figure("other_room_nipple_worst", worst_of(r.get("other_room_nipple_mm") for r in resc), None, None, "mm",
+               volume_worst_pct=worst_of(abs(r["other_room_volume_pct"]) for r in resc if "other_room_volume_pct" in r),
+               over="each re-scan body scanned once more in the other room (a wall where its re-scans had none, or "
+                    "none where they had one): the nipple from the re-scans' mean, found body frame; its volume "
+                    "from their median (no target: the up axis then comes from the wall on one visit and from her "
+                    "midline profile on the other)"),
         figure("rescan_honesty", 100.0 * honest / measured if measured else None, T["honesty_pct"], None, "%",
                at_most=False, over=f"{honest}/{measured} re-scan volumes within their ± of their breast's median "
                                    "(the fitted model states no ±)"),
@@ -453,10 +511,19 @@ def figures_of(resc: list[dict], sym: list[dict], asym: list[dict], results: lis
                true_lr_cc_range=[min(a["true_lr_cc"] for a in cups), max(a["true_lr_cc"] for a in cups)],
                over=f"{sum(a['new_error_cc'] is not None for a in cups)}/{len(cups)} scenes of one-sided cup "
                     "bodies: |measured − true (left − right)| / |true|"),
+        figure("single_scan_change_worst_pct", worst_abs(v["new_pct_of_true"] - 100.0 for v in visits
+                                                          if v["new_pct_of_true"] is not None), None,
+               worst_abs(v["fitted_pct_of_true"] - 100.0 for v in visits if v["fitted_pct_of_true"] is not None), "%",
+               shares_of_true_pct=[v["new_pct_of_true"] for v in visits],
+               baseline_shares_of_true_pct=[v["fitted_pct_of_true"] for v in visits],
+               over=f"{len(visits)} breasts of 2 women whose cup changed between two visits (true change "
+                    f"{min(v['true_cc'] for v in visits):.0f}–{max(v['true_cc'] for v in visits):.0f} cc), one "
+                    "scan each, each on its own wall: |measured change − true| / true; no target (a follow-up is "
+                    "measured on one wall, `--wall-from`: bench_realistic)") if visits else None,
         figure("seconds_per_torso_median", median_of(measure_s), None, median_of(fit_s), "s",
                over="measure_breasts per scene (both breasts) vs fit_scan per breast (baseline); no target"),
     ]
-    return [{"benchmark": "bench_volume_repeat", **f} for f in figures]
+    return [{"benchmark": "bench_volume_repeat", **f} for f in figures if f is not None]
 
 
 # --- printing --------------------------------------------------------------------------------
@@ -518,15 +585,8 @@ def print_tables(console: Console, results, resc, sym, asym, figures) -> None:
         for row in failed:
             table.add_row(*row[:4], row[4][:120])
         console.print(table)
-    table = new_table("bench_volume_repeat — figures (new: measure_breasts; baseline: the fitted model, same run)",
-                      ("figure", "new", "target", "baseline", "met", "over"))
-    for f in figures:
-        unit = f["unit"]
-        show = lambda v: "–" if v is None else f"{v:.3g} {unit}"  # noqa: E731
-        target = "–" if f["target"] is None else f"{'≤' if f['target_is'] == 'max' else '≥'} {f['target']:g} {unit}"
-        table.add_row(f["figure"], show(f["value"]), target, show(f["baseline"]),
-                      "–" if f["met"] is None else ("yes" if f["met"] else "no"), f.get("over", ""))
-    console.print(table)
+    print_figures(figures, console, "bench_volume_repeat — figures (measure_breasts; baseline: the fitted model, "
+                                    "same run)")
 
 
 def main() -> None:
