@@ -28,7 +28,7 @@ The points are put in a canonical order first, so the result depends on her surf
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -110,6 +110,10 @@ class SkinCells:
         """(nx, ny) the footprint's cells on one side."""
         return self.footprint & ((self.x > 0) if side == "left" else (self.x < 0))[:, None]
 
+    def volume_cc(self, side: str) -> float:
+        """One breast's volume: her skin's heights above the wall (those above 0) over its footprint, cc."""
+        return float(np.clip(self.height_mm[self.side(side)], 0.0, None).sum()) * CELL_MM ** 2 / 1000.0
+
 
 @dataclass(frozen=True, eq=False)
 class BreastVolumes:
@@ -120,6 +124,20 @@ class BreastVolumes:
     landmarks: BodyLandmarks
     body_from_input: np.ndarray         # (4, 4) input frame → her body frame, mm
     cells: SkinCells
+
+
+def change_on_earlier_wall(earlier: BreastVolumes, torso_mm, earlier_from_input, side: str) -> tuple[float, float]:
+    """One breast's volume then and now (cc), both on an earlier visit's chest wall and inside one
+    footprint: this scan's torso (input frame, mm) carried into the earlier scan's input frame by
+    `earlier_from_input` (a registration of the two chests, (4, 4)) and its skin measured on the earlier
+    visit's cells; the footprint is the earlier one grown over the skin that now rises FOOT_MM from the
+    wall next to it (a breast grown since), both sides' joined and mirrored as `measure_breasts` joins them."""
+    then = earlier.cells
+    now = then.moved(transform_points(earlier.body_from_input @ np.asarray(earlier_from_input, float),
+                                      np.asarray(torso_mm, float)))
+    grown = ndimage.binary_propagation(then.footprint, mask=then.footprint | (now.height_mm > FOOT_MM))
+    grown |= grown[::-1]
+    return replace(then, footprint=grown).volume_cc(side), replace(now, footprint=grown).volume_cc(side)
 
 
 def body_frame(landmarks: BodyLandmarks) -> np.ndarray:

@@ -20,6 +20,7 @@ from breastplan.fitting.ffd import STOP_RESIDUAL
 from breastplan.options import SIDES
 
 from .job import PLAN_SCHEMA, Plan, SidePlan, input_record
+from .breast_volume import change_on_earlier_wall
 from .measures import asymmetry, breast_measures
 from .symmetry import bcct_measures, ptosis_from_cells
 
@@ -85,14 +86,19 @@ def volume_record(plan: Plan, side: str) -> dict:
 
 
 def _skin_change(plan: Plan, side: str) -> dict:
-    """A follow-up's change of her volume on her skin, each visit measured on its own chest wall from one
-    scan: beside the model's change on the earlier wall."""
+    """A follow-up's change of her volume on her skin: on the earlier visit's wall and footprint (this
+    torso carried there by the side's registration), and from each visit's own scan and wall alone."""
     then = plan.earlier_volumes.sides.get(side) if plan.earlier_volumes is not None else None
     if then is None or not then.volume_cc > 0:
         return {}
-    change = plan.volumes.sides[side].volume_cc - then.volume_cc
-    return {"skin_earlier_volume_cc": round(then.volume_cc, 1), "skin_volume_change_cc": round(change, 1),
-            "skin_volume_change_pct": round(100.0 * change / then.volume_cc, 1)}
+    sp = plan.sides[side]
+    before, after = change_on_earlier_wall(plan.earlier_volumes, sp.scan.torso_camera,
+                                           sp.follow_up.registration.earlier_from_later, side)
+    on_wall, alone = after - before, plan.volumes.sides[side].volume_cc - then.volume_cc
+    return {"skin_earlier_volume_cc": round(before, 1), "skin_volume_change_cc": round(on_wall, 1),
+            "skin_volume_change_pct": round(100.0 * on_wall / before, 1),
+            "skin_own_walls_change_cc": round(alone, 1),
+            "skin_own_walls_change_pct": round(100.0 * alone / then.volume_cc, 1)}
 
 
 def fit_record(sp: SidePlan) -> dict:
