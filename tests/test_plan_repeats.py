@@ -48,7 +48,6 @@ def scan_files(tmp_path_factory):
 def test_a_plan_is_the_same_for_any_order_of_the_points_any_blas_threads_and_from_run_to_run(cli, scan_files,
                                                                                             tmp_path):
     first = _numbers(_plan(cli, scan_files / "her.ply", tmp_path / "a", threads=1))
-    assert _numbers(_plan(cli, scan_files / "shuffled.ply", tmp_path / "b", threads=1)) == first
-    assert _numbers(_plan(cli, scan_files / "her.ply", tmp_path / "c", threads=2)) == first
-    assert _numbers(_plan(cli, scan_files / "her.ply", tmp_path / "d", threads=1)) == first
+    assert _numbers(_plan(cli, scan_files / "shuffled.ply", tmp_path / "b", threads=2)) == first   # order, threads
+    assert _numbers(_plan(cli, scan_files / "her.ply", tmp_path / "c", threads=1)) == first        # run to run
     assert all(r["volume"]["volume_cc"] > 100 for r in first["sides"].values())
