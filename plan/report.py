@@ -331,7 +331,7 @@ td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4p
 <div id="sliders"></div>
 <div><b>Show</b><br><button id="original">Original</button><button id="combined">Combined, as planned</button></div>
 <p id="state"></p>
-<p>Dark points: the scan of the breast. Skin-coloured surface: the planned breast. Coloured points: how far the plan moves the patient's surface (mm). Red: the sternal notch, the midline and the nipples the measures start from.</p>
+<p>Dark points: the scan of the breast. Skin-coloured surface: the planned breast. Coloured points: how far the plan moves the patient's surface (mm). Red: the sternal notch, the midline and the nipples the measures start from. Blue: each breast's footprint, the outline her volume is measured inside.</p>
 </div></main>
 <div id="tables">%TABLES%</div>
 <script>%SCRIPT%</script>
