@@ -33,7 +33,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import ndimage
 
-from breastplan import transform_points
+from breastplan import BadInputError, transform_points
 
 from .measures import BodyLandmarks, find_landmarks
 
@@ -51,6 +51,8 @@ ODD_TERMS = "x, x (y − cy)"
 """Two terms of the wall odd in x: they take up a body frame turned by a degree about her vertical or her
 anterior axis (which a mirror-symmetric wall cannot follow: it set one breast's side 3 mm higher than the
 other's), and leave the wall otherwise the same on both sides."""
+MIN_WALL_CELLS = 100
+"""The wall is fitted to at least this many cells of her chest (a quarter of a 10 × 10 cm patch)."""
 DISC = 0.75
 """The first round leaves out a disc of this many times that distance round each breast."""
 ROUNDS = 3
@@ -206,6 +208,9 @@ class _SkinGrid:
         """The wall's anterior coordinate on every cell, fitted robustly to the skin of `support`, and
         the mean standard error of a fitted value, σ √(terms / inliers), mm."""
         A, z = self.basis[support], self.skin[support]
+        if len(z) < MIN_WALL_CELLS:
+            raise BadInputError(None, f"shows too little of her chest around the breasts ({len(z)} cell"
+                                      f"{'s' * (len(z) != 1)} of {CELL_MM:g} mm) to infer the chest wall beneath them")
         inlier = np.ones(len(z), bool)
         for it in range(TRIM_ITERATIONS):
             coef = np.linalg.lstsq(A[inlier], z[inlier], rcond=None)[0]

@@ -116,3 +116,16 @@ def test_the_measure_depends_on_her_surface_alone_not_the_points_order_nor_the_b
         runs.append({s: (round(v.volume_cc, 1), round(v.uncertainty_cc, 1), v.footprint_input_mm.round(1).tobytes())
                      for s, v in m.sides.items()})
     assert runs[0] == runs[1] == runs[2]
+
+
+def test_a_torso_that_shows_too_little_chest_around_the_breasts_is_refused_in_a_sentence():
+    """Her breasts with hardly any chest around them: no wall can be inferred beneath them, and that is
+    said (BadInputError), not guessed."""
+    from breastplan import BadInputError
+
+    torso, nipples, view_from, plumb, _ = scanned(SYMMETRIC)
+    near = np.min([np.linalg.norm(torso - n, axis=1) for n in nipples.values()], axis=0) < 70.0
+    centre = 0.5 * (nipples["left"] + nipples["right"])
+    neck = (torso[:, 1] < centre[1] - 150.0) & (np.abs(torso[:, 0] - centre[0]) < 40.0)     # her midline's notch
+    with pytest.raises(BadInputError, match="too little of her chest"):
+        measure_breasts(torso[near | neck], nipples, view_from, plumb)
