@@ -9,7 +9,7 @@ same), and the spread of the fitted volumes, (max − min) / mean, is reported; 
 of the chest wall found under the breast (at the unshifted nipple's foot, ±60 mm around it) against
 the unshifted one. The unshifted breast is also fitted with its points in other orders (reversed,
 two seeded shuffles): the same points, so any spread would be the fit's own doing; the fit works on
-its points in canonical order (`fitting.sampling.canonical_order`: its seeded subsets are drawn in
+its points in canonical order (`breastplan.point_order`: its seeded subsets are drawn in
 that order, not by the caller's indices), so the spread is 0 (it was 2–3 % at the median, up to 9.5 % worst,
 when the subsets were drawn by index). Cases: 4 MakeHuman bodies of bench_realistic's pairs (cup 0.3 and 0.2, firmness 0
 of cup 0.7 and 0.9) in one view each, both sides; baseline: 2 Chen torsos in the same run.

@@ -20,9 +20,10 @@ from breastplan.deform.global_deformations import ptosis
 from breastplan.deform.names import PARAM_NAMES, at_bounds
 from breastplan.meshes import mesh_volume, volume_below_base
 from breastplan.options import FitOptions
+from breastplan.point_order import canonical_order
 
 from .ffd import STOP_RESIDUAL, FFDFit, fit_ffd
-from .sampling import canonical_order, one_blas_thread
+from .sampling import one_blas_thread
 from .superquadric import SuperquadricFit, distance_stats, fit_superquadric
 
 MESH_GRID = (40, 96)
@@ -122,7 +123,7 @@ def fit_breast(points_mm: np.ndarray, options: FitOptions = FitOptions(),
     residual above MAX_RESIDUAL, or no enclosed volume).
 
     The fit is a function of the point set alone: any order of the same points gives the same fit,
-    bit for bit (its stages work on the points in canonical order, `sampling.canonical_order`, and
+    bit for bit (its stages work on the points in canonical order, `breastplan.point_order`, and
     report the per-point residuals in the caller's order), and so does any BLAS thread count (it
     runs on one).
     """

@@ -10,7 +10,7 @@ Laplacian) until the mean normalised residual ‖d − m‖/‖d‖ (docs/model.
 by ‖o‖) is below 0.0015 (thesis stopping rule), the residual stops improving, or the
 iterations run out: the budget is counted in iterations, never in seconds, so a result does not
 depend on the machine's load. Nor on the order of the data points or the BLAS thread count: the fit
-works on the points in canonical order (`sampling.canonical_order`; its subset is drawn in that
+works on the points in canonical order (`breastplan.point_order`; its subset is drawn in that
 order) on one BLAS thread, and returns the residuals in the caller's order.
 
 Matching on the *closed* mesh holds the base cap to the data's base ring on the chest wall;
@@ -28,8 +28,9 @@ import open3d as o3d
 from scipy import sparse
 
 from breastplan.deform.lattice import Lattice
+from breastplan.point_order import canonical_order, in_caller_order
 
-from .sampling import canonical_order, in_caller_order, one_blas_thread, seeded_subset
+from .sampling import one_blas_thread, seeded_subset
 
 STOP_RESIDUAL = 0.0015
 MAX_ITERATIONS = 1000

@@ -1,6 +1,7 @@
-"""What makes a fit a function of its point set alone: the canonical order the fits work in, the
-seeded subsets they solve on (drawn in that order: the same points whatever the caller's order),
-and the one BLAS thread they run on (the same sums whatever the machine's thread count)."""
+"""What makes a fit a function of its point set alone, beside the canonical order it works in
+(`breastplan.point_order`): the seeded subsets it solves on (drawn in that order: the same points
+whatever the caller's order), and the one BLAS thread it runs on (the same sums whatever the
+machine's thread count)."""
 from __future__ import annotations
 
 import threading
@@ -10,22 +11,6 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 _within = threading.local()
-
-
-def canonical_order(points: np.ndarray) -> np.ndarray:
-    """Indices that put (N, 3) points in lexicographic order of their coordinates (x, then y, then
-    z): any order of the same points comes out as the same array (equal points are interchangeable),
-    so every subset, sum and discrete choice of a fit made in it is the same too."""
-    p = np.asarray(points)
-    return np.lexsort(p.T[::-1])
-
-
-def in_caller_order(order: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Per-point values computed in canonical order (`canonical_order`'s `order`), back in the
-    caller's order."""
-    out = np.empty_like(values)
-    out[order] = values
-    return out
 
 
 def seeded_subset(points: np.ndarray, n: int) -> np.ndarray:

@@ -20,13 +20,14 @@ from breastplan.deform.global_deformations import (REFERENCE_AXIS, TABULATED, De
                                                    apply_kind, beta, top_shape_table)
 from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
 from breastplan.errors import counted
+from breastplan.point_order import canonical_order, in_caller_order
 from breastplan.primitive import EPS_BOUNDS
 
-from .sampling import canonical_order, in_caller_order, one_blas_thread, seeded_subset
+from .sampling import one_blas_thread, seeded_subset
 
 FIT_POINTS = 3000
 """Larger clouds are fitted on a seeded random subset of this size, drawn from the points in
-canonical order (`sampling.canonical_order`: the same subset whatever the order of the points; the
+canonical order (`breastplan.point_order`: the same subset whatever the order of the points; the
 residuals of all points are reported): 3000 surface points pin 7 shape and 6 pose parameters to ≈ 0.1 %."""
 MAX_TURN_RAD = 0.35
 """Bound on each rotation-vector component (≈ 20°): the breast frame already fixes the axes, and
@@ -225,7 +226,7 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
 
     The deformation parameters start from zero unless `x0` gives the whole parameter vector; with
     top-shape, see `_fit_with_top_shape`. The fit is a function of the point set: it works on the
-    points in canonical order (`sampling.canonical_order`) on one BLAS thread, and returns the
+    points in canonical order (`breastplan.point_order`) on one BLAS thread, and returns the
     residuals in the caller's order.
     """
     kinds = tuple(k for k in KIND_PARAMS if k in set(deformations))  # docs/model.md §3 order
@@ -556,7 +557,7 @@ def _bounds(x0: np.ndarray, max_turn: float, bounded: tuple[str, ...]) -> tuple[
 
 
 def _checked(points_mm) -> tuple[np.ndarray, np.ndarray]:
-    """The points (mm) in canonical order and that order (`sampling.canonical_order`); BadInputError
+    """The points (mm) in canonical order and that order (`breastplan.point_order`); BadInputError
     for points no surface can be fitted to."""
     p = np.asarray(points_mm, dtype=float)
     if p.ndim != 2 or p.shape[1] != 3:

@@ -17,6 +17,7 @@ from breastplan import BadInputError, transform_points
 from breastplan.chest_wall import ChestWall
 from breastplan.clock import Clock
 from breastplan.options import IngestOptions
+from breastplan.point_order import canonical_order
 from breastplan.voxels import voxel_centroids
 
 from . import breast as B
@@ -94,7 +95,7 @@ def ingest_cloud(cloud: ScanCloud, options: IngestOptions, clock: Clock | None =
     her surface, not on the order a file lists its points in."""
     clock = clock or Clock()
     with clock("viewing frame"):
-        ordered = cloud.points[np.lexsort(cloud.points.T[::-1])]
+        ordered = cloud.points[canonical_order(cloud.points)]
         view, found = (np.eye(4), None) if cloud.frame_hint == "camera-opencv" else viewing_frame(ordered, options.up)
         points = transform_points(view, ordered)
         viewer = points.mean(0) - [0.0, 0.0, 2000.0]

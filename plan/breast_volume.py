@@ -34,6 +34,7 @@ import numpy as np
 from scipy import ndimage
 
 from breastplan import BadInputError, transform_points
+from breastplan.point_order import canonical_order
 
 from .measures import BodyLandmarks, find_landmarks
 
@@ -156,7 +157,7 @@ def measure_breasts(torso_mm, nipples: dict, view_from_input=None, plumb=None) -
     torso_mm: (M, 3) the body's points without background, input frame, mm; nipples: side → (3,)
     input frame; view_from_input, plumb: as `find_landmarks` takes them."""
     P = np.asarray(torso_mm, float)
-    P = P[np.lexsort(P.T[::-1])]                       # a canonical order: the result is the surface's
+    P = P[canonical_order(P)]                          # the result is the surface's, whatever the order
     landmarks = find_landmarks(P, nipples, view_from_input, plumb)
     T = body_frame(landmarks)
     grid = _SkinGrid(transform_points(T, P), {s: transform_points(T, np.asarray(n, float)[None])[0]
