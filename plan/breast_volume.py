@@ -115,7 +115,7 @@ class SkinCells:
 
     def volume_cc(self, side: str) -> float:
         """One breast's volume: her skin's heights above the wall (those above 0) over its footprint, cc."""
-        return float(np.clip(self.height_mm[self.side(side)], 0.0, None).sum()) * CELL_MM ** 2 / 1000.0
+        return _volume_cc(self.height_mm, self.side(side))
 
 
 @dataclass(frozen=True, eq=False)
@@ -167,8 +167,8 @@ def measure_breasts(torso_mm, nipples: dict, view_from_input=None, plumb=None) -
     sides = {}
     for side in grid.nipples:
         mask = footprint & grid.half(side)
-        volume = grid.volume(height, mask)
-        unseen = grid.volume(height, mask & ~grid.seen)
+        volume = _volume_cc(height, mask)
+        unseen = _volume_cc(height, mask & ~grid.seen)
         area_cm2 = float(mask.sum() * CELL_MM ** 2 / 100.0)
         sides[side] = BreastVolume(
             volume, float(2.0 * se_mm * area_cm2 / 10.0 + unseen + FLOOR_PCT / 100.0 * volume),
@@ -254,10 +254,6 @@ class _SkinGrid:
     def filled_height(self, wall: np.ndarray) -> np.ndarray:
         return _filled(self.skin, wall)
 
-    def volume(self, height: np.ndarray, mask: np.ndarray) -> float:
-        """cc of the heights above 0 over the cells of `mask`."""
-        return float(np.clip(height[mask], 0.0, None).sum()) * CELL_MM ** 2 / 1000.0
-
     def outline(self, mask: np.ndarray, wall: np.ndarray) -> np.ndarray:
         """(K, 3) the longest closed boundary of `mask`, on the skin (the wall where unseen), body frame."""
         import contourpy
@@ -272,6 +268,11 @@ class _SkinGrid:
         surface = np.where(self.seen, self.skin, wall)
         ij = np.clip(np.floor((xy - self.lo) / CELL_MM).astype(int), 0, np.array(mask.shape) - 1)
         return np.column_stack([xy, surface[ij[:, 0], ij[:, 1]]])
+
+
+def _volume_cc(height: np.ndarray, mask: np.ndarray) -> float:
+    """cc of the heights (mm) above 0 over the cells of `mask`."""
+    return float(np.clip(height[mask], 0.0, None).sum()) * CELL_MM ** 2 / 1000.0
 
 
 def _filled(skin: np.ndarray, wall: np.ndarray) -> np.ndarray:
