@@ -112,12 +112,10 @@ def fit(
                          "measures both breasts on one chest wall, inside one mirrored outline, and its figure is the "
                          "one to compare.", markup=False, soft_wrap=True)
         volume = {**measured.as_dict(), "volume_from": "skin" if both else "skin, one side",
-                  "model_differs_pct":
-                  round(100.0 * (fit.volume_cc - measured.volume_cc) / measured.volume_cc, 1)
-                  if measured.volume_cc > 0 else None}
-    from breastplan.plan.report import MODEL_DIFFERS_PCT
+                  "model_differs_pct": measured.model_differs_pct(fit.volume_cc)}
+    from breastplan.plan.breast_volume import model_differs_much
 
-    if abs(volume.get("model_differs_pct") or 0) > MODEL_DIFFERS_PCT:
+    if model_differs_much(volume.get("model_differs_pct")):
         stderr.print(f"warning: {source}: the fitted model holds {volume['model_differs_pct']:+.0f} % of the volume "
                      "measured on her skin: the model describes this breast only roughly.", markup=False, soft_wrap=True)
     report({"fit": str(paths[Case.FIT_NPZ]), "mesh": str(paths[Case.FIT_PLY]), "points": len(points),

@@ -57,7 +57,7 @@ def plan(
 
     from breastplan.plan.changes import short_of
     from breastplan.plan.job import run_plan
-    from breastplan.plan.report import MODEL_DIFFERS_PCT
+    from breastplan.plan.breast_volume import model_differs_much
 
     with _progress() as step:
         result = run_plan(input, out, options, step)
@@ -75,7 +75,7 @@ def plan(
         _print_plan(result, record)
     for s, r in record["sides"].items():
         differs = r["volume"]["model_differs_pct"]
-        if differs is not None and abs(differs) > MODEL_DIFFERS_PCT:
+        if model_differs_much(differs):
             stderr.print(f"note: the {s} breast's fitted model holds {differs:+.0f} % of the volume measured on her "
                          "skin; the report says so.", markup=False, soft_wrap=True)
         if not r["fit"]["stopping_rule_met"]:

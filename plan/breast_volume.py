@@ -66,6 +66,8 @@ UPPER, REACH = 1.2, 1.2
 TRIM_KEEP, TRIM_FRONT_MM, TRIM_BACK_MM, TRIM_ITERATIONS = 0.5, 3.0, 6.0, 12
 """The wall's robust fit: the first half of the iterations keep the TRIM_KEEP share of cells nearest the
 wall, the rest those within max(3σ, TRIM_FRONT_MM) in front of it and max(3σ, TRIM_BACK_MM) behind."""
+MODEL_DIFFERS_PCT = 25.0
+"""A fitted model whose volume lies further than this from hers is said to (%)."""
 FLOOR_PCT = 2.0
 """Share of the volume added to its ± for what moves between two scans of her (the landmarks, her
 outline): set so that nine re-scans in ten fall within it (benchmarks/bench_volume_repeat.py)."""
@@ -86,6 +88,15 @@ class BreastVolume:
     def as_dict(self) -> dict:
         return {"volume_cc": round(self.volume_cc, 1), "uncertainty_cc": round(self.uncertainty_cc, 1),
                 "footprint_area_cm2": round(self.area_cm2, 1), "unseen_pct": round(self.unseen_pct, 1)}
+
+    def model_differs_pct(self, model_cc: float) -> float | None:
+        """How far a fitted model's volume (cc) lies from hers, % of hers (0.1); None when hers is 0."""
+        return round(100.0 * (model_cc - self.volume_cc) / self.volume_cc, 1) if self.volume_cc > 0 else None
+
+
+def model_differs_much(pct: float | None) -> bool:
+    """Whether a `BreastVolume.model_differs_pct` is further than MODEL_DIFFERS_PCT from hers."""
+    return pct is not None and abs(pct) > MODEL_DIFFERS_PCT
 
 
 @dataclass(frozen=True, eq=False)

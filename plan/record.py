@@ -79,9 +79,7 @@ def volume_record(plan: Plan, side: str) -> dict:
     """plan.json's `volume` of a side: measured on her skin (`plan.breast_volume`), its footprint (input
     frame, mm), and how far the fitted model's volume lies from it."""
     measured, model = plan.volumes.sides[side], plan.sides[side].fit.volume_cc
-    return {**measured.as_dict(), "model_volume_cc": round(model, 1),
-            "model_differs_pct": round(100.0 * (model - measured.volume_cc) / measured.volume_cc, 1)
-            if measured.volume_cc > 0 else None,
+    return {**measured.as_dict(), "model_volume_cc": round(model, 1), "model_differs_pct": measured.model_differs_pct(model),
             "footprint_input_mm": np.round(measured.footprint_input_mm, 1).tolist()}
 
 

@@ -27,6 +27,7 @@ from importlib import metadata
 
 import numpy as np
 
+from .breast_volume import model_differs_much
 from .changes import short_of
 from .job import Plan
 from .measures import measure_label
@@ -65,8 +66,6 @@ VOLUME_TEXT = ('<p id="volume-how">Her volume is the tissue between her skin and
                'holds nine re-scans in ten. Where the camera did not see her, the other side\'s mirror image stands '
                'in, and the ± grows by what it adds. The fitted model, which plans the change, has a volume of its '
                'own; it is shown as a cross-check.</p>')
-MODEL_DIFFERS_PCT = 25.0
-"""The report says so when the model's volume lies further than this from hers (%)."""
 DIFFERS_TEXT = ('<p class="differs">The fitted model of her {side} breast holds {pct:+.0f} % of the volume measured '
                 'on her skin: the model describes her breast only roughly, and its planned change is best read as '
                 'a shape, not a volume.</p>')
@@ -242,7 +241,7 @@ def tables(record: dict) -> str:
         ["side", "volume cc", "footprint cm²", "estimated where unseen %", "the model's volume cc",
          "the model differs by %"], rows, "volume") + VOLUME_TEXT
         + "".join(DIFFERS_TEXT.format(side=s, pct=r["volume"]["model_differs_pct"]) for s, r in record["sides"].items()
-                  if abs(r["volume"]["model_differs_pct"] or 0) > MODEL_DIFFERS_PCT))
+                  if model_differs_much(r["volume"]["model_differs_pct"])))
     parts.append(_symmetry_tables(record))
     rows = [[s, r["fit"]["model_volume_cc"], r["fit"]["model_volume_cc_below_base"], r["fit"]["rms_mm"],
              r["fit"]["normalised_residual"], "met" if r["fit"]["stopping_rule_met"] else "not met", r["fit"]["points"],
