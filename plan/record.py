@@ -42,18 +42,14 @@ def write_plan(plan: Plan, folder: Path) -> dict:
                            "changes": [_save_change(sp, c, folder, stage) for c in sp.changes]}
             if sp.follow_up is not None:
                 sides[side]["wall_from"] = {**sp.follow_up.record(sp.fit.volume_cc), **_skin_change(plan, side)}
-        torso_files = {}
+        torso_files, torsos = {}, planned_torsos(plan)
         record = {"schema": PLAN_SCHEMA, "version": __version__, "input": input_record(plan),
                   "options": plan.options.as_dict(), "stopping_rule": STOP_RESIDUAL, "sides": sides,
-                  "measures": plan_measures(plan), "versions": versions(),
+                  "measures": plan_measures(plan, torsos[-1]), "versions": versions(),
                   "files": {"report": Case.REPORT, "summary": SUMMARY, "torso": torso_files},
                   "timings_ms": {k: round(v, 1) for k, v in plan.timings_ms.items()}}
-        first = next(iter(plan.sides.values()))
-        for i, change in enumerate(first.changes):
+        for change, moved in zip(next(iter(plan.sides.values())).changes, torsos):
             name = f"{Case.PLAN}/{change.name}-torso.ply"
-            moved = first.scan.torso_camera.copy()
-            for sp in plan.sides.values():
-                moved += sp.planned(sp.changes[i]).displacement(first.scan.torso_camera)
             write_ply(stage(folder / name), moved, comments=[
                 f"breastplan plan: {change.name}, the torso with the planned change, input frame, mm"])
             torso_files[change.name] = name
@@ -62,6 +58,18 @@ def write_plan(plan: Plan, folder: Path) -> dict:
         Path(stage(folder / Case.PLAN_JSON)).write_text(to_json(record, indent=1), encoding="utf-8")
     _remove_earlier_plans(folder, record)
     return record
+
+
+def planned_torsos(plan: Plan) -> list[np.ndarray]:
+    """Her torso (`Scan.torso_camera`, input frame, mm) with each change of the plan, both sides moved."""
+    torso = next(iter(plan.sides.values())).scan.torso_camera
+    torsos = []
+    for i in range(len(next(iter(plan.sides.values())).changes)):
+        moved = torso.copy()
+        for sp in plan.sides.values():
+            moved += sp.planned(sp.changes[i]).displacement(torso)
+        torsos.append(moved)
+    return torsos
 
 
 def _remove_earlier_plans(folder: Path, record: dict) -> None:
@@ -127,10 +135,11 @@ def _save_change(sp: SidePlan, change, folder: Path, stage: Stage) -> dict:
             "files": {k: os.path.relpath(p, folder) for k, p in paths.items()}}
 
 
-def plan_measures(plan: Plan) -> dict:
+def plan_measures(plan: Plan, planned_torso: np.ndarray) -> dict:
     """Each side's measures before and after (the last change: the combination as planned, or the
     single change), and their asymmetry (left − right); lengths mm, volumes cc, input frame. The volume
-    is hers, measured on her skin; after, it changes by as much as the fitted model's does."""
+    is hers, measured on her skin; after, it changes by as much as the fitted model's does.
+    `planned_torso`: her torso as planned (`planned_torsos`' last), input frame, mm."""
     landmarks = plan.volumes.landmarks
     before, after = {}, {}
     for side, sp in plan.sides.items():
@@ -144,24 +153,23 @@ def plan_measures(plan: Plan) -> dict:
     asym = {when: {k: v["left_minus_right"] for k, v in asymmetry(m).items()} for when, m in
             (("before", before), ("after", after))}
     return _finite({"before": before, "after": after, "asymmetry": asym if len(before) == 2 else {},
-                    **symmetry_record(plan),
+                    **symmetry_record(plan, planned_torso),
                     "landmarks": {"sternal_notch_mm": landmarks.sternal_notch, "up_axis": landmarks.up_axis,
                                   "left_axis": landmarks.left_axis, "up_from": landmarks.up_from}})
 
 
-def symmetry_record(plan: Plan) -> dict:
+def symmetry_record(plan: Plan, planned_torso: np.ndarray) -> dict:
     """plan.json's `symmetry` (BCCT.core's measures, both sides) and `ptosis` (each side's grade), before
-    and as planned (the last change), from her skin's cells (`plan.symmetry`)."""
+    and as planned (the last change; `planned_torso`: her torso so, input frame, mm), from her skin's
+    cells (`plan.symmetry`)."""
     volumes = plan.volumes
     T, cells = volumes.body_from_input, volumes.cells
-    torso = next(iter(plan.sides.values())).scan.torso_camera
-    moved, nipples = torso.copy(), {"before": {}, "after": {}}
+    nipples = {"before": {}, "after": {}}
     for side, sp in plan.sides.items():
         planned = sp.planned(sp.changes[-1])
-        moved += planned.displacement(torso)
         nipples["before"][side] = transform_points(T, sp.scan.nipple_camera_mm[None])[0]
         nipples["after"][side] = transform_points(T, planned.model(sp.scan.nipple_camera_mm[None]))[0]
-    states = {"before": cells, "after": cells.moved(transform_points(T, moved))}
+    states = {"before": cells, "after": cells.moved(transform_points(T, planned_torso))}
     return {"symmetry": {when: bcct_measures(nipples[when], states[when]) if len(plan.sides) == 2 else {}
                          for when in states},
             "ptosis": {when: {s: ptosis_from_cells(nipples[when][s], states[when], s) for s in plan.sides}
