@@ -39,6 +39,7 @@ class State:
     mesh: dict[str, np.ndarray]       # side → (V, 3) planned breast vertices, display frame
     torso: np.ndarray                  # (P, 3) the moved torso patch, display frame
 
+
 FOOTPRINT_LIFT_MM = 4.0
 """Each footprint is drawn this far in front of her skin (along her anterior axis), over the points on it."""
 
