@@ -137,7 +137,7 @@ def _print_plan(result: dict, record: dict) -> None:
             stdout.print(f"{s} since {since['case']}: the model {since['volume_change_cc']:+.1f} cc "
                          f"({since['volume_change_pct']:+.1f} %; then {since['earlier_volume_cc']:.1f} cc, measured "
                          f"down to its chest wall, registered at rms {since['rms_mm']:.2f} mm)"
-                         + (f"; on her skin, each visit on its own wall: {since['skin_volume_change_cc']:+.1f} cc"
+                         + (f"; on her skin, on the earlier wall: {since['skin_volume_change_cc']:+.1f} cc"
                             if "skin_volume_change_cc" in since else ""))
     if m["symmetry"]["before"]:
         sym = {w: m["symmetry"][w] for w in ("before", "after")}

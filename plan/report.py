@@ -259,7 +259,7 @@ def tables(record: dict) -> str:
                  in f else "—", f["rms_mm"], f"{100 * f['agreement']:.0f} %"] for s, f in since.items()]
         parts.append("<h2>Since the earlier scan (the model, measured down to its chest wall)</h2>" + _table(
             ["side", "earlier case", "volume then cc", "volume now cc", "change cc", "change %",
-             "on her skin, each visit on its own wall: change cc", "chests registered, rms mm", "chest agreeing"],
+             "on her skin, on the earlier wall: change cc", "chests registered, rms mm", "chest agreeing"],
             rows, "since"))
     method = record["options"]["method"]
     rows = [[s, c["name"], ", ".join(f"{d['kind']} {d['degree']:g} ({_how(d)})" for d in c["details"]),
