@@ -1,11 +1,12 @@
 """The ingest pipeline: depth frames or a scan file → the breast of one side in the breast frame.
 
-fusion → depth to points (open3d) → background removal (depth range, the nearest large
-DBSCAN cluster of coarse voxels) → a wall behind her, if one stands there (`ingest.background`:
-the plumb the plan's up axis takes) → trunk (head, neck and arms cut off) → chest wall (robust
-height field, mounds excluded) → the breasts among the mounds (a pair placed as breasts
-are), the requested side's → breast crop → breast frame and nipple → outlier removal →
-voxel downsampling → outward normals → breast frame. Every step is timed.
+The body, once for every side (`BodyScan`): fusion → depth to points (open3d) → background removal
+(depth range, the nearest large DBSCAN cluster of coarse voxels) → trunk (head, neck and arms cut
+off) → a wall behind her, if one stands there (`ingest.background`: the plumb the plan's up axis
+takes) → chest wall (robust height field, mounds excluded) → mounds. Then each side (`isolate_side`):
+the breasts among the mounds (a pair placed as breasts are), the requested side's → its chest wall
+→ breast crop → breast frame and nipple → outlier removal → voxel downsampling → outward normals
+→ breast frame. Every step is timed.
 """
 from __future__ import annotations
 
@@ -76,9 +77,29 @@ def find_body(points: np.ndarray) -> BodyInView:
     return BodyInView(body, voxels, which, find_trunk(body))
 
 
+@dataclass(frozen=True)
+class BodyScan:
+    """What every side's breast is isolated from: the body in view and its chest (viewing frame, mm)."""
+
+    view_from_camera: np.ndarray     # (4, 4) input frame → viewing frame
+    viewer: np.ndarray               # (3,) where the camera is
+    trunk: Trunk
+    torso: np.ndarray                # (M, 3) the trunk's points
+    coarse: np.ndarray               # (K, 3) the chest's coarse voxels' centroids
+    wall: ChestWall                  # the chest wall fitted on them, mounds excluded
+    mounds: tuple[B.Mound, ...]      # largest volume first
+    plumb: np.ndarray | None         # (3,) a wall's normal behind her, or None
+    timings_ms: dict                 # the steps timed until now (the source's read included)
+
+
 def ingest_frames(frames: DepthFrames, options: IngestOptions, clock: Clock | None = None) -> Ingested:
     """Depth frames (camera = viewing frame) → the breast of `options.side`."""
     clock = clock or Clock()
+    return isolate_side(frames_body(frames, clock), options, clock)
+
+
+def frames_body(frames: DepthFrames, clock: Clock) -> BodyScan:
+    """Depth frames (camera = viewing frame) → the body in view."""
     with clock("fuse"):
         image = fuse(frames.depth)
     with clock("depth to points (open3d)"):
@@ -86,21 +107,26 @@ def ingest_frames(frames: DepthFrames, options: IngestOptions, clock: Clock | No
         points = to_points(image, frames.K, near, far)
         S = BEHIND_STRIDE                                      # beyond the slab: what stands behind her
         beyond = to_points(image[::S, ::S], np.diag([1.0 / S, 1.0 / S, 1.0]) @ frames.K, far, np.inf)
-    return isolate(points, np.eye(4), options, clock, viewer=np.zeros(3), beyond=beyond)
+    return isolate_body(points, np.eye(4), clock, viewer=np.zeros(3), beyond=beyond)
 
 
 def ingest_cloud(cloud: ScanCloud, options: IngestOptions, clock: Clock | None = None) -> Ingested:
-    """A scan file's points → the breast of `options.side`; the viewing direction comes from the torso's shape.
-    The points are put in a canonical order first (sorted by their coordinates): what is found depends on
-    her surface, not on the order a file lists its points in."""
+    """A scan file's points → the breast of `options.side`; the viewing direction comes from the torso's shape."""
     clock = clock or Clock()
+    return isolate_side(cloud_body(cloud, options.up, clock), options, clock)
+
+
+def cloud_body(cloud: ScanCloud, up: str, clock: Clock) -> BodyScan:
+    """A scan file's points, `up` its superior axis → the body in view. The points are put in a canonical
+    order first (sorted by their coordinates): what is found depends on her surface, not on the order
+    a file lists its points in."""
     with clock("viewing frame"):
         ordered = cloud.points[canonical_order(cloud.points)]
-        view, found = (np.eye(4), None) if cloud.frame_hint == "camera-opencv" else viewing_frame(ordered, options.up)
+        view, found = (np.eye(4), None) if cloud.frame_hint == "camera-opencv" else viewing_frame(ordered, up)
         points = transform_points(view, ordered)
         viewer = points.mean(0) - [0.0, 0.0, 2000.0]
-    return isolate(points, view, options, clock, viewer=viewer, found=found,
-                   up=None if cloud.frame_hint == "camera-opencv" else options.up)
+    return isolate_body(points, view, clock, viewer=viewer, found=found,
+                        up=None if cloud.frame_hint == "camera-opencv" else up)
 
 
 def viewing_frame(points: np.ndarray, up: str) -> tuple[np.ndarray, BodyInView]:
@@ -190,15 +216,17 @@ def _trunk_bulge(body: BodyInView | None) -> float:
 
 
 def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOptions, clock: Clock,
-            viewer: np.ndarray, found: BodyInView | None = None, beyond: np.ndarray | None = None,
-            up: str | None = None) -> Ingested:
-    """The common pipeline on points in the viewing frame (`viewer`: where the camera is; `found`:
-    the body among them, if already found; `beyond`: more points farther away, where a wall may stand;
-    `up`: the input's up axis, when the viewing frame was built on it)."""
-    roi, nipple, side = options.roi_camera_mm, options.nipple_camera_mm, options.side
-    to_camera = np.linalg.inv(view_from_camera)
-    in_roi = _roi_test(roi, to_camera)
-    nipple_view = None if nipple is None else transform_points(view_from_camera, nipple)
+            viewer: np.ndarray) -> Ingested:
+    """The breast of `options.side` among points in the viewing frame (`viewer`: where the camera is)."""
+    return isolate_side(isolate_body(points, view_from_camera, clock, viewer), options, clock)
+
+
+def isolate_body(points: np.ndarray, view_from_camera: np.ndarray, clock: Clock, viewer: np.ndarray,
+                 found: BodyInView | None = None, beyond: np.ndarray | None = None,
+                 up: str | None = None) -> BodyScan:
+    """The body among points in the viewing frame (`viewer`: where the camera is; `found`: the body
+    among them, if already found; `beyond`: more points farther away, where a wall may stand; `up`:
+    the input's up axis, when the viewing frame was built on it)."""
     if found is None:
         with clock("background: voxels + DBSCAN (open3d)"):
             body, voxels, which = body_cluster(points)
@@ -216,9 +244,20 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
         coarse = found.voxels[in_trunk & trunk.chest(found.voxels)]       # the chest's coarse voxels
         wall = fit_chest_wall(coarse, 2)
     with clock("mounds (height basins) + breasts"):
-        mounds = B.find_mounds(coarse, wall, trunk.midline_x, COARSE_MM)
-        mound = _breast_mound(mounds, trunk, options, nipple_view, in_roi)
-        wall = B.chest_wall_under(coarse, mound, wall)
+        mounds = tuple(B.find_mounds(coarse, wall, trunk.midline_x, COARSE_MM))
+    return BodyScan(view_from_camera, viewer, trunk, torso, coarse, wall, mounds, plumb, dict(clock.ms))
+
+
+def isolate_side(body: BodyScan, options: IngestOptions, clock: Clock) -> Ingested:
+    """The breast of `options.side` on the body; its steps timed on `clock` (which should hold the body's)."""
+    roi, nipple, side = options.roi_camera_mm, options.nipple_camera_mm, options.side
+    view_from_camera, torso = body.view_from_camera, body.torso
+    to_camera = np.linalg.inv(view_from_camera)
+    in_roi = _roi_test(roi, to_camera)
+    nipple_view = None if nipple is None else transform_points(view_from_camera, nipple)
+    with clock("mounds (height basins) + breasts"):
+        mound = _breast_mound(body.mounds, body.trunk, options, nipple_view, in_roi)
+        wall = B.chest_wall_under(body.coarse, mound, body.wall)
     with clock("crop + breast frame"):
         region = B.breast_region(torso, mound, wall, COARSE_MM)
         crop = torso[region & in_roi(torso)] if in_roi is not None else torso[region]
@@ -236,7 +275,7 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
     _enough(len(cloud.points), f"{options.voxel_mm:g} mm voxel downsampling")
     with clock("normals (open3d)"):
         cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=max(3 * options.voxel_mm, 5.0), max_nn=16))
-        cloud.orient_normals_towards_camera_location(viewer)
+        cloud.orient_normals_towards_camera_location(body.viewer)
     with clock("to breast frame (open3d)"):
         cloud.transform(frame.matrix)
     return Ingested(
@@ -248,7 +287,7 @@ def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOpt
         crop={"mound_centre_view_mm": mound.centre, "mound_radius_mm": mound.radius, "mound_peak_mm": mound.peak_mm,
               "roi_camera_mm": None if roi is None else np.asarray(roi, float), "crop_height_mm": B.CROP_MM},
         torso_camera=transform_points(to_camera, torso),
-        plumb_camera=None if plumb is None else view_from_camera[:3, :3].T @ plumb, timings_ms=clock.ms)
+        plumb_camera=None if body.plumb is None else view_from_camera[:3, :3].T @ body.plumb, timings_ms=clock.ms)
 
 
 def _upside_down(up: str | None) -> str:
@@ -291,7 +330,7 @@ def _roi_test(roi, to_camera: np.ndarray):
     return inside
 
 
-def _breast_mound(mounds: list, trunk, options: IngestOptions, nipple_view, in_roi) -> B.Mound:
+def _breast_mound(mounds: tuple[B.Mound, ...], trunk: Trunk, options: IngestOptions, nipple_view, in_roi) -> B.Mound:
     """The requested breast's mound: the one under a given nipple, the largest in a region of
     interest, else the breast of `options.side` (docs/isolation.md §4); BadInputError saying why if none."""
     side = options.side

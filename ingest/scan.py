@@ -39,7 +39,8 @@ def ingest(input: Path | None, options: IngestOptions) -> Scan:
 
 
 def ingest_sides(input: Path | None, options: list[IngestOptions]) -> list[Scan]:
-    """`ingest` once per options (one per side), the source read once."""
+    """`ingest` once per options (one per side), the source read once and its body found once (once
+    per up axis of a scan file); each side's timings hold the read's and the body's."""
     clock = Clock()
     first = options[0]
     if input is None or is_recording(Path(input)):
@@ -49,24 +50,34 @@ def ingest_sides(input: Path | None, options: list[IngestOptions]) -> list[Scan]
                 depth = capture(first.device_id, first.frames or 10)
             else:
                 depth = read_recording(input, first.frames)
-        from .pipeline import ingest_frames
+        from .pipeline import frames_body
 
-        run = lambda opts, c: ingest_frames(depth, opts, c)  # noqa: E731
+        cloud, body_of = None, lambda up, c: frames_body(depth, c)  # noqa: E731
         source = _depth_source(depth, "recording" if input is not None else "device")
     else:
         cloud = read_scan_file(input, first.units)
-        from .pipeline import ingest_cloud
+        from .pipeline import cloud_body
 
-        run = lambda opts, c: ingest_cloud(cloud, opts, c)  # noqa: E731
+        body_of = lambda up, c: cloud_body(cloud, up, c)  # noqa: E731
         source = Source("file", cloud.description)
+    from .pipeline import isolate_side
+
     inputs = {} if input is None else {Path(input).name: input}
-    scans = []
+    bodies, scans = {}, []
     for opts in options:
-        side_clock = Clock()
-        side_clock.ms.update(clock.ms)
-        result = run(opts, side_clock)
+        up = None if cloud is None else opts.up            # a recording's body does not depend on it
+        if up not in bodies:
+            bodies[up] = body_of(up, _clock(clock.ms))
+        result = isolate_side(bodies[up], opts, _clock(bodies[up].timings_ms))
         scans.append(scan_record(result, source, opts, Provenance.of(inputs, opts.as_dict())))
     return scans
+
+
+def _clock(ms: dict) -> Clock:
+    """A clock holding a copy of the steps `ms` timed already."""
+    clock = Clock()
+    clock.ms.update(ms)
+    return clock
 
 
 def _depth_source(depth: DepthFrames, kind: str) -> Source:
