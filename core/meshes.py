@@ -1,4 +1,4 @@
-"""Measures of closed triangle meshes (libigl)."""
+"""Measures of closed triangle meshes (libigl), and integrals over their triangles."""
 from __future__ import annotations
 
 import igl
@@ -32,3 +32,20 @@ def volume_below_base(vertices, faces, floor) -> float:
     area = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) / k**2             # signed, per sub-triangle
     gap = centroids[..., 2] - floor(centroids[..., :2])
     return float(np.sum(area[:, None] * gap) * np.sign(area.sum()))
+
+
+def positive_part_mean(f: np.ndarray) -> np.ndarray:
+    """(T,) mean over each triangle of max(f, 0), f linear with vertex values f (T, 3) (exact)."""
+    s = np.sort(f, axis=1)[:, ::-1]                 # f1 ≥ f2 ≥ f3
+    f1, f2, f3 = s.T
+    out = s.mean(1)
+    # f1³ / (3 (f1 − f2)(f1 − f3)) and its twin, written as f/3 times two edge fractions in (0, 1]:
+    # cubes and their products under- or overflow (tiny or huge values gave NaN)
+    one = (f1 > 0) & (f2 <= 0)                      # only the largest is positive
+    a = f1[one]
+    out[one] = a / 3.0 * (a / (a - f2[one])) * (a / (a - f3[one]))
+    two = (f2 > 0) & (f3 < 0)                       # the smallest is negative
+    g = -f3[two]
+    out[two] += g / 3.0 * (g / (f1[two] + g)) * (g / (f2[two] + g))
+    out[f1 <= 0] = 0.0
+    return out

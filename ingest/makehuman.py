@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from breastplan.meshes import positive_part_mean
 from breastplan.options import SIDES, OptionError
 
 ASSET = Path(__file__).with_name("assets") / "makehuman.npz"
@@ -131,23 +132,6 @@ class Body:
         x = tri[:, :, 0]
         return {"left": float(area_x @ positive_part_mean(x)) / 1000.0,
                 "right": float(-(area_x @ positive_part_mean(-x))) / 1000.0}
-
-
-def positive_part_mean(f: np.ndarray) -> np.ndarray:
-    """(T,) mean over each triangle of max(f, 0), f linear with vertex values f (T, 3) (exact)."""
-    s = np.sort(f, axis=1)[:, ::-1]                 # f1 ≥ f2 ≥ f3
-    f1, f2, f3 = s.T
-    out = s.mean(1)
-    # f1³ / (3 (f1 − f2)(f1 − f3)) and its twin, written as f/3 times two edge fractions in (0, 1]:
-    # cubes and their products under- or overflow (tiny or huge values gave NaN)
-    one = (f1 > 0) & (f2 <= 0)                      # only the largest is positive
-    a = f1[one]
-    out[one] = a / 3.0 * (a / (a - f2[one])) * (a / (a - f3[one]))
-    two = (f2 > 0) & (f3 < 0)                       # the smallest is negative
-    g = -f3[two]
-    out[two] += g / 3.0 * (g / (f1[two] + g)) * (g / (f2[two] + g))
-    out[f1 <= 0] = 0.0
-    return out
 
 
 def make_body(options: BodyOptions = BodyOptions()) -> Body:

@@ -44,8 +44,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from breastplan import BadInputError
-from breastplan.ingest.makehuman import positive_part_mean
-from breastplan.meshes import mesh_volume
+from breastplan.meshes import mesh_volume, positive_part_mean
 from breastplan.voxels import voxel_centroids
 
 MEASURES = ("volume_cc", "upper_pole_cc", "lower_pole_cc", "pole_ratio", "notch_to_nipple_mm",

@@ -14,7 +14,8 @@ from scipy.spatial import cKDTree
 
 from breastplan import read_ply
 from breastplan.ingest.files import read_scan_file
-from breastplan.ingest.makehuman import POSES, Body, BodyOptions, breast_region, make_body, positive_part_mean
+from breastplan.ingest.makehuman import POSES, Body, BodyOptions, breast_region, make_body
+from breastplan.meshes import positive_part_mean
 from breastplan.ingest.realistic import CameraOptions, load_body_truth, make_body_scene
 from breastplan.ingest.recording import read_recording
 
