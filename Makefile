@@ -43,7 +43,7 @@ demo: $(STAMP)
 	$(BIN)/breastplan plan --out $(DEMO)
 	@echo "open $(abspath $(DEMO))/report.html in a browser"
 
-# The stages one by one, as the README's tour runs them.
+# The stages one by one, as docs/tour.md's tour runs them.
 tour: $(STAMP)
 	$(BIN)/breastplan synth --db S --out $(TOUR)/database-S --ply
 	$(BIN)/breastplan deform $(TOUR)/database-S/S-shape1-00.ply --kind ptosis --param b0=1.125 --param b1=0.25 --out $(TOUR)/S-shape1-00-ptosis.ply

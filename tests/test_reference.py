@@ -1,6 +1,6 @@
 """The package against an independent reference (tests/reference_model.py, written from docs/model.md
 alone), hand-computed values inside every deformation's profile, the thesis's constants as literals
-and the learnt accuracy the README claims.
+and the learnt accuracy benchmarks/README.md claims.
 
 The other test files build their truths (databases, scanned patients, fit targets) with the
 deformation code under test, so a formula bug applied consistently moves the truth with the result.
@@ -294,8 +294,8 @@ def test_metrics_match_the_reference(seed):
     assert rmse_pct(f, y) == pytest.approx(ref.rmse_pct(f, y), rel=1e-12)
 
 
-# --- §5.2 learnt models: the accuracy the README claims -------------------------------------------
-README_LEARNT = {  # README "Deformation models": best learnt Euclidean µ (%), modelled ⇒ original, database S
+# --- §5.2 learnt models: the accuracy benchmarks/README.md claims --------------------------------
+README_LEARNT = {  # benchmarks/README.md "Deformation models": best learnt Euclidean µ (%), modelled ⇒ original, database S
     "ptosis b0>b1": 0.020, "ptosis b1>=b0": 0.020, "turn c0>c1": 0.030, "turn c1>c0": 0.018,
     "top-shape s0->s1+": 0.020, "top-shape s1->s0+": 0.013,
 }
@@ -303,10 +303,10 @@ README_LEARNT = {  # README "Deformation models": best learnt Euclidean µ (%), 
 
 @pytest.mark.parametrize("name", list(README_LEARNT))
 def test_shipped_models_reach_the_readme_accuracy(db_s, name):
-    """The shipped model (LR on FS5 with the continuous degree, as the README's best learnt) on database
+    """The shipped model (LR on FS5 with the continuous degree, as benchmarks/README.md's best learnt) on database
     S's test breasts at rows 3 and 6 (a quarter of the test split, to stay fast): the breast and the
     truly deformed one come from the reference, the degree is the reference's, the model gives t and
-    the reference deforms by at(t). Tolerance: within [1/3, 1.5] × the README's figure (the README's
+    the reference deforms by at(t). Tolerance: within [1/3, 1.5] × benchmarks/README.md's figure (its
     study does not clip t to [0, 1] as deployment does, which matters at the end rows; on these rows
     the two agree within 15 %; a shift of t by 0.03 multiplies the error by 8)."""
     kind = ref.TABLE_4_2[name][0]
@@ -331,7 +331,7 @@ def test_shipped_models_reach_the_readme_accuracy(db_s, name):
 def test_a_quickly_trained_model_recovers_the_rows():
     """The training pipeline (dataset positions, FS5 features, the LR grid) on a small database S (4
     breasts per shape and split, 2500 points): test positions within 0.01 RMSE of (j − 1)/7 and a
-    modelled ⇒ original Euclidean µ under 0.05 % (the README's full study: 0.020 %)."""
+    modelled ⇒ original Euclidean µ under 0.05 % (benchmarks/README.md's full study: 0.020 %)."""
     from joblib import parallel_config
 
     from breastplan.learn.databases import build_database
