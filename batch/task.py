@@ -15,7 +15,6 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from breastplan.json_text import from_json
 
 LEFTOVER = re.compile(r"^\..+\.(plan|batch|stale)-[0-9a-f]{8}$")
 """Hidden folders a killed batch may leave: `run_plan`'s build folder, a re-plan's copy, a swapped-out case."""
@@ -57,7 +56,7 @@ def plan_case(task: Task) -> dict:
 
 def _plan(task: Task) -> None:
     from breastplan.options import PlanOptions
-    from breastplan.plan.job import PLAN_SCHEMA, run_plan
+    from breastplan.plan.job import run_plan
 
     options = PlanOptions.from_dict(task.options)
     case = Path(task.case)
@@ -66,7 +65,8 @@ def _plan(task: Task) -> None:
         return
     work = _sibling(case, "batch")
     try:
-        if _record(case).get("schema") == PLAN_SCHEMA:   # reuse its stages; else plan afresh
+        planned = _plan_file(case)
+        if planned is not None and planned.current:     # reuse its stages; else plan afresh
             shutil.copytree(case, work, symlinks=True)
         run_plan(Path(task.input), work, options)
         old = _sibling(case, "stale")
@@ -84,38 +84,26 @@ def _sibling(case: Path, kind: str) -> Path:
 def finished(case: Path, sha256: str, options: dict) -> bool:
     """Whether `case` holds a whole plan of the input of this SHA-256 with these options: its plan.json
     says so, and every file it names is there, with each side's scan and fit."""
-    from breastplan.case import Case
-    from breastplan.plan.job import PLAN_SCHEMA
-
-    record = _record(case)
-    try:
-        if not (record.get("schema") == PLAN_SCHEMA and record["input"].get("sha256") == sha256
-                and record["options"] == options):
-            return False
-        files = [record["files"]["report"], record["files"]["summary"], *record["files"]["torso"].values()]
-        for side, planned in record["sides"].items():
-            files += [f"{side}/{Case.SCAN_NPZ}", f"{side}/{Case.FIT_NPZ}"]
-            files += [f for change in planned["changes"] for f in change["files"].values()]
-        return all(isinstance(f, str) and (case / f).is_file() for f in files)
-    except (KeyError, TypeError, AttributeError):
-        return False
+    planned = _plan_file(case)
+    return (planned is not None and planned.current and planned.input_sha256 == sha256
+            and planned.options == options and planned.files is not None
+            and all((case / f).is_file() for f in planned.files))
 
 
 def _planned_input(case: Path) -> str | None:
     """The SHA-256 of the input `case` holds a plan of; None if it holds none."""
-    planned = _record(case).get("input")
-    return planned.get("sha256") if isinstance(planned, dict) else None
+    planned = _plan_file(case)
+    return None if planned is None else planned.input_sha256
 
 
-def _record(case: Path) -> dict:
-    """The case's plan.json as a dict; {} if it has none or it is not a JSON object."""
-    from breastplan.case import Case
+def _plan_file(case: Path):
+    """The case's plan.json (`plan.plan_file.PlanFile`); None if it has none or it is not a JSON object."""
+    from breastplan.plan.plan_file import read_plan_file
 
     try:
-        record = from_json((case / Case.PLAN_JSON).read_text())
+        return read_plan_file(case)
     except (OSError, ValueError):
-        return {}
-    return record if isinstance(record, dict) else {}
+        return None
 
 
 def remove_leftovers(out: Path) -> list[Path]:

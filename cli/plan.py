@@ -1,6 +1,7 @@
 """The `plan` command: the main job, from a patient's scan to report.html (docs/cli.md)."""
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import List, Optional
 
@@ -44,7 +45,7 @@ def plan(
         options = PlanOptions.parse(deform, side, method, units, up, None if wall_from is None else str(wall_from))
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
-    check_method(method)
+    resolved = check_method(method)
     if input is not None and not input.is_dir():
         require_file(input, "recording or scan file")
     scan_file_options(input, units, up)
@@ -55,41 +56,50 @@ def plan(
                           "--wall-from")
     writable(out, folder=True)
 
+    from breastplan.plan.breast_volume import model_differs_much
     from breastplan.plan.changes import short_of
     from breastplan.plan.job import run_plan
-    from breastplan.plan.breast_volume import model_differs_much
 
     with _progress() as step:
-        result = run_plan(input, out, options, step)
-    record = _read_record(out)
-    sides = {s: {"volume_cc": r["volume"]["volume_cc"], "uncertainty_cc": r["volume"]["uncertainty_cc"],
-                 "model_volume_cc": r["volume"]["model_volume_cc"], "stopping_rule_met": r["fit"]["stopping_rule_met"],
-                 "changes": [c["name"] for c in r["changes"]], "reused": r["reused"],
-                 **({"wall_from": r["wall_from"]} if "wall_from" in r else {})}
-             for s, r in record["sides"].items()}
-    result = {"case": str(out), "report": str(out / "report.html"), "plan": str(out / "plan.json"),
-              "input": str(result.input), "sides": sides, "measures": record["measures"], "seconds": clock.seconds}
+        planned = run_plan(input, out, options, step, resolved)
     if as_json:
-        report(result, True, "")
+        report(_json(planned, out, clock.seconds), True, "")
     else:
-        _print_plan(result, record)
-    for s, r in record["sides"].items():
-        differs = r["volume"]["model_differs_pct"]
+        _print_plan(planned, out / "report.html", clock.seconds)
+    for s, sp in planned.sides.items():
+        differs = planned.volumes.sides[s].model_differs_pct(sp.fit.volume_cc)
         if model_differs_much(differs):
             stderr.print(f"note: the {s} breast's fitted model holds {differs:+.0f} % of the volume measured on her "
                          "skin; the report says so.", markup=False, soft_wrap=True)
-        if not r["fit"]["stopping_rule_met"]:
+        if not sp.fit.stopping_rule_met:
             stderr.print(f"note: the {s} breast's fit ends above the stopping rule (normalised residual "
-                         f"{r['fit']['normalised_residual']:.4f}); the report says so.", markup=False, soft_wrap=True)
-    for s, r in record["sides"].items():
-        for d in (d for c in r["changes"] if c["name"] != "combined" for d in c["details"]):
+                         f"{sp.fit.normalised_residual:.4f}); the report says so.", markup=False, soft_wrap=True)
+    for s, sp in planned.sides.items():
+        for d in (d for st in planned.changes if st.kind is not None for d in st.changes[s].details):
             short = short_of(d, options.method)
             if short:
                 stderr.print(f"note: on the {s} breast, {d['kind']} {d['degree']:g} reaches {short}; the report says "
                              "so.", markup=False, soft_wrap=True)
 
 
-def _print_plan(result: dict, record: dict) -> None:
+def _json(plan, out: Path, seconds: float) -> dict:
+    """`plan --json`: where the case and its report are, each side's volume, fit and changes, the measures."""
+    from breastplan.plan.record import follow_up_record, measures_record, skin_change_record, volume_record
+
+    sides = {}
+    for s, sp in plan.sides.items():
+        volume = volume_record(plan, s)
+        sides[s] = {"volume_cc": volume["volume_cc"], "uncertainty_cc": volume["uncertainty_cc"],
+                    "model_volume_cc": volume["model_volume_cc"], "stopping_rule_met": sp.fit.stopping_rule_met,
+                    "changes": [st.key for st in plan.changes], "reused": list(sp.reused)}
+        if sp.follow_up is not None:
+            sides[s]["wall_from"] = {**follow_up_record(sp.follow_up, sp.fit.volume_cc),
+                                     **skin_change_record(plan.skin_changes.get(s))}
+    return {"case": str(out), "report": str(out / "report.html"), "plan": str(out / "plan.json"),
+            "input": str(plan.input), "sides": sides, "measures": measures_record(plan), "seconds": seconds}
+
+
+def _print_plan(plan, report_path: Path, seconds: float) -> None:
     """The plan for a person: what was planned, the measures before and after, where the report is."""
     from rich.table import Table
 
@@ -97,83 +107,77 @@ def _print_plan(result: dict, record: dict) -> None:
 
     from .output import stdout
 
-    m = record["measures"]
-    sides = list(record["sides"])
-    changes = ", ".join(c["name"] for c in record["sides"][sides[0]]["changes"])
-    table = Table(title=f"plan: {changes} — after: {record['sides'][sides[0]]['changes'][-1]['name']}",
+    m, sides = plan.measures, list(plan.sides)
+    table = Table(title=f"plan: {', '.join(st.key for st in plan.changes)} — after: {plan.shown.key}",
                   title_justify="left")
     table.add_column("measure")
     for s in sides:
         table.add_column(f"{s} before", justify="right")
         table.add_column(f"{s} after", justify="right")
-    if m["asymmetry"]:
+    if m.asymmetry:
         table.add_column("left − right before", justify="right")
         table.add_column("after", justify="right")
-    for name in m["before"][sides[0]]:
+    for name in m.before[sides[0]]:
         row = [measure_label(name)]
         for s in sides:
-            row += [_number(m["before"][s][name]), _number(m["after"][s][name])]
-        if m["asymmetry"]:
-            row += [_number(m["asymmetry"]["before"][name]), _number(m["asymmetry"]["after"][name])]
+            row += [_number(m.before[s][name]), _number(m.after[s][name])]
+        if m.asymmetry:
+            row += [_number(m.asymmetry["before"][name]), _number(m.asymmetry["after"][name])]
         table.add_row(*row)
     stdout.print(table)
-    for s in sides:
-        fit, volume = record["sides"][s]["fit"], record["sides"][s]["volume"]
-        reused = record["sides"][s]["reused"]
-        stdout.print(f"{s} volume: {volume['volume_cc']:.1f} ± {volume['uncertainty_cc']:.1f} cc on her skin "
-                     f"(footprint {volume['footprint_area_cm2']:.0f} cm²"
-                     + (f", {volume['unseen_pct']:.0f} % estimated where unseen" if volume["unseen_pct"] >= 1 else "")
+    for s, sp in plan.sides.items():
+        fit, volume = sp.fit, plan.volumes.sides[s]
+        stdout.print(f"{s} volume: {volume.volume_cc:.1f} ± {volume.uncertainty_cc:.1f} cc on her skin "
+                     f"(footprint {volume.area_cm2:.0f} cm²"
+                     + (f", {volume.unseen_pct:.0f} % estimated where unseen" if volume.unseen_pct >= 1 else "")
                      + ")")
-        grade = m["ptosis"]["before"][s]
-        stdout.print(f"{s} ptosis: grade {grade['grade']} → {m['ptosis']['after'][s]['grade']} as planned"
+        grade = m.ptosis["before"][s]
+        stdout.print(f"{s} ptosis: grade {grade['grade']} → {m.ptosis['after'][s]['grade']} as planned"
                      + (f" (nipple {abs(grade['nipple_to_fold_mm']):.0f} mm "
                         f"{'above' if grade['nipple_to_fold_mm'] >= 0 else 'below'} the fold, the fold "
                         f"{grade['fold_from']})" if grade["nipple_to_fold_mm"] is not None else ""))
-        stdout.print(f"{s} fit: the model's volume {fit['model_volume_cc']:.1f} cc down to the chest wall, "
-                     f"rms {fit['rms_mm']:.2f} mm, normalised residual "
-                     f"{fit['normalised_residual']:.4f}" + (f"; reused: {', '.join(reused)}" if reused else ""))
-        since = record["sides"][s].get("wall_from")
-        if since:
-            stdout.print(f"{s} since {since['case']}: the model {since['volume_change_cc']:+.1f} cc "
-                         f"({since['volume_change_pct']:+.1f} %; then {since['earlier_volume_cc']:.1f} cc, measured "
-                         f"down to its chest wall, registered at rms {since['rms_mm']:.2f} mm)"
-                         + (f"; on her skin, on the earlier wall: {since['skin_volume_change_cc']:+.1f} cc"
-                            if "skin_volume_change_cc" in since else ""))
-    if m["symmetry"]["before"]:
-        sym = {w: m["symmetry"][w] for w in ("before", "after")}
+        stdout.print(f"{s} fit: the model's volume {fit.volume_cc:.1f} cc down to the chest wall, "
+                     f"rms {fit.residuals_mm['rms']:.2f} mm, normalised residual "
+                     f"{fit.normalised_residual:.4f}" + (f"; reused: {', '.join(sp.reused)}" if sp.reused else ""))
+        if sp.follow_up is not None:
+            f, skin = sp.follow_up, plan.skin_changes.get(s)
+            change = fit.volume_cc - f.earlier_volume_cc
+            stdout.print(f"{s} since {f.case}: the model {change:+.1f} cc "
+                         f"({100.0 * change / f.earlier_volume_cc:+.1f} %; then {f.earlier_volume_cc:.1f} cc, measured "
+                         f"down to its chest wall, registered at rms {f.registration.rms_mm:.2f} mm)"
+                         + (f"; on her skin, on the earlier wall: {skin.on_wall_cc:+.1f} cc" if skin else ""))
+    if m.symmetry["before"]:
+        sym = m.symmetry
         stdout.print("symmetry: " + ", ".join(f"{k.replace('_pct', '')} {sym['before'][k]:.1f} → {sym['after'][k]:.1f} %"
                                              for k in ("pBRA_pct", "pLBC_pct", "pUNR_pct", "overlap_pct")
-                                             if sym["before"].get(k) is not None and sym["after"].get(k) is not None))
-    stdout.print(f"report → {result['report']}  ({result['seconds']:.1f} s)")
+                                             if _finite(sym["before"].get(k)) and _finite(sym["after"].get(k))))
+    stdout.print(f"report → {report_path}  ({seconds:.1f} s)")
+
+
+def _finite(v) -> bool:
+    return v is not None and math.isfinite(v)
 
 
 def _number(v) -> str:
     return "—" if v is None else f"{v:.1f}" if abs(v) >= 10 else f"{v:.2f}"
 
 
-def check_method(method: str) -> None:
-    """--method: exact, learnt, or a model file (.npz) that plans one of the plannable kinds; a usage
-    error otherwise, bad input (exit 3) for a model file that is missing, unreadable or inconsistent, said
-    before any work."""
-    if method in ("exact", "learnt"):
-        return
-    path = Path(method)
-    if path.suffix.lower() != ".npz":
-        raise usage_error(f"'{method}' is not a method; choose exact, learnt or a model file (.npz)", "--method")
-    from breastplan.deform.by_degree import degree_model
-    from breastplan.learn.field_file import field_file, is_field_model
-    from breastplan.model_file import load_model
+def check_method(method: str):
+    """--method resolved (`plan.changes.Method`): exact, learnt, or a model file (.npz) that plans one of
+    the plannable kinds; a usage error otherwise, bad input (exit 3) for a model file that is missing,
+    unreadable or inconsistent, said before any work."""
+    from breastplan.plan.changes import Method
 
-    model = load_model(require_file(path, "model file"))
-    kinds = field_file(model, path).kinds if is_field_model(model) else degree_model(model, path).kinds
-    if not set(kinds) & set(DEGREE_KINDS):
-        raise usage_error(f"{path} models {', '.join(map(str, kinds))}, which has no degrees to plan", "--method")
-
-
-def _read_record(out: Path) -> dict:
-    import json
-
-    return json.loads((out / "plan.json").read_text())
+    if method not in ("exact", "learnt"):
+        path = Path(method)
+        if path.suffix.lower() != ".npz":
+            raise usage_error(f"'{method}' is not a method; choose exact, learnt or a model file (.npz)", "--method")
+        require_file(path, "model file")
+    resolved = Method.resolve(method)
+    if resolved.model is not None and not set(resolved.kinds) & set(DEGREE_KINDS):
+        raise usage_error(f"{method} models {', '.join(map(str, resolved.kinds))}, which has no degrees to plan",
+                          "--method")
+    return resolved
 
 
 class _progress:

@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
+
 
 def to_json(value, **kwargs) -> str:
     """`value` as strict JSON text; `kwargs` go to json.dumps (indent, separators)."""
@@ -19,6 +21,19 @@ def from_json(text: str | bytes):
         return json.loads(text)
     except RecursionError:
         raise ValueError("JSON nested deeper than Python's parser reaches") from None
+
+
+def measure_values(x):
+    """Measures as plain JSON values: floats to 4 decimals below 10, else 2 (None where not finite);
+    arrays to lists; dicts item by item."""
+    if isinstance(x, dict):
+        return {k: measure_values(v) for k, v in x.items()}
+    if isinstance(x, np.ndarray):
+        return [measure_values(float(v)) for v in x]
+    if isinstance(x, (float, np.floating)):
+        x = float(x)
+        return round(x, 4 if abs(x) < 10 else 2) if math.isfinite(x) else None
+    return x
 
 
 def _strict(value):

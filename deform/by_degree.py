@@ -91,15 +91,17 @@ def learnt_position(model: ModelFile, points_mm, kind: str, degree: float) -> fl
 
 def deform_by_degree(points_mm, kind: str, degree: float, *, condition: str | None = None,
                      method: str = "exact", primitive: Primitive | None = None,
-                     models: Path = MODELS) -> ByDegree:
+                     models: Path = MODELS, given: ModelFile | None = None) -> ByDegree:
     """Deform a breast (mm, breast frame) to `degree` ∈ [1, 8] of `kind` along `condition`.
 
     `method`: exact, learnt (the condition's model in `models`), or the path of a `breastplan.model/1`
     file (`.npz`) trained for one condition of `kind`, whose condition is then the default.
+    `given`: that file, already loaded and checked (`degree_model`; else it is loaded here).
     (`learn.field_file.by_degree` also takes statistical model files.)"""
     if method not in METHODS and not str(method).endswith(".npz"):
         raise ValueError(f"unknown method '{method}'; choose one of {', '.join(METHODS)} or a model file")
-    given = None if method in METHODS else load_degree_model(Path(method))
+    if given is None and method not in METHODS:
+        given = load_degree_model(Path(method))
     cond = pick_condition(kind, condition or (given.meta.get("condition") if given else None))
     check_degree(degree)
     p_mu = to_model_units(np.asarray(points_mm, dtype=float))

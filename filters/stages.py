@@ -14,7 +14,7 @@ scan of the patient: its breast is isolated (and fitted) first. A remembered sur
 
 **Changes.** A deformed surface is the fitted breast with its changes solved by degree on the
 fitted model (`plan.changes.solve_change`) and applied to the whole model (`plan.surface`), in the
-anatomical frame `plan.job.SidePlan` gives (a left breast is planned in its mirror image). Applying
+anatomical frame `plan.result.SidePlan` gives (a left breast is planned in its mirror image). Applying
 another change to a deformed surface adds it (a change of the same kind replaces the one before: a
 degree is always measured on the fitted breast), as `plan` combines its changes.
 """
@@ -40,7 +40,7 @@ from .registry import ParameterError, filter
 if TYPE_CHECKING:
     from breastplan.case import Scan
     from breastplan.plan.changes import Change
-    from breastplan.plan.job import SidePlan
+    from breastplan.plan.result import SidePlan
 
 SideOrAuto = Literal[("auto", *SIDES)]
 Units = Literal[UNITS]
@@ -145,14 +145,15 @@ def get_breast_measures(mesh: Mesh, *, side: SideOrAuto = "auto", units: Units =
     (`plan.measures.breast_measures`). `fit_volume_cc`, `rms_mm`, `normalised_residual`,
     `stopping_rule_met`, `converged` describe the fit; `changes` the changes applied."""
     from breastplan.plan.measures import BodyLandmarks, breast_measures
+    from breastplan.plan.surface import PlannedChange
 
     record = _fitted(mesh, side, units, up, FitOptions())
     plan, fit = record.fitted, record.fitted.fit
     nipple, vertices = plan.scan.nipple_camera_mm, plan.surface_input
     if record.change is not None:
-        planned = plan.planned(record.change)
+        planned = PlannedChange.of(plan, record.change)
         nipple, vertices = planned.model(nipple[None])[0], planned.model(vertices)
-    axes = plan.to_input[:3, :3]                      # breast frame → input frame: x the patient's left, y up
+    axes = plan.frames.breast_to_input[:3, :3]                      # breast frame → input frame: x the patient's left, y up
     landmarks = BodyLandmarks(nipple, nipple, axes[:, 0], axes[:, 1])
     measures = breast_measures(landmarks, nipple, vertices, fit.faces)
     details = [d for change in ([record.change] if record.change is not None else []) for d in change.details]
@@ -282,7 +283,7 @@ def _fitted(mesh: Mesh, side: str, units: str, up: str, options: FitOptions) -> 
         from threadpoolctl import threadpool_limits
 
         from breastplan.fitting.breast_fit import fit_scan
-        from breastplan.plan.job import SidePlan
+        from breastplan.plan.result import SidePlan
 
         with threadpool_limits(1, "blas"):
             fit = fit_scan(record.scan, options).artefact()
@@ -296,20 +297,20 @@ def _apply(kind: str, mesh: Mesh, degree: float, method: str, side: str, units: 
     _check_degree({"degree": degree})
     from threadpoolctl import threadpool_limits
 
-    from breastplan.plan.changes import combine, short_of, solve_change
+    from breastplan.plan.changes import Method as Resolved, combine, short_of, solve_change
+    from breastplan.plan.surface import PlannedChange
 
     record = _fitted(mesh, side, units, up, FitOptions())
     order = list(KIND_PARAMS)
     changes = tuple(sorted([c for c in record.changes if c[0] != kind] + [(kind, float(degree), method)],
                            key=lambda c: order.index(c[0])))
     plan = record.fitted
-    local = plan.local_surface()
     with threadpool_limits(1, "blas"):
-        singles = [solve_change(local, k, d, plan.primitive, m) for k, d, m in changes]
+        singles = [solve_change(plan.local_surface, k, d, plan.primitive, Resolved.resolve(m)) for k, d, m in changes]
     asked = next(single for single, (k, _, _) in zip(singles, changes) if k == kind)
     short = short_of(asked.details[0], method)
     if short is not None:
         warnings.warn(f"{kind} reaches {short}", ShortOfDegree, stacklevel=4)   # the caller of the filter
     change = singles[0] if len(singles) == 1 else combine(singles)
-    vertices = plan.planned(change).model(plan.surface_input)
+    vertices = PlannedChange.of(plan, change).model(plan.surface_input)
     return _remember(Mesh(vertices, plan.fit.faces), replace(record, changes=changes, change=change))

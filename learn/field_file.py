@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from breastplan import ArtefactError, BadInputError, to_model_units
-from breastplan.deform.by_degree import ByDegree, check_degree, deform_by_degree, degree_reached, pick_condition
+from breastplan.deform.by_degree import (ByDegree, check_degree, deform_by_degree, degree_model, degree_reached,
+                                         pick_condition)
 from breastplan.deform.lattice import Lattice
 from breastplan.model_file import ModelFile, load_model
 from breastplan.units import displacement_problem
@@ -55,12 +56,16 @@ class FieldFile:
         return field_lattice(self.field(before, kind, degree), before.box(self.lattice))
 
 
-def by_degree(points_mm, kind: str, degree: float, *, method: str = "exact", primitive=None) -> ByDegree:
+def by_degree(points_mm, kind: str, degree: float, *, method: str = "exact", primitive=None,
+              model: ModelFile | None = None) -> ByDegree:
     """`deform_by_degree` (mm, the points' frame), or, when `method` is a statistical model file, the
-    breast moved by its FFD lattice (the result's `lattice`; no position t or parameters)."""
-    model = load_model(Path(method)) if str(method).endswith(".npz") else None
+    breast moved by its FFD lattice (the result's `lattice`; no position t or parameters). `model`:
+    the file `method` names, already loaded (else it is loaded here)."""
+    if model is None and str(method).endswith(".npz"):
+        model = load_model(Path(method))
     if model is None or not is_field_model(model):
-        return deform_by_degree(points_mm, kind, degree, method=method, primitive=primitive)
+        given = None if model is None else degree_model(model, Path(method))
+        return deform_by_degree(points_mm, kind, degree, method=method, primitive=primitive, given=given)
     cond = pick_condition(kind)
     check_degree(degree)
     points_mm = np.asarray(points_mm, dtype=float)

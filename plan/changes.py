@@ -9,13 +9,17 @@ deformations in docs/model.md §3 order, then the lattices.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from breastplan import Primitive
-from breastplan.learn.field_file import by_degree
+from breastplan.learn.field_file import by_degree, field_file, is_field_model
+from breastplan.deform.by_degree import degree_model
 from breastplan.deform.global_deformations import Deformation
 from breastplan.deform.lattice import Lattice
+from breastplan.deform.names import METHODS
+from breastplan.model_file import ModelFile, load_model
 
 
 @dataclass(frozen=True)
@@ -34,6 +38,39 @@ REACH = 0.5
 (rounds to it: the thesis's degrees are the rounded continuous ones)."""
 
 
+@dataclass(frozen=True, eq=False)
+class Method:
+    """How a plan turns a degree into a change, resolved once: `name` exact (the inverse solver), learnt
+    (the shipped regressions) or the path of a model file, then loaded and checked as `model` (a
+    regression of one condition, or a statistical model), which plans its own kinds."""
+
+    name: str
+    model: ModelFile | None = None
+
+    @classmethod
+    def resolve(cls, name: str) -> "Method":
+        """The method `name` (plan.json's `options.method`); ArtefactError naming a model file that is
+        missing, unreadable or inconsistent."""
+        if name in METHODS:
+            return cls(name)
+        path = Path(name)
+        model = load_model(path)
+        if is_field_model(model):
+            field_file(model, path)
+        else:
+            degree_model(model, path)
+        return cls(name, model)
+
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        """The kinds a model file plans (every kind for exact and learnt: empty)."""
+        return () if self.model is None else tuple(self.model.kinds)
+
+    def for_kind(self, kind: str) -> "Method":
+        """The method that plans `kind`: this one, or exact for a kind a model file does not plan."""
+        return self if self.model is None or kind in self.kinds else Method("exact")
+
+
 def short_of(detail: dict, method: str) -> str | None:
     """What a change's `details` entry reaches and why, when it does not round to the degree asked
     (`method` as planned: exact, learnt or a model file); None when it does."""
@@ -48,11 +85,11 @@ def change_name(kind: str, degree: float) -> str:
     return f"{kind}-{degree:g}"
 
 
-def solve_change(local_mm: np.ndarray, kind: str, degree: float, primitive: Primitive, method: str) -> Change:
-    """The change (kind, degree) of the breast `local_mm` (fitted surface, mm, primitive frame).
-
-    `method`: exact, learnt, or the path of a `breastplan.model/1` file of one of kind's conditions."""
-    r = by_degree(local_mm, kind, degree, method=method, primitive=primitive)
+def solve_change(local_mm: np.ndarray, kind: str, degree: float, primitive: Primitive, method: Method) -> Change:
+    """The change (kind, degree) of the breast `local_mm` (fitted surface, mm, primitive frame), by
+    `method` (`Method.for_kind`)."""
+    method = method.for_kind(kind)
+    r = by_degree(local_mm, kind, degree, method=method.name, primitive=primitive, model=method.model)
     details = {"kind": kind, "degree": degree, "condition": r.condition.name,
                "t": float(r.t) if r.lattice is None else None, "params": [float(v) for v in r.params],
                "degree_reached": r.degree_reached, "reached": bool(abs(r.degree_reached - degree) < REACH),

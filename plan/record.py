@@ -14,15 +14,12 @@ import numpy as np
 from breastplan import __version__, transform_points, write_ply
 from breastplan.atomic import Stage, atomic_set
 from breastplan.case import Case, Provenance, sha256
-from breastplan.json_text import to_json, utf8
-from breastplan.deform.names import PARAM_NAMES, at_bounds
+from breastplan.json_text import measure_values, to_json, utf8
 from breastplan.fitting.ffd import STOP_RESIDUAL
 from breastplan.options import SIDES
 
-from .job import PLAN_SCHEMA, Plan, SidePlan, input_record
-from .breast_volume import change_on_earlier_wall
-from .measures import asymmetry, breast_measures
-from .symmetry import bcct_measures, ptosis_from_cells
+from .plan_file import PLAN_SCHEMA
+from .result import FollowUp, Plan, PlanState, SidePlan, SkinChange
 
 SUMMARY = "summary.png"
 
@@ -30,7 +27,7 @@ SUMMARY = "summary.png"
 def write_plan(plan: Plan, folder: Path) -> dict:
     """Write every artefact of `plan` into `folder` (its case folder, or the one being built); the
     plan.json record."""
-    from .report import render, versions
+    from .report import render
     from .summary import summary_png
 
     with atomic_set() as stage:             # the changes, the torso, the report and plan.json: all or nothing
@@ -39,37 +36,32 @@ def write_plan(plan: Plan, folder: Path) -> dict:
             sides[side] = {"nipple_input_mm": [round(float(v), 2) for v in sp.scan.nipple_camera_mm],
                            "nipple_found": sp.scan.nipple_found,
                            "volume": volume_record(plan, side), "fit": fit_record(sp), "reused": list(sp.reused),
-                           "changes": [_save_change(sp, c, folder, stage) for c in sp.changes]}
+                           "changes": [_save_change(sp, st, folder, stage) for st in plan.changes]}
             if sp.follow_up is not None:
-                sides[side]["wall_from"] = {**sp.follow_up.record(sp.fit.volume_cc), **_skin_change(plan, side)}
-        torso_files, torsos = {}, planned_torsos(plan)
+                sides[side]["wall_from"] = {**follow_up_record(sp.follow_up, sp.fit.volume_cc),
+                                            **skin_change_record(plan.skin_changes.get(side))}
+        torso_files = {}
         record = {"schema": PLAN_SCHEMA, "version": __version__, "input": input_record(plan),
                   "options": plan.options.as_dict(), "stopping_rule": STOP_RESIDUAL, "sides": sides,
-                  "measures": plan_measures(plan, torsos[-1]), "versions": versions(),
+                  "measures": measures_record(plan), "versions": plan.versions,
                   "files": {"report": Case.REPORT, "summary": SUMMARY, "torso": torso_files},
                   "timings_ms": {k: round(v, 1) for k, v in plan.timings_ms.items()}}
-        for change, moved in zip(next(iter(plan.sides.values())).changes, torsos):
-            name = f"{Case.PLAN}/{change.name}-torso.ply"
+        for state, moved in zip(plan.changes, plan.planned_torsos):
+            name = f"{Case.PLAN}/{state.key}-torso.ply"
             write_ply(stage(folder / name), moved, comments=[
-                f"breastplan plan: {change.name}, the torso with the planned change, input frame, mm"])
-            torso_files[change.name] = name
-        Path(stage(folder / Case.REPORT)).write_bytes(utf8(render(plan, record)))
-        summary_png(plan, record, stage(folder / SUMMARY))
+                f"breastplan plan: {state.key}, the torso with the planned change, input frame, mm"])
+            torso_files[state.key] = name
+        Path(stage(folder / Case.REPORT)).write_bytes(utf8(render(plan)))
+        summary_png(plan, stage(folder / SUMMARY))
         Path(stage(folder / Case.PLAN_JSON)).write_text(to_json(record, indent=1), encoding="utf-8")
     _remove_earlier_plans(folder, record)
     return record
 
 
-def planned_torsos(plan: Plan) -> list[np.ndarray]:
-    """Her torso (`Scan.torso_camera`, input frame, mm) with each change of the plan, both sides moved."""
-    torso = next(iter(plan.sides.values())).scan.torso_camera
-    torsos = []
-    for i in range(len(next(iter(plan.sides.values())).changes)):
-        moved = torso.copy()
-        for sp in plan.sides.values():
-            moved += sp.planned(sp.changes[i]).displacement(torso)
-        torsos.append(moved)
-    return torsos
+def input_record(plan: Plan) -> dict:
+    """The plan's input as plan.json records it: path, kind and content hash."""
+    return {"path": str(plan.input), "kind": plan.input_kind,
+            **({} if plan.input_sha256 is None else {"sha256": plan.input_sha256})}
 
 
 def _remove_earlier_plans(folder: Path, record: dict) -> None:
@@ -91,20 +83,22 @@ def volume_record(plan: Plan, side: str) -> dict:
             "footprint_input_mm": np.round(measured.footprint_input_mm, 1).tolist()}
 
 
-def _skin_change(plan: Plan, side: str) -> dict:
-    """A follow-up's change of her volume on her skin: on the earlier visit's wall and footprint (this
-    torso carried there by the side's registration), and from each visit's own scan and wall alone."""
-    then = plan.earlier_volumes.sides.get(side) if plan.earlier_volumes is not None else None
-    if then is None or not then.volume_cc > 0:
+def follow_up_record(follow_up: FollowUp, volume_cc: float) -> dict:
+    """plan.json's `wall_from` of a side whose fitted breast now measures `volume_cc` on the earlier wall."""
+    change = volume_cc - follow_up.earlier_volume_cc
+    return {"case": str(follow_up.case), **follow_up.registration.as_dict(),
+            "earlier_volume_cc": round(follow_up.earlier_volume_cc, 2), "volume_change_cc": round(change, 2),
+            "volume_change_pct": round(100.0 * change / follow_up.earlier_volume_cc, 2)}
+
+
+def skin_change_record(change: SkinChange | None) -> dict:
+    """A follow-up's change of her volume on her skin (`plan.compute.skin_changes`); {} when there is none."""
+    if change is None:
         return {}
-    sp = plan.sides[side]
-    before, after = change_on_earlier_wall(plan.earlier_volumes, sp.scan.torso_camera,
-                                           sp.follow_up.registration.earlier_from_later, side)
-    on_wall, alone = after - before, plan.volumes.sides[side].volume_cc - then.volume_cc
-    return {"skin_earlier_volume_cc": round(before, 1), "skin_volume_change_cc": round(on_wall, 1),
-            "skin_volume_change_pct": round(100.0 * on_wall / before, 1),
-            "skin_own_walls_change_cc": round(alone, 1),
-            "skin_own_walls_change_pct": round(100.0 * alone / then.volume_cc, 1)}
+    return {"skin_earlier_volume_cc": round(change.earlier_cc, 1), "skin_volume_change_cc": round(change.on_wall_cc, 1),
+            "skin_volume_change_pct": round(change.on_wall_pct, 1),
+            "skin_own_walls_change_cc": round(change.alone_cc, 1),
+            "skin_own_walls_change_pct": round(change.alone_pct, 1)}
 
 
 def fit_record(sp: SidePlan) -> dict:
@@ -112,17 +106,17 @@ def fit_record(sp: SidePlan) -> dict:
     return {"model_volume_cc": round(f.volume_cc, 2), "model_volume_cc_below_base": round(f.volume_cc_below_base, 2),
             "rms_mm": round(f.residuals_mm["rms"], 4),
             "normalised_residual": round(f.normalised_residual, 6), "stopping_rule_met": f.stopping_rule_met,
-            "converged": f.converged, "at_bounds": at_bounds(dict(zip(PARAM_NAMES, map(float, f.deformation)))),
-            "ptosis_params": [round(float(f.deformation[PARAM_NAMES.index(k)]), 4) for k in ("b0", "b1")],
+            "converged": f.converged, "at_bounds": sp.at_bounds,
+            "ptosis_params": [round(v, 4) for v in sp.ptosis_params],
             "points": f.points, "iterations": list(f.iterations)}
 
 
-def _save_change(sp: SidePlan, change, folder: Path, stage: Stage) -> dict:
+def _save_change(sp: SidePlan, state: PlanState, folder: Path, stage: Stage) -> dict:
     """Write one change of one side (model and scan points in the breast frame); its plan.json entry."""
-    planned = sp.planned(change)
-    to_breast = sp.scan.camera_to_breast
+    change, planned = state.changes[sp.side], state.planned[sp.side]
+    to_breast = sp.frames.input_to_breast
     model = transform_points(to_breast, planned.model(sp.surface_input))
-    shift = planned.displacement(transform_points(sp.to_input, sp.scan.points)) @ to_breast[:3, :3].T
+    shift = planned.displacement(transform_points(sp.frames.breast_to_input, sp.scan.points)) @ to_breast[:3, :3].T
     details = [dict(d) for d in change.details]
     record = {"name": change.name, "requested": [list(r) for r in change.requested], "details": details,
               "displacement_mm": shift}
@@ -135,54 +129,10 @@ def _save_change(sp: SidePlan, change, folder: Path, stage: Stage) -> dict:
             "files": {k: os.path.relpath(p, folder) for k, p in paths.items()}}
 
 
-def plan_measures(plan: Plan, planned_torso: np.ndarray) -> dict:
-    """Each side's measures before and after (the last change: the combination as planned, or the
-    single change), and their asymmetry (left − right); lengths mm, volumes cc, input frame. The volume
-    is hers, measured on her skin; after, it changes by as much as the fitted model's does.
-    `planned_torso`: her torso as planned (`planned_torsos`' last), input frame, mm."""
-    landmarks = plan.volumes.landmarks
-    before, after = {}, {}
-    for side, sp in plan.sides.items():
-        verts, nipple = sp.surface_input, sp.scan.nipple_camera_mm
-        planned = sp.planned(sp.changes[-1])
-        before[side] = breast_measures(landmarks, nipple, verts, sp.fit.faces)
-        after[side] = breast_measures(landmarks, planned.model(nipple[None])[0], planned.model(verts), sp.fit.faces)
-        measured = plan.volumes.sides[side].volume_cc              # her volume, and after: changed as the model is
-        after[side]["volume_cc"] = measured + after[side]["volume_cc"] - before[side]["volume_cc"]
-        before[side]["volume_cc"] = measured
-    asym = {when: {k: v["left_minus_right"] for k, v in asymmetry(m).items()} for when, m in
-            (("before", before), ("after", after))}
-    return _finite({"before": before, "after": after, "asymmetry": asym if len(before) == 2 else {},
-                    **symmetry_record(plan, planned_torso),
+def measures_record(plan: Plan) -> dict:
+    """plan.json's `measures`: `Plan.measures` and the landmarks they start from."""
+    m, landmarks = plan.measures, plan.volumes.landmarks
+    return measure_values({"before": m.before, "after": m.after, "asymmetry": m.asymmetry, "symmetry": m.symmetry,
+                    "ptosis": m.ptosis,
                     "landmarks": {"sternal_notch_mm": landmarks.sternal_notch, "up_axis": landmarks.up_axis,
                                   "left_axis": landmarks.left_axis, "up_from": landmarks.up_from}})
-
-
-def symmetry_record(plan: Plan, planned_torso: np.ndarray) -> dict:
-    """plan.json's `symmetry` (BCCT.core's measures, both sides) and `ptosis` (each side's grade), before
-    and as planned (the last change; `planned_torso`: her torso so, input frame, mm), from her skin's
-    cells (`plan.symmetry`)."""
-    volumes = plan.volumes
-    T, cells = volumes.body_from_input, volumes.cells
-    nipples = {"before": {}, "after": {}}
-    for side, sp in plan.sides.items():
-        planned = sp.planned(sp.changes[-1])
-        nipples["before"][side] = transform_points(T, sp.scan.nipple_camera_mm[None])[0]
-        nipples["after"][side] = transform_points(T, planned.model(sp.scan.nipple_camera_mm[None]))[0]
-    states = {"before": cells, "after": cells.moved(transform_points(T, planned_torso))}
-    return {"symmetry": {when: bcct_measures(nipples[when], states[when]) if len(plan.sides) == 2 else {}
-                         for when in states},
-            "ptosis": {when: {s: ptosis_from_cells(nipples[when][s], states[when], s) for s in plan.sides}
-                       for when in states}}
-
-
-def _finite(x):
-    """Plain values for JSON: floats to 4 decimals below 10, else 2 (None where not finite); arrays to lists."""
-    if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
-    if isinstance(x, np.ndarray):
-        return [_finite(float(v)) for v in x]
-    if isinstance(x, (float, np.floating)):
-        x = float(x)
-        return round(x, 4 if abs(x) < 10 else 2) if np.isfinite(x) else None
-    return x

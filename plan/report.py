@@ -23,14 +23,15 @@ import html
 import io
 import json
 import re
-from importlib import metadata
 
 import numpy as np
 
+from breastplan.fitting.ffd import STOP_RESIDUAL
+
 from .breast_volume import model_differs_much
 from .changes import short_of
-from .job import Plan
 from .measures import measure_label
+from .result import Plan
 from .views import State, Views, build_views, quantise
 
 SKIN_RGB = (236, 188, 160)
@@ -115,10 +116,7 @@ def cmax(views: Views) -> float:
 
 def first_state(plan: Plan, views: Views) -> State:
     """The state the page opens on: the combination as planned, or the one planned change."""
-    if len(plan.options.changes) > 1:
-        return next(st for st in views.states if st.key == "combined")
-    kind, degree = plan.options.changes[0]
-    return next(st for st in views.states if st.kind == kind and st.degree == degree)
+    return next(st for st in views.states if st.key == plan.shown.key)
 
 
 def poster_png(views: Views, state: State, top: float) -> bytes:
@@ -167,16 +165,6 @@ def _surface(vertices: np.ndarray, faces: np.ndarray):
                           edgecolors="none", antialiased=False, alpha=0.8)
 
 
-def versions() -> dict[str, str]:
-    out = {}
-    for name in ("breastplan", "numpy", "scipy", "open3d", "plotly", "depthai"):
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = "not installed"
-    return out
-
-
 def _table(head: list[str], rows: list[list], cls: str = "") -> str:
     th = "".join(f"<th>{html.escape(str(h))}</th>" for h in head)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(c))}</td>" for c in row) + "</tr>" for row in rows)
@@ -189,14 +177,14 @@ def _fmt(v) -> str:
     return "—" if v is None else str(v)
 
 
-def render(plan: Plan, record: dict) -> str:
-    """The page's HTML for a plan and its plan.json record."""
+def render(plan: Plan) -> str:
+    """The page's HTML for a plan."""
     from plotly.offline import get_plotlyjs
 
-    views = build_views(plan, record["measures"]["landmarks"])
+    views = build_views(plan)
     data = page_data(plan, views)
     poster = poster_png(views, first_state(plan, views), data["cmax"])
-    parts = {"TITLE": TITLE, "POSTER": base64.b64encode(poster).decode("ascii"), "TABLES": tables(record),
+    parts = {"TITLE": TITLE, "POSTER": base64.b64encode(poster).decode("ascii"), "TABLES": tables(plan),
              "SCRIPT": _SCRIPT, "PLOTLY": get_plotlyjs(),
              "DATA": json.dumps(data, separators=(",", ":")).replace("</", "<\\/")}
     return re.sub(r"%([A-Z]+)%", lambda m: parts[m[1]], _TEMPLATE)
@@ -214,64 +202,68 @@ def _reached(detail: dict, method: str) -> str:
     return short_of(detail, method) or f"{detail['degree_reached']:.2f}"
 
 
-def tables(record: dict) -> str:
-    """The measures, fit quality and provenance tables of a plan.json record."""
-    sides = list(record["sides"])
-    parts = []
-    measures = record["measures"]
-    if measures["before"]:
-        names = list(next(iter(measures["before"].values())))
-        head = ["measure"] + [f"{s} {w}" for s in sides for w in ("before", "after")]
-        if len(sides) == 2:
-            head += ["asymmetry before", "asymmetry after"]
-        rows = []
-        for name in names:
-            row = [measure_label(name)]
-            for s in sides:
-                row += [measures["before"][s].get(name), measures["after"][s].get(name)]
-            if len(sides) == 2:
-                row += [measures["asymmetry"]["before"].get(name), measures["asymmetry"]["after"].get(name)]
-            rows.append(row)
-        parts.append("<h2>Measures (after: the combination as planned)</h2>" + _table(head, rows, "measures")
-                     + f'<p id="up-from">{UP_FROM_TEXT[measures["landmarks"].get("up_from", "midline profile")]}</p>')
-    rows = [[s, f"{r['volume']['volume_cc']:.1f} ± {r['volume']['uncertainty_cc']:.1f}", r["volume"]["footprint_area_cm2"],
-             r["volume"]["unseen_pct"], r["volume"]["model_volume_cc"], r["volume"]["model_differs_pct"]]
-            for s, r in record["sides"].items()]
+def tables(plan: Plan) -> str:
+    """The measures, volume, symmetry, fit quality, follow-up, changes and provenance tables of a plan."""
+    sides = list(plan.sides)
+    parts = [_measures_table(plan)]
+    volumes = {s: plan.volumes.sides[s] for s in sides}
+    differs = {s: v.model_differs_pct(plan.sides[s].fit.volume_cc) for s, v in volumes.items()}
+    rows = [[s, f"{v.volume_cc:.1f} ± {v.uncertainty_cc:.1f}", v.area_cm2, v.unseen_pct, plan.sides[s].fit.volume_cc,
+             differs[s]] for s, v in volumes.items()]
     parts.append("<h2>Volume, measured on her skin</h2>" + _table(
         ["side", "volume cc", "footprint cm²", "estimated where unseen %", "the model's volume cc",
          "the model differs by %"], rows, "volume") + VOLUME_TEXT
-        + "".join(DIFFERS_TEXT.format(side=s, pct=r["volume"]["model_differs_pct"]) for s, r in record["sides"].items()
-                  if model_differs_much(r["volume"]["model_differs_pct"])))
-    parts.append(_symmetry_tables(record))
-    rows = [[s, r["fit"]["model_volume_cc"], r["fit"]["model_volume_cc_below_base"], r["fit"]["rms_mm"],
-             r["fit"]["normalised_residual"], "met" if r["fit"]["stopping_rule_met"] else "not met", r["fit"]["points"],
-             NIPPLE_FOUND[r.get("nipple_found", "apex")], ", ".join(r["fit"]["at_bounds"]) or "none"]
-            for s, r in record["sides"].items()]
+        + "".join(DIFFERS_TEXT.format(side=s, pct=pct) for s, pct in differs.items() if model_differs_much(pct)))
+    parts.append(_symmetry_tables(plan))
+    rows = [[s, sp.fit.volume_cc, sp.fit.volume_cc_below_base, sp.fit.residuals_mm["rms"], sp.fit.normalised_residual,
+             "met" if sp.fit.stopping_rule_met else "not met", sp.fit.points, NIPPLE_FOUND[sp.scan.nipple_found],
+             ", ".join(sp.at_bounds) or "none"] for s, sp in plan.sides.items()]
     parts.append("<h2>Fit quality</h2>" + _table(
         ["side", "model volume cc down to the chest wall", "of it below the base cc", "rms mm", "normalised residual",
-         f"stopping rule {record['stopping_rule']}", "points", "nipple found", "at an end of its plausible range"],
-        rows, "fit") + AT_BOUNDS_TEXT * any(r["fit"]["at_bounds"] for r in record["sides"].values()))
-    since = {s: r["wall_from"] for s, r in record["sides"].items() if "wall_from" in r}
+         f"stopping rule {STOP_RESIDUAL}", "points", "nipple found", "at an end of its plausible range"],
+        rows, "fit") + AT_BOUNDS_TEXT * any(sp.at_bounds for sp in plan.sides.values()))
+    since = {s: sp for s, sp in plan.sides.items() if sp.follow_up is not None}
     if since:
-        rows = [[s, f["case"], f["earlier_volume_cc"], record["sides"][s]["fit"]["model_volume_cc"],
-                 f"{f['volume_change_cc']:+.1f}", f"{f['volume_change_pct']:+.1f}",
-                 f"{f['skin_volume_change_cc']:+.1f} ({f['skin_volume_change_pct']:+.1f} %)" if "skin_volume_change_cc"
-                 in f else "—", f["rms_mm"], f"{100 * f['agreement']:.0f} %"] for s, f in since.items()]
+        rows = []
+        for s, sp in since.items():
+            f, skin = sp.follow_up, plan.skin_changes.get(s)
+            change = sp.fit.volume_cc - f.earlier_volume_cc
+            rows.append([s, str(f.case), f.earlier_volume_cc, sp.fit.volume_cc, f"{change:+.1f}",
+                         f"{100.0 * change / f.earlier_volume_cc:+.1f}",
+                         f"{skin.on_wall_cc:+.1f} ({skin.on_wall_pct:+.1f} %)" if skin else "—",
+                         f.registration.rms_mm, f"{100 * f.registration.agreement:.0f} %"])
         parts.append("<h2>Since the earlier scan (the model, measured down to its chest wall)</h2>" + _table(
             ["side", "earlier case", "volume then cc", "volume now cc", "change cc", "change %",
              "on her skin, on the earlier wall: change cc", "chests registered, rms mm", "chest agreeing"],
             rows, "since"))
-    method = record["options"]["method"]
-    rows = [[s, c["name"], ", ".join(f"{d['kind']} {d['degree']:g} ({_how(d)})" for d in c["details"]),
-             ", ".join(_reached(d, method) for d in c["details"])]
-            for s, r in record["sides"].items() for c in r["changes"]]
+    method = plan.options.method
+    rows = [[s, st.key, ", ".join(f"{d['kind']} {d['degree']:g} ({_how(d)})" for d in st.changes[s].details),
+             ", ".join(_reached(d, method) for d in st.changes[s].details)]
+            for s in sides for st in plan.changes]
     parts.append("<h2>Planned changes</h2>" + _table(["side", "change", "how (parameters in model units)",
                                                        "degree reached"], rows))
-    inp = record["input"]
-    rows = [["input", inp["path"]], ["input kind", inp["kind"]], ["input sha256", inp.get("sha256", "—")],
-            ["options", json.dumps(record["options"])]] + [[k, v] for k, v in record["versions"].items()]
+    rows = [["input", str(plan.input)], ["input kind", plan.input_kind], ["input sha256", plan.input_sha256 or "—"],
+            ["options", json.dumps(plan.options.as_dict())]] + [[k, v] for k, v in plan.versions.items()]
     parts.append("<h2>Inputs, options and versions</h2>" + _table(["", ""], rows, "about"))
     return "\n".join(parts)
+
+
+def _measures_table(plan: Plan) -> str:
+    """Each side's measures before and as planned, and their asymmetry, with where up came from."""
+    sides, m = list(plan.sides), plan.measures
+    head = ["measure"] + [f"{s} {w}" for s in sides for w in ("before", "after")]
+    if m.asymmetry:
+        head += ["asymmetry before", "asymmetry after"]
+    rows = []
+    for name in m.before[sides[0]]:
+        row = [measure_label(name)]
+        for s in sides:
+            row += [m.before[s][name], m.after[s][name]]
+        if m.asymmetry:
+            row += [m.asymmetry["before"][name], m.asymmetry["after"][name]]
+        rows.append(row)
+    return ("<h2>Measures (after: the combination as planned)</h2>" + _table(head, rows, "measures")
+            + f'<p id="up-from">{UP_FROM_TEXT[plan.volumes.landmarks.up_from]}</p>')
 
 
 SYMMETRY_LABELS = {"pBRA_pct": "pBRA: nipples from the notch, one against the other's mirror image %",
@@ -286,19 +278,19 @@ SYMMETRY_TEXT = ('<p id="symmetry-how">BCCT.core\'s measures of a frontal photog
                  'ptosis grade rests on that estimate; confirm it by examining her.</p>')
 
 
-def _symmetry_tables(record: dict) -> str:
+def _symmetry_tables(plan: Plan) -> str:
     """The symmetry measures before and as planned, and each side's ptosis grade beside the fitted
     ptosis parameters."""
-    sym, ptosis = record["measures"]["symmetry"], record["measures"]["ptosis"]
+    sym, ptosis = plan.measures.symmetry, plan.measures.ptosis
     html = ""
     if sym["before"]:
         rows = [[label, sym["before"].get(k), sym["after"].get(k)] for k, label in SYMMETRY_LABELS.items()]
         html += "<h2>Symmetry</h2>" + _table(["measure", "before", "after"], rows, "symmetry")
     rows = []
-    for s, side in record["sides"].items():
+    for s, sp in plan.sides.items():
         before, after = ptosis["before"][s], ptosis["after"][s]
         rows.append([s, before["grade"], after["grade"], before["nipple_to_fold_mm"], before["nipple_to_lowest_mm"],
-                     before["fold_from"], side["fit"]["ptosis_params"]])
+                     before["fold_from"], [round(v, 4) for v in sp.ptosis_params]])
     return html + "<h2>Ptosis (Regnault)</h2>" + _table(
         ["side", "grade before", "grade after", "nipple above the fold mm", "nipple above the breast's lowest point mm",
          "fold", "fitted ptosis b0, b1"], rows, "ptosis") + SYMMETRY_TEXT

@@ -7,10 +7,11 @@ import numpy as np
 from scipy import ndimage
 
 from breastplan import transform_points
+from breastplan.json_text import measure_values
 
-from .job import Plan
 from .measures import measure_label
 from .report import SCAN, SKIN_RGB
+from .result import Plan
 from .views import VIEW_TO_DISPLAY
 
 DPI = 110
@@ -32,44 +33,43 @@ def outline(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return x, y, grid.T.astype(float)
 
 
-def summary_png(plan: Plan, record: dict, path: Path) -> Path:
+def summary_png(plan: Plan, path: Path) -> Path:
     """Front and side views of each side's breast, outlined before (dashed) and after the combination
     as planned (solid, over the planned surface in skin colour), with the measures beside them."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 
-    sides = list(plan.sides)
+    sides, m = list(plan.sides), plan.measures
     fig = Figure(figsize=(12, 3.6 * len(sides)), dpi=DPI)
     FigureCanvasAgg(fig)
     axes = fig.subplots(len(sides), 3, squeeze=False)
     for row, side in zip(axes, sides):
         sp = plan.sides[side]
-        show = VIEW_TO_DISPLAY @ sp.scan.view_from_camera
+        show = VIEW_TO_DISPLAY @ sp.frames.input_to_view
         verts = sp.surface_input
         before = transform_points(show, verts)
-        after = transform_points(show, sp.planned(sp.changes[-1]).model(verts))
+        after = transform_points(show, plan.shown.planned[side].model(verts))
         for ax, (u, v, title) in zip(row[:2], ((0, 2, "front"), (1, 2, "side"))):
             ax.scatter(after[:, u], after[:, v], s=4, linewidths=0, c=[np.array(SKIN_RGB) / 255], alpha=0.35)
             for xy, style in ((before[:, [u, v]], BEFORE), (after[:, [u, v]], PLANNED)):
                 ax.contour(*outline(xy), levels=[0.5], **style)
             ax.set_aspect("equal")
             ax.set_title(f"{side} breast, {title} view (mm)")
-        text = [f"{side}: " + ", ".join(c["name"] for c in record["sides"][side]["changes"][-1:])]
-        for name, value in record["measures"]["before"][side].items():
-            text.append(f"{measure_label(name)}: {value} → {record['measures']['after'][side][name]}")
-        fit, volume = record["sides"][side]["fit"], record["sides"][side]["volume"]
-        text.append(f"volume on her skin: {volume['volume_cc']:.1f} ± {volume['uncertainty_cc']:.1f} cc "
-                    f"(the model's: {fit['model_volume_cc']:.1f})")
-        text.append(f"fit residual {fit['normalised_residual']:.4f} (rule "
-                    f"{'met' if fit['stopping_rule_met'] else 'not met'})")
-        if fit["at_bounds"]:
-            text.append(f"at an end of the plausible range: {', '.join(fit['at_bounds'])}")
-        since = record["sides"][side].get("wall_from")
-        if since:
-            text.append(f"since the earlier scan: {since['volume_change_cc']:+.1f} cc "
-                        f"of the model on the earlier wall ({since['earlier_volume_cc']:.1f} → "
-                        f"{fit['model_volume_cc']:.1f} cc)")
+        text = [f"{side}: {plan.shown.key}"]
+        for name, value in m.before[side].items():
+            text.append(f"{measure_label(name)}: {measure_values(value)} → {measure_values(m.after[side][name])}")
+        fit, volume = sp.fit, plan.volumes.sides[side]
+        text.append(f"volume on her skin: {volume.volume_cc:.1f} ± {volume.uncertainty_cc:.1f} cc "
+                    f"(the model's: {fit.volume_cc:.1f})")
+        text.append(f"fit residual {fit.normalised_residual:.4f} (rule "
+                    f"{'met' if fit.stopping_rule_met else 'not met'})")
+        if sp.at_bounds:
+            text.append(f"at an end of the plausible range: {', '.join(sp.at_bounds)}")
+        if sp.follow_up is not None:
+            then = sp.follow_up.earlier_volume_cc
+            text.append(f"since the earlier scan: {fit.volume_cc - then:+.1f} cc "
+                        f"of the model on the earlier wall ({then:.1f} → {fit.volume_cc:.1f} cc)")
         row[2].axis("off")
         row[2].text(0, 1, "\n".join(text), va="top", family="monospace", fontsize=8)
     fig.legend(handles=[Line2D([], [], color=BEFORE["colors"], linestyle=BEFORE["linestyles"], label="before"),
@@ -79,3 +79,4 @@ def summary_png(plan: Plan, record: dict, path: Path) -> Path:
     with open(path, "wb") as fh:
         fig.savefig(fh, format="png", pil_kwargs={"compress_level": 3})
     return Path(path)
+

@@ -48,6 +48,11 @@ class PlannedChange:
     band: float = BAND
     fields: tuple[Lattice, ...] = ()  # FFD lattices applied after the deformation (mm, primitive frame)
 
+    @classmethod
+    def of(cls, side, change) -> "PlannedChange":
+        """A change (`plan.changes.Change`) of one breast (`plan.result.SidePlan`), placed in its input frame."""
+        return cls(change.deformation, side.primitive, side.frames.input_to_primitive, fields=change.fields)
+
     def footprint_radius(self, local_mm: np.ndarray) -> np.ndarray:
         """Normalised radius of primitive-frame points over the base superellipse (1 on its rim)."""
         p = self.primitive

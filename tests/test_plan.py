@@ -1,13 +1,12 @@
 """`breastplan plan`: the main job on the bundled realistic sample (a MakeHuman patient recorded
 through depthai), checked against the sample's truth and against the reference model; the reuse
 of finished stages; the blend of a change into the chest; bad input."""
-import copy
 import json
 import os
 import re
 import shutil
 import time
-from pathlib import Path
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -21,14 +20,13 @@ from browser import chromium, requires_chromium
 from clitools import assert_bad_input, run
 
 from breastplan import read_ply, transform_points
-from breastplan.case import Case
 from breastplan.deform.global_deformations import Deformation
 from breastplan.ingest.makehuman import BodyOptions
 from breastplan.ingest.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
 from breastplan.deform.by_degree import pick_condition
 from breastplan.deform.inverse import solve_degree
 from breastplan.deform.names import DD
-from breastplan.plan.changes import REACH, short_of, solve_change
+from breastplan.plan.changes import REACH, Method, short_of, solve_change
 from breastplan.plan.job import sample_recording
 from breastplan.plan.report import tables
 from breastplan.plan.surface import BAND, PlannedChange, smoothstep
@@ -49,6 +47,18 @@ def planned(cli, tmp_path_factory):
     res = run(cli, "plan", "--out", case, "--json", *[a for c in CHANGES for a in ("--deform", c)])
     assert res.returncode == 0, res.stderr[-3000:]
     return case, json.loads((case / "plan.json").read_text()), res
+
+
+@pytest.fixture(scope="module")
+def computed(planned, tmp_path_factory):
+    """The planned sample as a value (`plan.result.Plan`): planned again in a copy of its case folder,
+    its ingest and fit reused."""
+    from breastplan.options import PlanOptions
+    from breastplan.plan.job import run_plan
+
+    copy = tmp_path_factory.mktemp("computed") / "case"
+    shutil.copytree(planned[0], copy)
+    return run_plan(copy, copy, PlanOptions.parse(list(CHANGES)))
 
 
 def test_plan_writes_every_artefact_of_both_sides(planned):
@@ -118,7 +128,7 @@ def test_her_symmetry_and_ptosis_are_measured_before_and_as_planned_and_shown(pl
     assert "<h2>Volume, measured on her skin</h2>" in page and '"footprints":{"left":[[' in page
 
 
-def test_the_wall_behind_the_sample_gives_her_up_axis_and_the_report_says_so(planned):
+def test_the_wall_behind_the_sample_gives_her_up_axis_and_the_report_says_so(planned, computed):
     """The sample was recorded with a plumb wall 400 mm behind her (its truth's meta): the up axis is
     its vertical, the body's Y to within a degree, and the report names where up came from."""
     case, record, _ = planned
@@ -129,20 +139,24 @@ def test_the_wall_behind_the_sample_gives_her_up_axis_and_the_report_says_so(pla
     assert landmarks["up_from"] == "wall"
     assert np.degrees(np.arccos(np.clip(up @ truth["camera_from_body"][:3, 1], -1, 1))) < 1.0
     assert "the vertical of the wall seen behind her" in (case / "report.html").read_text()
-    unwalled = copy.deepcopy(record)                                      # a scan with no wall behind her
-    unwalled["measures"]["landmarks"]["up_from"] = "midline profile"
+    volumes = computed.volumes                                             # a scan with no wall behind her
+    unwalled = replace(computed, volumes=replace(volumes, landmarks=replace(volumes.landmarks, up_from="midline profile")))
     assert "no wall was seen behind her" in tables(unwalled)
 
 
-def test_the_report_names_a_fitted_parameter_at_an_end_of_its_plausible_range(planned):
+def test_the_report_names_a_fitted_parameter_at_an_end_of_its_plausible_range(computed):
     """The fit's table has a column for it on each side, and a paragraph says what it means only when
-    either side has one."""
-    _, record, _ = planned
+    either side has one: b0 and b1 set at the ends of their plausible ranges (`deform.names`)."""
+    from breastplan.deform.names import PARAM_NAMES, PLAUSIBLE
+
     for named in ([], ["b0", "b1"]):
-        edited = copy.deepcopy(record)
-        for side in edited["sides"].values():
-            side["fit"]["at_bounds"] = named
-        html = tables(edited)
+        sides = {}
+        for s, sp in computed.sides.items():
+            deformation = np.array(sp.fit.deformation, float)
+            for name in named:
+                deformation[PARAM_NAMES.index(name)] = PLAUSIBLE[name][1]
+            sides[s] = replace(sp, fit=replace(sp.fit, deformation=deformation))
+        html = tables(replace(computed, sides=sides))
         assert "at an end of its plausible range</th>" in html
         assert ('id="at-bounds"' in html) == bool(named)
         assert ("<td>b0, b1</td>" in html) == bool(named) and ("<td>none</td>" in html) == (not named)
@@ -200,7 +214,7 @@ def test_a_degree_beyond_a_small_breasts_line_is_flagged_as_not_reached():
     small = Primitive(4.0, 4.0, 4.0, 4.0, 4.0, 1.0, 1.0)
     points = to_mm(small.sample(30, 30))
     assert not solve_degree(small.sample(30, 30), pick_condition("turn"), DD, 8.0, small).reached
-    far, near = (solve_change(points, "turn", d, small, "exact").details[0] for d in (8.0, 3.0))
+    far, near = (solve_change(points, "turn", d, small, Method("exact")).details[0] for d in (8.0, 3.0))
     assert not far["reached"] and far["degree_reached"] < 8.0 - REACH
     assert short_of(far, "exact") == (f"degree {far['degree_reached']:.2f}, not 8 "
                                       "(the end of its condition's line for this breast)")
@@ -218,10 +232,11 @@ def test_a_change_a_realistic_breast_cannot_reach_is_said_in_the_terminal_plan_j
              for d in c["details"] if not d["reached"]}
     assert set(short) == {("left", "top-shape-8"), ("right", "top-shape-8")}
     stderr = " ".join(res.stderr.split())
+    report = (tmp_path / "case" / "report.html").read_text()
     for (side, _), detail in short.items():
         assert detail["degree_reached"] < 8.0 - REACH
         assert f"note: on the {side} breast, top-shape 8 reaches {short_of(detail, 'exact')}" in stderr
-        assert f"{detail['degree_reached']:.2f}, not 8 (the end of its condition" in tables(record)
+        assert f"{detail['degree_reached']:.2f}, not 8 (the end of its condition" in report
     assert "ptosis 3 reaches" not in stderr
 
 
@@ -569,7 +584,7 @@ def test_a_plan_removes_the_build_folders_of_killed_plans_and_no_other(tmp_path)
     import subprocess
     import sys
 
-    from breastplan.plan.job import _building
+    from breastplan.building import building
 
     killed, live, other = (tmp_path / name for name in (".case.plan-0123abcd", ".case.plan-89abcdef",
                                                           ".cases.plan-00000000"))
@@ -585,7 +600,7 @@ def test_a_plan_removes_the_build_folders_of_killed_plans_and_no_other(tmp_path)
     fd = os.open(live, os.O_RDONLY)
     fcntl.flock(fd, fcntl.LOCK_EX)                                           # a plan still building
     try:
-        with _building(tmp_path / "case") as work:
+        with building(tmp_path / "case", "plan") as work:
             assert not killed.exists() and live.exists() and other.exists()
             (work / "plan.json").write_text("{}")
     finally:

@@ -1,0 +1,157 @@
+"""A plan computed from her fitted breasts: every state it shows, her volumes, her torso as planned and
+the measures (`plan.result.Plan`). Writes nothing: `plan.record` writes what this computes.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from breastplan import transform_points
+from breastplan.case import sha256
+from breastplan.clock import Clock
+from breastplan.options import PlanOptions
+
+from .breast_volume import BreastVolumes, change_on_earlier_wall, measure_breasts
+from .changes import Change, Method, change_name, combine, solve_change
+from .measures import asymmetry, breast_measures
+from .result import COMBINED, Measures, Plan, PlanState, SidePlan, SkinChange
+from .surface import PlannedChange
+from .symmetry import bcct_measures, ptosis_from_cells
+
+
+def slider_degrees(requested: float) -> list[float]:
+    """The degrees a kind's slider offers: 1..8 and the requested one."""
+    return sorted({*map(float, range(1, 9)), float(requested)})
+
+
+def compute_plan(source: Path, fitted: dict[str, SidePlan], options: PlanOptions, method: Method,
+                 earlier: BreastVolumes | None, clock: Clock) -> Plan:
+    """The plan of `options` on her fitted breasts (`fitted`: each side's scan and fit, no changes yet),
+    by `method`; `earlier`: a follow-up's earlier visit measured on her skin then."""
+    sides = {}
+    for side, sp in fitted.items():
+        with clock(f"changes {side}"):
+            sides[side] = replace(sp, changes=solve_changes(sp, options, method))
+    with clock("states"):
+        states = tuple(_states(sides, options, method))
+    with clock("volumes on her skin"):
+        volumes = measure_sides(sides)
+    with clock("measures"):
+        requested = [next(st for st in states if st.key == c.name) for c in next(iter(sides.values())).changes]
+        torsos = tuple(planned_torso(sides, st) for st in requested)
+        measures = plan_measures(sides, volumes, requested[-1], torsos[-1])
+        skin = {} if earlier is None else skin_changes(sides, volumes, earlier)
+    return Plan(source, options, sides, volumes, states, torsos, measures, earlier, skin,
+                None if source.is_dir() else sha256(source), versions(), clock.ms)
+
+
+def versions() -> dict[str, str]:
+    """The versions of breastplan and the packages a plan rests on."""
+    out = {}
+    for name in ("breastplan", "numpy", "scipy", "open3d", "plotly", "depthai"):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def solve_changes(side: SidePlan, options: PlanOptions, method: Method) -> tuple[Change, ...]:
+    """Each requested change of one side, then (for more than one) their combination."""
+    singles = [solve_change(side.local_surface, kind, degree, side.primitive, method)
+               for kind, degree in options.changes]
+    return tuple(singles + ([combine(singles)] if len(singles) > 1 else []))
+
+
+def _states(sides: dict[str, SidePlan], options: PlanOptions, method: Method):
+    """Every state the plan shows: each requested kind at each of its slider's degrees (the requested
+    degree being the change solved for the plan), then the combination as planned."""
+    for kind, requested in options.changes:
+        for degree in slider_degrees(requested):
+            name = change_name(kind, degree)
+            changes = {s: next((c for c in sp.changes if c.name == name), None)
+                       or solve_change(sp.local_surface, kind, degree, sp.primitive, method)
+                       for s, sp in sides.items()}
+            yield _state(sides, name, kind, degree, changes)
+    if len(options.changes) > 1:
+        yield _state(sides, COMBINED, None, None, {s: sp.changes[-1] for s, sp in sides.items()})
+
+
+def _state(sides: dict[str, SidePlan], key: str, kind, degree, changes: dict[str, Change]) -> PlanState:
+    return PlanState(key, kind, degree, changes, {s: PlannedChange.of(sp, changes[s]) for s, sp in sides.items()})
+
+
+def measure_sides(sides: dict[str, SidePlan]) -> BreastVolumes:
+    """Both breasts measured on her skin (`plan.breast_volume`), from the torso the sides share."""
+    return measure_scans({s: sp.scan for s, sp in sides.items()})
+
+
+def measure_scans(scans: dict) -> BreastVolumes:
+    """The breasts of these scans (side → `Scan`, of one torso) measured on her skin."""
+    first = next(iter(scans.values()))
+    return measure_breasts(first.torso_camera, {s: scan.nipple_camera_mm for s, scan in scans.items()},
+                           first.view_from_camera, first.plumb_camera)
+
+
+def planned_torso(sides: dict[str, SidePlan], state: PlanState) -> np.ndarray:
+    """Her torso (`Scan.torso_camera`, input frame, mm) in `state`, both sides moved."""
+    torso = next(iter(sides.values())).scan.torso_camera
+    moved = torso.copy()
+    for side in sides:
+        moved += state.planned[side].displacement(torso)
+    return moved
+
+
+def plan_measures(sides: dict[str, SidePlan], volumes: BreastVolumes, shown: PlanState,
+                  torso: np.ndarray) -> Measures:
+    """Each side's measures before and as planned (`shown`, her torso so: `torso`, input frame, mm), and
+    their asymmetry (left − right). The volume is hers, measured on her skin; as planned, it changes by
+    as much as the fitted model's does."""
+    landmarks = volumes.landmarks
+    before, after = {}, {}
+    for side, sp in sides.items():
+        verts, nipple, planned = sp.surface_input, sp.scan.nipple_camera_mm, shown.planned[side]
+        before[side] = breast_measures(landmarks, nipple, verts, sp.fit.faces)
+        after[side] = breast_measures(landmarks, planned.model(nipple[None])[0], planned.model(verts), sp.fit.faces)
+        measured = volumes.sides[side].volume_cc
+        after[side]["volume_cc"] = measured + after[side]["volume_cc"] - before[side]["volume_cc"]
+        before[side]["volume_cc"] = measured
+    asym = {when: {k: v["left_minus_right"] for k, v in asymmetry(m).items()} for when, m in
+            (("before", before), ("after", after))}
+    symmetry, ptosis = _symmetry(sides, volumes, shown, torso)
+    return Measures(before, after, asym if len(before) == 2 else {}, symmetry, ptosis)
+
+
+def _symmetry(sides: dict[str, SidePlan], volumes: BreastVolumes, shown: PlanState, torso: np.ndarray):
+    """BCCT.core's measures (both sides) and each side's ptosis grade, before and as planned, from her
+    skin's cells (`plan.symmetry`)."""
+    T, cells = volumes.body_from_input, volumes.cells
+    nipples = {"before": {}, "after": {}}
+    for side, sp in sides.items():
+        nipple = sp.scan.nipple_camera_mm[None]
+        nipples["before"][side] = transform_points(T, nipple)[0]
+        nipples["after"][side] = transform_points(T, shown.planned[side].model(nipple))[0]
+    states = {"before": cells, "after": cells.moved(transform_points(T, torso))}
+    symmetry = {when: bcct_measures(nipples[when], states[when]) if len(sides) == 2 else {} for when in states}
+    ptosis = {when: {s: ptosis_from_cells(nipples[when][s], states[when], s) for s in sides} for when in states}
+    return symmetry, ptosis
+
+
+def skin_changes(sides: dict[str, SidePlan], volumes: BreastVolumes, earlier: BreastVolumes) -> dict[str, SkinChange]:
+    """A follow-up's change of each breast's volume on her skin: on the earlier visit's wall and
+    footprint (this torso carried there by the side's registration), and from each visit's own scan
+    and wall alone. Sides the earlier visit has no volume for are left out."""
+    out = {}
+    for side, sp in sides.items():
+        then = earlier.sides.get(side)
+        if then is None or not then.volume_cc > 0 or sp.follow_up is None:
+            continue
+        before, after = change_on_earlier_wall(earlier, sp.scan.torso_camera,
+                                               sp.follow_up.registration.earlier_from_later, side)
+        alone = volumes.sides[side].volume_cc - then.volume_cc
+        out[side] = SkinChange(before, after - before, 100.0 * (after - before) / before, alone,
+                               100.0 * alone / then.volume_cc)
+    return out

@@ -1,0 +1,199 @@
+"""What a plan is, as values: her body, each breast with its fit and frames, every planned state, the
+measures. Computed once (`plan.compute`), then written (`plan.record`), drawn (`plan.report`,
+`plan.summary`, `plan.views`) and printed (`cli.plan`); nothing downstream computes any of it again.
+
+Frames (4 × 4, mm), named `a_to_b`: *input* (a recording's camera, x right, y down, z forward; a scan
+file's own frame), *view* (the scan's viewing frame), *breast* (the scan's breast frame: x the
+patient's left, y up, z out of the chest), *primitive* (the fitted primitive's frame, made anatomical:
+a left breast mirrored in x so that both sides are planned as the model's right breast) and *body*
+(x her left, y up, z anterior, origin the sternal notch: `BreastVolumes.body_from_input`).
+
+This module imports nothing else from `plan/`: it is the vocabulary the others share.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from breastplan import Primitive, transform_points
+from breastplan.case import Case, Fit, Scan
+from breastplan.deform.names import PARAM_NAMES, at_bounds
+from breastplan.options import PlanOptions
+
+if TYPE_CHECKING:
+    from breastplan.ingest.follow_up import Registration
+
+    from .breast_volume import BreastVolumes
+    from .changes import Change
+    from .surface import PlannedChange
+
+COMBINED = "combined"
+"""The key of the state that applies every requested change together."""
+
+
+@dataclass(frozen=True, eq=False)
+class BreastFrames:
+    """One breast's frames: the transforms between the input, view, breast and primitive frames."""
+
+    input_to_breast: np.ndarray
+    input_to_view: np.ndarray
+    breast_to_primitive: np.ndarray
+
+    @classmethod
+    def of(cls, scan: Scan, fit: Fit, side: str) -> "BreastFrames":
+        """From a scan's frames and its fit's pose (primitive → breast); a left breast is mirrored in x
+        (the model's breast is a right one, its −x lateral, docs/model.md §1, §3), so both sides plan
+        the same change, medial and lateral alike."""
+        mirror = np.diag([-1.0, 1.0, 1.0, 1.0]) if side == "left" else np.eye(4)
+        return cls(np.asarray(scan.camera_to_breast, float), np.asarray(scan.view_from_camera, float),
+                   mirror @ np.linalg.inv(fit.pose))
+
+    @cached_property
+    def breast_to_input(self) -> np.ndarray:
+        return np.linalg.inv(self.input_to_breast)
+
+    @cached_property
+    def input_to_primitive(self) -> np.ndarray:
+        return self.breast_to_primitive @ self.input_to_breast
+
+
+@dataclass(frozen=True, eq=False)
+class FollowUp:
+    """A side measured down to an earlier case's chest wall: that case, the registration that carried
+    its wall over, and the earlier breast's fit down to its own wall (its surface carried into this
+    scan's input frame by the registration, mm)."""
+
+    case: Path
+    registration: Registration
+    earlier_volume_cc: float
+    earlier_surface_input: np.ndarray       # (V, 3)
+    earlier_faces: np.ndarray               # (F, 3)
+
+
+@dataclass(frozen=True, eq=False)
+class SidePlan:
+    """One breast: its case, scan and fit, its frames, and its planned changes (each as solved on the
+    fitted surface: one per requested change, then their combination)."""
+
+    side: str
+    case: Case | None                        # None: in memory only (the filters)
+    scan: Scan
+    fit: Fit
+    changes: tuple[Change, ...]
+    reused: tuple[str, ...] = ()             # stages taken from the case folder as they were
+    follow_up: FollowUp | None = None        # with `wall_from`: the earlier case it is measured against
+
+    @cached_property
+    def frames(self) -> BreastFrames:
+        return BreastFrames.of(self.scan, self.fit, self.side)
+
+    @property
+    def primitive(self) -> Primitive:
+        """The fitted primitive in the anatomical frame (a left breast's a1, a2 swapped)."""
+        p = self.fit.primitive
+        return replace(p, a1=p.a2, a2=p.a1) if self.side == "left" else p
+
+    @cached_property
+    def surface_input(self) -> np.ndarray:
+        """The fitted surface's vertices (fit.ply) in the input frame, mm."""
+        return transform_points(self.frames.breast_to_input, self.fit.vertices)
+
+    @cached_property
+    def local_surface(self) -> np.ndarray:
+        """The fitted surface in the anatomical primitive frame, mm: what degrees are measured on."""
+        return transform_points(self.frames.breast_to_primitive, self.fit.vertices)
+
+    @property
+    def at_bounds(self) -> list[str]:
+        """The fitted deformation parameters at an end of their plausible range."""
+        return at_bounds(dict(zip(PARAM_NAMES, map(float, self.fit.deformation))))
+
+    @property
+    def ptosis_params(self) -> tuple[float, float]:
+        """The fitted ptosis parameters b0, b1 (model units)."""
+        d = self.fit.deformation
+        return float(d[PARAM_NAMES.index("b0")]), float(d[PARAM_NAMES.index("b1")])
+
+
+@dataclass(frozen=True, eq=False)
+class PlanState:
+    """The plan at one (kind, degree) on every side — a requested change or a degree the report's
+    slider offers — or the combination as planned (kind and degree None)."""
+
+    key: str                                  # "ptosis-3", "turn-2.5" or COMBINED
+    kind: str | None
+    degree: float | None
+    changes: dict[str, Change]                # side → the change as solved on that breast
+    planned: dict[str, PlannedChange]         # side → that change placed in the input frame
+
+
+@dataclass(frozen=True)
+class SkinChange:
+    """A follow-up's change of one breast's volume on her skin (cc, %): on the earlier visit's wall and
+    footprint (`on_wall`, from `earlier_cc`), and from each visit's own scan and wall alone (`alone`)."""
+
+    earlier_cc: float
+    on_wall_cc: float
+    on_wall_pct: float
+    alone_cc: float
+    alone_pct: float
+
+
+@dataclass(frozen=True, eq=False)
+class Measures:
+    """The plan's measures (lengths mm, volumes cc, input frame): each side's before and as planned (the
+    last change), the asymmetry (left − right) of each, BCCT.core's symmetry measures and each side's
+    Regnault ptosis grade, before and as planned. `before`/`after`: side → measure name → value."""
+
+    before: dict[str, dict[str, float]]
+    after: dict[str, dict[str, float]]
+    asymmetry: dict[str, dict[str, float]]    # "before"/"after" → measure → left − right ({} for one side)
+    symmetry: dict[str, dict[str, float]]     # "before"/"after" → measure ({} for one side)
+    ptosis: dict[str, dict[str, dict]]        # "before"/"after" → side → grade and what it rests on
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """A computed plan: its input and options, each breast, her volumes measured on her skin, every
+    state (the requested changes, their combination and the slider's degrees), her torso as planned,
+    the measures, and for a follow-up the earlier visit's volumes and each side's change since."""
+
+    input: Path
+    options: PlanOptions
+    sides: dict[str, SidePlan]
+    volumes: BreastVolumes
+    states: tuple[PlanState, ...]
+    planned_torsos: tuple[np.ndarray, ...]    # her torso (input frame, mm) with each of `changes`
+    measures: Measures
+    earlier_volumes: BreastVolumes | None = None
+    skin_changes: dict[str, SkinChange] = field(default_factory=dict)
+    input_sha256: str | None = None           # None: a case folder
+    versions: dict[str, str] = field(default_factory=dict)   # package → version, as planned
+    timings_ms: dict = field(default_factory=dict)
+
+    @property
+    def input_kind(self) -> str:
+        if self.input.is_dir():
+            return "case folder"
+        return "recording" if self.input.suffix.lower() == ".mcap" else "scan file"
+
+    @property
+    def first(self) -> SidePlan:
+        """The first side: its scan holds the torso both sides share."""
+        return next(iter(self.sides.values()))
+
+    @property
+    def changes(self) -> tuple[PlanState, ...]:
+        """The planned states in order: each requested change, then (for more than one) the combination."""
+        names = [c.name for c in self.first.changes]
+        by_key = {st.key: st for st in self.states}
+        return tuple(by_key[n] for n in names)
+
+    @property
+    def shown(self) -> PlanState:
+        """The state the plan leads with: the combination as planned, or the one planned change."""
+        return self.changes[-1]

@@ -1,0 +1,171 @@
+"""The stages a plan rests on, each side's: its scan (ingested, or taken from a case folder) and its fit
+(down to an earlier case's chest wall for a follow-up), each reused from the case folder when its
+inputs and options hash as before, else made and saved there.
+"""
+from __future__ import annotations
+
+import shutil
+from dataclasses import replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from breastplan import BadInputError, transform_points
+from breastplan.case import Case, Fit, Provenance, Scan
+from breastplan.clock import Clock
+from breastplan.errors import about
+from breastplan.options import FitOptions, IngestOptions, PlanOptions
+
+from .breast_volume import BreastVolumes
+from .compute import measure_scans
+from .plan_file import PLAN_SCHEMA, read_plan_file
+from .result import FollowUp, SidePlan
+
+Progress = Callable[[str], None]
+
+
+def fitted_sides(source: Path, folder: Path, options: PlanOptions, clock: Clock, progress: Progress) -> dict[str, SidePlan]:
+    """Scan and fit each side (reusing what the case folder holds; down to the earlier case's wall
+    with `wall_from`); no changes solved yet."""
+    earlier = {} if options.wall_from is None else _earlier_cases(Path(options.wall_from), options.sides)
+    if source.is_dir():
+        cases = _cases_of(source, folder, options)
+        scans, reused = {}, {}
+        for side, case in cases.items():
+            scans[side], reused[side] = case.load_scan(), ["ingest"]
+    else:
+        cases = {side: Case(folder / side) for side in options.sides}
+        scans, reused = _ingest(source, cases, options, clock, progress)
+    sides = {}
+    for side, case in cases.items():
+        with clock(f"fit {side}"):
+            progress(f"fit {side}")
+            fit, fit_reused, follow_up = _fit(case, scans[side], earlier.get(side))
+        sides[side] = SidePlan(side, case, scans[side], fit, (), tuple(reused[side] + fit_reused), follow_up)
+    return sides
+
+
+def _cases_of(source: Path, folder: Path, options: PlanOptions) -> dict[str, Case]:
+    """The side cases a case folder holds for the requested sides, copied into `folder` unless the
+    plan is made in place. A one-side case from `ingest` plans its own side."""
+    _check_schema(source)
+    held = Case.of_sides(source)
+    found = {s: case.folder for s, case in held.items() if s in options.sides}
+    missing = [] if found and Case.holds(source) else [s for s in options.sides if s not in held]
+    if missing:
+        raise BadInputError(source, f"holds no scan of the {' and '.join(missing)} breast; plan it from the "
+                                    "recording or scan file")
+    in_place = folder.resolve() == source.resolve()
+    cases = {}
+    for side, path in found.items():
+        target = path if in_place else folder / side
+        if not in_place:
+            shutil.copytree(path, target, dirs_exist_ok=True)
+        cases[side] = Case(target)
+    return cases
+
+
+def _check_schema(folder: Path) -> None:
+    """BadInputError naming a plan.json of another schema (an older or newer breastplan's case)."""
+    doc = folder / Case.PLAN_JSON
+    try:
+        planned = read_plan_file(folder)
+    except (OSError, ValueError):
+        raise BadInputError(doc, "is not a plan record (not JSON)") from None
+    if planned is None or planned.current:
+        return
+    schema = planned.schema
+    name, _, version = schema.partition("/")
+    if name != PLAN_SCHEMA.split("/")[0]:
+        raise BadInputError(doc, f"is not a plan record (schema '{schema}')")
+    age = "an older" if version.isdigit() and int(version) < int(PLAN_SCHEMA.split("/")[1]) else "another"
+    raise BadInputError(folder, f"is a case folder of {age} schema ({schema}; this breastplan writes "
+                                f"{PLAN_SCHEMA}); plan the patient's scan again into a new folder")
+
+
+def _ingest(source: Path, cases: dict[str, Case], options: PlanOptions, clock: Clock, progress: Progress):
+    """Each side's scan: reused when the case holds one made from this input with the same options."""
+    from breastplan.ingest.scan import ingest_sides
+
+    wanted = {side: IngestOptions(side, units=options.units, up=options.up) for side in cases}
+    scans, reused = {}, {}
+    stale = []
+    for side, case in cases.items():
+        if case.is_fresh(Case.SCAN_NPZ, Provenance.of({source.name: source}, wanted[side].as_dict())):
+            scans[side], reused[side] = case.load_scan(), ["ingest"]
+        else:
+            stale.append(side)
+            reused[side] = []
+    if stale:
+        with clock("ingest"), about(source):
+            progress("ingest " + " and ".join(stale))
+            for side, scan in zip(stale, ingest_sides(source, [wanted[s] for s in stale])):
+                cases[side].save_scan(scan)
+                scans[side] = scan
+    return scans, reused
+
+
+def _fit(case: Case, scan: Scan, earlier: Case | None) -> tuple[Fit, list[str], FollowUp | None]:
+    """The side's fit (reused when the case holds one of this scan, and of the earlier scan it is
+    measured against, with the default options), the stages reused, and the follow-up."""
+    from breastplan.ingest.follow_up import carried_wall
+
+    scan_ply = case.path(Case.SCAN_PLY)
+    inputs, options, follow_up = {scan_ply.name: scan_ply}, FitOptions().as_dict(), None
+    if earlier is not None:
+        with about(earlier.folder):
+            earlier_scan = earlier.load_scan()
+            wall, registration = carried_wall(earlier_scan, scan)
+        scan = replace(scan, chest_wall=wall)
+        more_inputs, more_options = registration.provenance(earlier.folder)
+        inputs, options = {**inputs, **more_inputs}, {**options, **more_options}
+        then = _own_wall_fit(earlier, earlier_scan)
+        later_from_earlier = np.linalg.inv(earlier_scan.camera_to_breast @ registration.earlier_from_later)
+        follow_up = FollowUp(earlier.folder, registration, then.volume_cc,
+                             transform_points(later_from_earlier, then.vertices), then.faces)
+    wanted = Provenance.of(inputs, options)
+    if case.is_fresh(Case.FIT_NPZ, wanted):
+        return case.load_fit(), ["fit"], follow_up
+    fit = _fitted(scan, scan_ply).artefact(wanted)
+    case.save_fit(fit)
+    return fit, [], follow_up
+
+
+def _own_wall_fit(case: Case, scan: Scan) -> Fit:
+    """An earlier breast's fit down to its own chest wall: its case's fit.npz when that was made with
+    the default options, else fitted now (and not written: the earlier case is only read)."""
+    scan_ply = case.path(Case.SCAN_PLY)
+    wanted = Provenance.of({scan_ply.name: scan_ply}, FitOptions().as_dict())
+    if case.is_fresh(Case.FIT_NPZ, wanted):
+        return case.load_fit()
+    return _fitted(scan, scan_ply).artefact(wanted)
+
+
+def _fitted(scan: Scan, scan_ply: Path):
+    """`fit_scan` with the default options, one BLAS thread, bad input naming `scan_ply`."""
+    from threadpoolctl import threadpool_limits
+
+    from breastplan.fitting.breast_fit import fit_scan
+
+    with about(scan_ply), threadpool_limits(1, "blas"):
+        return fit_scan(scan, FitOptions())
+
+
+def _earlier_cases(folder: Path, sides: tuple[str, ...]) -> dict[str, Case]:
+    """Each planned side's case in an earlier case folder (`ingest.follow_up.earlier_cases`)."""
+    from breastplan.ingest.follow_up import earlier_cases
+
+    cases = earlier_cases(folder)
+    if set(sides) - set(cases):                          # only a one-side case lacks a side
+        held = next(iter(cases))
+        raise BadInputError(folder, f"holds a scan of the {held} breast only; plan --side {held} against it")
+    return {side: cases[side] for side in sides}
+
+
+def earlier_volumes(folder: Path) -> BreastVolumes:
+    """An earlier visit's breasts measured on her skin then, on its own chest wall."""
+    from breastplan.ingest.follow_up import earlier_cases
+
+    with about(folder):
+        return measure_scans({side: case.load_scan() for side, case in earlier_cases(folder).items()})
