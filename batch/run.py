@@ -8,13 +8,13 @@ hidden folders of a killed batch removed.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
 
 from breastplan import BadInputError, __version__
+from breastplan.building import lock
 from breastplan.case import sha256
 from breastplan.errors import Interrupted, require_folder
 from breastplan.options import BatchOptions
@@ -116,12 +116,11 @@ def _rows_and_tasks(inputs: list[Input], out: Path, options: BatchOptions) -> tu
 @contextlib.contextmanager
 def _locked(out: Path) -> Iterator[None]:
     """Hold `out`'s batch lock (released by the system if the batch is killed)."""
-    fd = os.open(out / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    (out / LOCK).touch()
+    fd = lock(out / LOCK, wait=False)
+    if fd is None:
+        raise BadInputError(out, "is being written by another batch (its lock is held); wait for it to finish")
     try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise BadInputError(out, "is being written by another batch (its lock is held); wait for it to finish") from None
         yield
     finally:
         os.close(fd)

@@ -8,16 +8,14 @@ finished cases intact and only hidden folders (`LEFTOVER`), which the next batch
 from __future__ import annotations
 
 import os
-import re
-import secrets
 import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from breastplan.building import LEFTOVER, sibling
 
-LEFTOVER = re.compile(r"^\..+\.(plan|batch|stale)-[0-9a-f]{8}$")
-"""Hidden folders a killed batch may leave: `run_plan`'s build folder, a re-plan's copy, a swapped-out case."""
+
 
 
 @dataclass(frozen=True)
@@ -63,22 +61,18 @@ def _plan(task: Task) -> None:
     if not case.exists():
         run_plan(Path(task.input), case, options)
         return
-    work = _sibling(case, "batch")
+    work = sibling(case, "batch")
     try:
         planned = _plan_file(case)
         if planned is not None and planned.current:     # reuse its stages; else plan afresh
             shutil.copytree(case, work, symlinks=True)
         run_plan(Path(task.input), work, options)
-        old = _sibling(case, "stale")
+        old = sibling(case, "stale")
         os.rename(case, old)
         os.rename(work, case)
         shutil.rmtree(old, ignore_errors=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)
-
-
-def _sibling(case: Path, kind: str) -> Path:
-    return case.parent / f".{case.name}.{kind}-{secrets.token_hex(4)}"
 
 
 def finished(case: Path, sha256: str, options: dict) -> bool:

@@ -65,28 +65,17 @@ def fit(
         from breastplan.ingest.follow_up import earlier_case
 
         earlier = earlier_case(wall_from, scan.side)           # in a plan's folder, the case of this side
-        earlier_scan = earlier.load_scan()
     writable(out or folder, folder=True)
 
-    from threadpoolctl import threadpool_limits
-
     from breastplan.case import Case, Provenance
-    from breastplan.fitting.breast_fit import fit_breast, fit_scan
     from breastplan.fitting.ffd import STOP_RESIDUAL
+    from breastplan.plan.stages import fit_one_thread, on_earlier_wall
 
     inputs, carried = {source.name: source}, {}
     if earlier is not None:
-        from dataclasses import replace
-
-        from breastplan.ingest.follow_up import carried_wall
-
-        with about(earlier.folder):
-            wall, registration = carried_wall(earlier_scan, scan)
-        scan = replace(scan, chest_wall=wall)
-        earlier_inputs, carried = registration.provenance(earlier.folder)
+        scan, _, earlier_inputs, carried = on_earlier_wall(scan, earlier)
         inputs.update(earlier_inputs)
-    with about(source), threadpool_limits(1, "blas"):   # small dense solves: threads only add overhead
-        result = fit_breast(points, options) if scan is None else fit_scan(scan, options)
+    result = fit_one_thread(points if scan is None else scan, options, source)
     fit = result.artefact(Provenance.of(inputs, {**options.as_dict(), **carried}))
     paths = Case(out or folder).save_fit(fit)
     if not fit.stopping_rule_met:

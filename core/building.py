@@ -72,9 +72,10 @@ def _locked_folder(work: Path, stem: str) -> Iterator[None]:
         os.close(held)
 
 
-def lock(folder: Path, wait: bool = True) -> int | None:
-    """A descriptor of `folder` holding its exclusive lock; None when another process holds it and not `wait`."""
-    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+def lock(path: Path, wait: bool = True) -> int | None:
+    """A descriptor of `path` (a folder or a file) holding its exclusive lock; None when another process
+    holds it and not `wait`."""
+    fd = os.open(path, os.O_RDONLY)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
     except BlockingIOError:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import shutil
 from dataclasses import replace
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -21,6 +21,9 @@ from .breast_volume import BreastVolumes
 from .compute import measure_scans
 from .plan_file import PLAN_SCHEMA, read_plan_file
 from .result import FollowUp, SidePlan
+
+if TYPE_CHECKING:
+    from breastplan.ingest.follow_up import Registration
 
 Progress = Callable[[str], None]
 
@@ -109,17 +112,12 @@ def _ingest(source: Path, cases: dict[str, Case], options: PlanOptions, clock: C
 def _fit(case: Case, scan: Scan, earlier: Case | None) -> tuple[Fit, list[str], FollowUp | None]:
     """The side's fit (reused when the case holds one of this scan, and of the earlier scan it is
     measured against, with the default options), the stages reused, and the follow-up."""
-    from breastplan.ingest.follow_up import carried_wall
-
     scan_ply = case.path(Case.SCAN_PLY)
     inputs, options, follow_up = {scan_ply.name: scan_ply}, FitOptions().as_dict(), None
     if earlier is not None:
-        with about(earlier.folder):
-            earlier_scan = earlier.load_scan()
-            wall, registration = carried_wall(earlier_scan, scan)
-        scan = replace(scan, chest_wall=wall)
-        more_inputs, more_options = registration.provenance(earlier.folder)
+        scan, registration, more_inputs, more_options = on_earlier_wall(scan, earlier)
         inputs, options = {**inputs, **more_inputs}, {**options, **more_options}
+        earlier_scan = earlier.load_scan()
         then = _own_wall_fit(earlier, earlier_scan)
         later_from_earlier = np.linalg.inv(earlier_scan.camera_to_breast @ registration.earlier_from_later)
         follow_up = FollowUp(earlier.folder, registration, then.volume_cc,
@@ -127,9 +125,20 @@ def _fit(case: Case, scan: Scan, earlier: Case | None) -> tuple[Fit, list[str], 
     wanted = Provenance.of(inputs, options)
     if case.is_fresh(Case.FIT_NPZ, wanted):
         return case.load_fit(), ["fit"], follow_up
-    fit = _fitted(scan, scan_ply).artefact(wanted)
+    fit = fit_one_thread(scan, FitOptions(), scan_ply).artefact(wanted)
     case.save_fit(fit)
     return fit, [], follow_up
+
+
+def on_earlier_wall(scan: Scan, earlier: Case) -> tuple[Scan, Registration, dict, dict]:
+    """`scan` with an earlier case's chest wall carried over (`ingest.follow_up.carried_wall`: the two
+    chests registered), the registration, and the inputs and options it adds to the fit's provenance.
+    Bad input names the earlier case."""
+    from breastplan.ingest.follow_up import carried_wall
+
+    with about(earlier.folder):
+        wall, registration = carried_wall(earlier.load_scan(), scan)
+    return (replace(scan, chest_wall=wall), registration, *registration.provenance(earlier.folder))
 
 
 def _own_wall_fit(case: Case, scan: Scan) -> Fit:
@@ -139,17 +148,18 @@ def _own_wall_fit(case: Case, scan: Scan) -> Fit:
     wanted = Provenance.of({scan_ply.name: scan_ply}, FitOptions().as_dict())
     if case.is_fresh(Case.FIT_NPZ, wanted):
         return case.load_fit()
-    return _fitted(scan, scan_ply).artefact(wanted)
+    return fit_one_thread(scan, FitOptions(), scan_ply).artefact(wanted)
 
 
-def _fitted(scan: Scan, scan_ply: Path):
-    """`fit_scan` with the default options, one BLAS thread, bad input naming `scan_ply`."""
+def fit_one_thread(scan: Scan | np.ndarray, options: FitOptions, source: Path):
+    """`fit_scan` of a scan (or `fit_breast` of breast-frame points, mm) with `options`, on one BLAS
+    thread (small dense solves: threads only add overhead), bad input naming `source`."""
     from threadpoolctl import threadpool_limits
 
-    from breastplan.fitting.breast_fit import fit_scan
+    from breastplan.fitting.breast_fit import fit_breast, fit_scan
 
-    with about(scan_ply), threadpool_limits(1, "blas"):
-        return fit_scan(scan, FitOptions())
+    with about(source), threadpool_limits(1, "blas"):
+        return fit_breast(scan, options) if isinstance(scan, np.ndarray) else fit_scan(scan, options)
 
 
 def _earlier_cases(folder: Path, sides: tuple[str, ...]) -> dict[str, Case]:
