@@ -31,11 +31,12 @@ from rich.table import Table
 
 from timing import fmt, repeats_argument, rounded, timed
 
+from breastplan.options import DEGREE_KINDS
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from browser import chromium, missing_chromium  # noqa: E402
 
 BIN = Path(sys.executable).with_name("breastplan")
-KINDS = ("ptosis", "turn", "top-shape")
 TARGETS = {"plan_s": 10.0, "report_mb": 8.0, "shown_s": 2.0}
 OPENS = 5
 """At least this many opens of each page are measured (after one warm-up)."""
@@ -50,7 +51,7 @@ def separate_commands(sample: Path, work: Path) -> None:
     for side in ("left", "right"):
         run("ingest", sample, "--side", side, "--out", work / side)
         run("fit", work / side)
-        for kind in KINDS:
+        for kind in DEGREE_KINDS:
             run("deform", work / side, "--kind", kind, "--degree", 3, "--out", work / f"{side}-{kind}.ply")
 
 

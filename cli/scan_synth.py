@@ -102,11 +102,12 @@ def scan_synth(
     import numpy as np
 
     from breastplan import PARAM_NAMES
+    from breastplan.deform.names import DEFORMATION_PARAMS
     from breastplan.atomic import atomic_set
     from breastplan.ingest import synthetic
     from breastplan.ingest.recording import write_recording
 
-    overrides = _side_overrides(side_params, set(PARAM_NAMES) | set(synthetic.DEFORMATION_NAMES))
+    overrides = _side_overrides(side_params, set(PARAM_NAMES) | set(DEFORMATION_PARAMS))
     try:
         scene = synthetic.make_scene(seed, tilt, distance, noise, overrides)
     except ValueError as exc:

@@ -11,7 +11,7 @@ KIND_PARAMS: dict[str, tuple[str, ...]] = {
     "turn": ("c0", "c1"),
 }
 """Parameter names of each kind, in the order the kinds are applied (docs/model.md §3)."""
-PARAM_NAMES: tuple[str, ...] = tuple(n for kind in KIND_PARAMS.values() for n in kind)
+DEFORMATION_PARAMS: tuple[str, ...] = tuple(n for kind in KIND_PARAMS.values() for n in kind)
 """The twelve deformation parameters in a deformation vector's order (s0 s1 t0 t1 h0 h1 g0 g1 b0 b1 c0 c1)."""
 NEEDS_PRIMITIVE = frozenset({"top-shape", "flatten-side", "turn-top"})
 """Kinds whose formulas need the breast's primitive."""

@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 from breastplan import BadInputError, Primitive, to_mm
 from breastplan.case import Fit, Provenance
 from breastplan.deform.global_deformations import ptosis
-from breastplan.deform.names import PARAM_NAMES, at_bounds
+from breastplan.deform.names import DEFORMATION_PARAMS, at_bounds
 from breastplan.meshes import mesh_volume, volume_below_base
 from breastplan.options import FitOptions
 from breastplan.point_order import canonical_order
@@ -80,7 +80,7 @@ class BreastFit:
     def params(self) -> dict[str, float]:
         """Primitive parameters (model units) and the fitted deformation parameters."""
         out = self.superquadric.primitive.as_dict()
-        out.update({n: float(v) for n, v in zip(PARAM_NAMES, self.superquadric.deformation.as_vector()) if v != 0.0})
+        out.update({n: float(v) for n, v in zip(DEFORMATION_PARAMS, self.superquadric.deformation.as_vector()) if v != 0.0})
         return out
 
     @property

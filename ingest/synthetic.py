@@ -22,7 +22,7 @@ from breastplan import PARAM_NAMES, Primitive, load_npz, save_npz, transform_poi
 from breastplan.chest_wall import ChestWall
 from breastplan.deform.breast_model import BreastModel
 from breastplan.deform.global_deformations import Deformation
-from breastplan.deform.names import KIND_PARAMS, PLAUSIBLE
+from breastplan.deform.names import DEFORMATION_PARAMS, PLAUSIBLE
 from breastplan.meshes import volume_below_base
 from breastplan.options import SIDES
 
@@ -34,7 +34,6 @@ CHEST_RX, CHEST_RY = 420.0, 900.0
 """Radii of curvature (mm) of the chest wall across (X) and along (Y) the body."""
 BASE_X = 90.0
 """|X| of the breast-base centres, mm."""
-DEFORMATION_NAMES = tuple(n for names in KIND_PARAMS.values() for n in names)
 NIPPLE_SIGMA_MM = 3.0
 """Width (σ) of the nipple bump."""
 SURFACE_GRID = (90, 144)
@@ -131,7 +130,7 @@ def default_breast(rng: np.random.Generator, overrides: dict[str, float] | None 
     """A plausible breast drawn from `rng` (≈ 300–650 cc, mild ptosis), with named overrides."""
     values = dict(zip(PARAM_NAMES, [*rng.uniform(9.0, 11.5, 5), rng.uniform(0.8, 1.1), rng.uniform(0.85, 1.1)]))
     values["a5"] = rng.uniform(8.5, 10.5)
-    deform = dict.fromkeys(DEFORMATION_NAMES, 0.0)
+    deform = dict.fromkeys(DEFORMATION_PARAMS, 0.0)
     deform.update(b0=rng.uniform(0.0, 1.5), b1=rng.uniform(0.0, 0.8), c0=rng.uniform(-0.4, 0.4),
                   g0=rng.uniform(0.0, 0.3))
     for name, value in (overrides or {}).items():
@@ -144,7 +143,7 @@ def default_breast(rng: np.random.Generator, overrides: dict[str, float] | None 
     if outside:
         raise ValueError("deformation parameters outside what a breast shows: " + ", ".join(
             f"{n} = {v:g} (range {PLAUSIBLE[n][0]:g}..{PLAUSIBLE[n][1]:g})" for n, v in outside.items()))
-    return Breast(primitive, Deformation.from_vector([deform[n] for n in DEFORMATION_NAMES]))
+    return Breast(primitive, Deformation.from_vector([deform[n] for n in DEFORMATION_PARAMS]))
 
 
 def make_scene(seed: int = 0, tilt_deg: float = 0.0, distance_mm: float | None = None, noise_mm: float = 1.0,
@@ -252,7 +251,7 @@ def save_truth(path: str | Path, scene: Scene, frames: int) -> Path:
                        f"{side}_camera_from_breast": T,
                        f"{side}_nipple_camera_mm": transform_points(T, breast.nipple_mm[None])[0],
                        f"{side}_vertices": transform_points(T, V).astype(np.float32), f"{side}_faces": F.astype(np.int32)})
-    meta = dict(scene.meta, frames=frames, deformation_order=list(DEFORMATION_NAMES), primitive_order=list(PARAM_NAMES),
+    meta = dict(scene.meta, frames=frames, deformation_order=list(DEFORMATION_PARAMS), primitive_order=list(PARAM_NAMES),
                 body_frame="X patient's left, Y superior, Z anterior; origin sternum at base-centre height")
     return save_npz(path, TRUTH_SCHEMA, arrays, units="mm", frame="camera", meta=meta, compress=True)
 

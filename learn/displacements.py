@@ -172,7 +172,7 @@ def fit_pair(before: Before, before_points: np.ndarray, after: np.ndarray, optio
 
     Closest points: the before's fitted surface is FFD-fitted to the after cloud. Corresponding:
     least squares of the Bernstein rows of the before points against their displacements, with
-    the SMOOTHNESS of the pair's `kind` (one of KINDS) on the lattice Laplacian."""
+    the SMOOTHNESS of the pair's `kind` (one of `options.DEGREE_KINDS`) on the lattice Laplacian."""
     before_points, after = np.asarray(before_points, float), np.asarray(after, float)
     box = before.box(options.lattice)
     smoothness = SMOOTHNESS[kind] if kind in SMOOTHNESS else max(SMOOTHNESS.values())
@@ -195,8 +195,6 @@ def fit_pair(before: Before, before_points: np.ndarray, after: np.ndarray, optio
     return hit["field"]
 
 
-KINDS = ("ptosis", "turn", "top-shape")
-"""The deformation types a model can learn, in the order of its one-hot features."""
 FEATURES = ("degree", "volume_cc", "width_mm", "height_mm", "projection_mm")
 
 

@@ -19,9 +19,10 @@ from breastplan.deform.by_degree import (ByDegree, check_degree, deform_by_degre
                                          pick_condition)
 from breastplan.deform.lattice import Lattice
 from breastplan.model_file import ModelFile, load_model
+from breastplan.options import DEGREE_KINDS
 from breastplan.units import displacement_problem
 
-from .displacements import (KINDS, FitCache, PairOptions, feature_names, field_lattice, fit_before, fit_pair,
+from .displacements import (FitCache, PairOptions, feature_names, field_lattice, fit_before, fit_pair,
                             pair_features)
 
 STATISTICAL = "statistical"
@@ -97,7 +98,7 @@ def field_file(model: ModelFile, path: Path) -> FieldFile:
     n = model.meta.get("lattice")
     if (mean is None or components is None or not isinstance(n, int) or mean.dtype.kind not in "fiu"
             or components.dtype.kind not in "fiu" or mean.shape != (3 * n ** 3,)
-            or components.shape != (model.n_outputs, mean.size) or not set(model.meta.get("kinds", ())) <= set(KINDS)
+            or components.shape != (model.n_outputs, mean.size) or not set(model.meta.get("kinds", ())) <= set(DEGREE_KINDS)
             or not model.meta.get("kinds")):
         raise ArtefactError(path, "holds an inconsistent statistical model (its modes, lattice or types)")
     k, features = len(model.meta["kinds"]), len(feature_names(model.meta["kinds"]))
@@ -146,7 +147,7 @@ def train_from_pairs(rows, options: PairOptions = PairOptions(), cache: FitCache
         return cloud
 
     fields = np.stack([fit_pair(befores[r.before], clouds[r.before], after(r), options, cache, r.kind) for r in train])
-    kinds = sorted({r.kind for r in train}, key=KINDS.index)
+    kinds = sorted({r.kind for r in train}, key=DEGREE_KINDS.index)
     X = pair_features([befores[r.before] for r in train], [r.degree for r in train], [r.kind for r in train], kinds)
     groups = np.array([str(r.before) for r in train])
     if len(set(groups)) >= 4:

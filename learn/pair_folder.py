@@ -29,13 +29,12 @@ from breastplan.deform.by_degree import slug
 from breastplan.deform.conditions import CONDITIONS, find_condition
 from breastplan.deform.names import DD
 from breastplan.errors import counted, require_file
+from breastplan.options import DEGREE_KINDS
 from breastplan.units import breast_points_problem
 
 PAIRS_CSV = "pairs.csv"
 COLUMNS = ("before", "after", "type", "degree", "split", "condition")
 REQUIRED = COLUMNS[:4]
-KINDS = tuple(dict.fromkeys(c.kind for c in CONDITIONS.values()))
-"""Deformation kinds that have degrees: those with conditions (ptosis, turn, top-shape)."""
 DEGREES = (1.0, float(DD))
 SPLITS = ("train", "test")
 MAX_PAIRS = 100_000
@@ -137,9 +136,9 @@ def _row(table: Path, line: int, paths: tuple[Path, dict[str, Path]], cells: lis
         raise bad(f"has {len(cells)} fields, more than the header's {width}")
     value = {name: (cells[i].strip() if i < len(cells) else "") for name, i in index.items()}
     kind = value["type"].lower().replace("_", "-")
-    if kind not in KINDS:
-        raise bad(f"type '{value['type']}' is not a deformation kind with degrees; choose {', '.join(KINDS)}"
-                  if value["type"] else f"has no type; choose {', '.join(KINDS)}")
+    if kind not in DEGREE_KINDS:
+        raise bad(f"type '{value['type']}' is not a deformation kind with degrees; choose {', '.join(DEGREE_KINDS)}"
+                  if value["type"] else f"has no type; choose {', '.join(DEGREE_KINDS)}")
     try:
         degree = float(value["degree"])
     except ValueError:

@@ -25,10 +25,11 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.model_selection import GridSearchCV, GroupKFold
 
 from breastplan.deform.conditions import find_condition
+from breastplan.options import DEGREE_KINDS
 
 from .databases import Database, build_database
 from .datasets import Dataset, build_dataset
-from .displacements import KINDS, Before, FitCache, PairOptions, apply_field, fit_before, fit_pair, pair_features
+from .displacements import Before, FitCache, PairOptions, apply_field, fit_before, fit_pair, pair_features
 from .metrics import indirect_metrics, spike_ratios, vertex_spike_ratios
 from .statistical import REGRESSORS, FieldModel, thesis_mlp
 
@@ -269,7 +270,7 @@ def run_all_types(per_type: list[Pairs], quick: bool) -> list[StatResult]:
     """One model learnt from the pairs of every type together, the type one-hot among its features,
     evaluated on each type's test split. Its cross-validated RMSE spans the types, so it is kept in
     `hyper` and the row is not a candidate for a condition's best."""
-    X = np.vstack([p.features(p.train, types=KINDS) for p in per_type])
+    X = np.vstack([p.features(p.train, types=DEGREE_KINDS) for p in per_type])
     Y = np.vstack([p.fields[p.train] for p in per_type])
     groups = np.concatenate([p.dataset.breast[p.train] for p in per_type])      # the same breasts in every type
     results = []
@@ -277,5 +278,5 @@ def run_all_types(per_type: list[Pairs], quick: bool) -> list[StatResult]:
         est, params, cv = grid_select(FieldModel(regressor), (QUICK_GRIDS if quick else GRIDS)[regressor], X, Y, groups)
         for p in per_type:
             results.append(evaluate(p, f"PCA + {regressor}, all types", {**params, "cv_all_types": cv}, float("nan"),
-                                    est.predict(p.features(p.test, types=KINDS))))
+                                    est.predict(p.features(p.test, types=DEGREE_KINDS))))
     return results

@@ -21,7 +21,7 @@ import numpy as np
 
 from breastplan import Primitive, transform_points
 from breastplan.case import Case, Fit, Scan
-from breastplan.deform.names import PARAM_NAMES, at_bounds
+from breastplan.deform.names import DEFORMATION_PARAMS, at_bounds
 from breastplan.options import PlanOptions
 
 if TYPE_CHECKING:
@@ -110,13 +110,13 @@ class SidePlan:
     @property
     def at_bounds(self) -> list[str]:
         """The fitted deformation parameters at an end of their plausible range."""
-        return at_bounds(dict(zip(PARAM_NAMES, map(float, self.fit.deformation))))
+        return at_bounds(dict(zip(DEFORMATION_PARAMS, map(float, self.fit.deformation))))
 
     @property
     def ptosis_params(self) -> tuple[float, float]:
         """The fitted ptosis parameters b0, b1 (model units)."""
         d = self.fit.deformation
-        return float(d[PARAM_NAMES.index("b0")]), float(d[PARAM_NAMES.index("b1")])
+        return float(d[DEFORMATION_PARAMS.index("b0")]), float(d[DEFORMATION_PARAMS.index("b1")])
 
 
 @dataclass(frozen=True, eq=False)

@@ -13,7 +13,7 @@ import pytest
 
 from breastplan import Primitive, read_ply, to_mm, transform_points, write_ply
 from breastplan.deform.global_deformations import Deformation
-from breastplan.deform.names import PARAM_NAMES, PLAUSIBLE, at_bounds
+from breastplan.deform.names import DEFORMATION_PARAMS, PLAUSIBLE, at_bounds
 from breastplan.case import Case, sha256
 from breastplan.chest_wall import ChestWall
 from breastplan.fitting.breast_fit import MESH_GRID, fit_breast
@@ -288,7 +288,7 @@ def test_at_bounds_names_a_parameter_at_either_end_of_its_range_only():
     assert at_bounds({"b0": lo}) == ["b0"] and at_bounds({"b0": hi, "c1": PLAUSIBLE["c1"][0]}) == ["b0", "c1"]
     assert at_bounds({"b0": 0.5 * (lo + hi), "b1": PLAUSIBLE["b1"][1] - 1e-3}) == []
     assert at_bounds({"a1": 1e9}) == []                                  # a primitive's parameter has no such range
-    assert PARAM_NAMES == ("s0", "s1", "t0", "t1", "h0", "h1", "g0", "g1", "b0", "b1", "c0", "c1")
+    assert DEFORMATION_PARAMS == ("s0", "s1", "t0", "t1", "h0", "h1", "g0", "g1", "b0", "b1", "c0", "c1")
 
 
 def _cloud(tmp_path, points):

@@ -348,7 +348,7 @@ def test_breast_cloud_caches_nothing(tmp_path):
     assert not np.array_equal(first, hemisphere(seed=2))
 
 
-def test_every_condition_kind_is_a_type():
-    from breastplan.learn.pair_folder import KINDS
+def test_the_kinds_planned_by_degree_are_those_with_conditions():
+    from breastplan.options import DEGREE_KINDS
 
-    assert set(KINDS) == {c.kind for c in CONDITIONS.values()} == {"ptosis", "turn", "top-shape"}
+    assert set(DEGREE_KINDS) == {c.kind for c in CONDITIONS.values()} == {"ptosis", "turn", "top-shape"}

@@ -147,14 +147,14 @@ def test_the_wall_behind_the_sample_gives_her_up_axis_and_the_report_says_so(pla
 def test_the_report_names_a_fitted_parameter_at_an_end_of_its_plausible_range(computed):
     """The fit's table has a column for it on each side, and a paragraph says what it means only when
     either side has one: b0 and b1 set at the ends of their plausible ranges (`deform.names`)."""
-    from breastplan.deform.names import PARAM_NAMES, PLAUSIBLE
+    from breastplan.deform.names import DEFORMATION_PARAMS, PLAUSIBLE
 
     for named in ([], ["b0", "b1"]):
         sides = {}
         for s, sp in computed.sides.items():
             deformation = np.array(sp.fit.deformation, float)
             for name in named:
-                deformation[PARAM_NAMES.index(name)] = PLAUSIBLE[name][1]
+                deformation[DEFORMATION_PARAMS.index(name)] = PLAUSIBLE[name][1]
             sides[s] = replace(sp, fit=replace(sp.fit, deformation=deformation))
         html = tables(replace(computed, sides=sides))
         assert "at an end of its plausible range</th>" in html
