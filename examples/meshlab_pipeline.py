@@ -129,10 +129,10 @@ def main(argv: list[str] | None = None) -> dict:
     breast_id = ms.current_mesh_id()
     meshlab.compute_breast_fit(ms, **where)
     fit_id = ms.current_mesh_id()
-    measures = meshlab.get_breast_measures(ms)
-    meshlab.apply_breast_ptosis(ms, degree=args.degree)
+    measures = meshlab.get_breast_measures(ms, **where)
+    meshlab.apply_breast_ptosis(ms, degree=args.degree, **where)
     ptosis_id = ms.current_mesh_id()
-    after = meshlab.get_breast_measures(ms)
+    after = meshlab.get_breast_measures(ms, **where)
     out.update({
         "side": args.side, "breast_points": ms.mesh(breast_id).vertex_number(),
         "measures": {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in measures.items()},

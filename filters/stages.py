@@ -7,10 +7,17 @@ in metres, unchanged for one in mm.
 
 **Memory.** The surfaces these filters return (the isolated points, the fitted surface, a deformed
 surface) are remembered, in memory, by a content hash of their vertices (the MEMORY most recent
-ones), with the isolation, fit and changes behind them; a later filter given one of them reuses
-those (its `units`, `up` and fit parameters then play no part). Any other geometry is taken as a
-scan of the patient: its breast is isolated (and fitted) first. A remembered surface keeps its side:
-`side` must be that side or `auto`.
+ones), each with its recipe: the scan of the patient its chain began with, the side and voxel size
+isolated, the fit's options and the changes applied. A later filter given one of them starts from
+that scan with the recipe, its own parameters replacing the recipe's: `units` and `up` (they
+describe that scan, in whose frame every surface of the chain lies), `voxel_mm` (isolation),
+`lattice` and `max_iterations` (fit), and an `apply_*` filter's change (replacing one of its kind);
+so its result is what the same chain gives from the scan with those parameters (as computed afresh
+after `forget()`). Any other geometry is taken as a scan of the patient: its breast is isolated (and
+fitted) first. A remembered surface keeps its side: `side` must be that side or `auto`. The
+isolations, fits and changes computed are kept too (the RESULTS most recent), each keyed on every
+option it depends on (the scan's content, side, voxel size, units, up; the fit's options; the
+change), so that nothing is computed twice and nothing is reused for other parameters.
 
 **Changes.** A deformed surface is the fitted breast with its changes solved by degree on the
 fitted model (`plan.changes.solve_change`) and applied to the whole model (`plan.surface`), in the
@@ -48,7 +55,9 @@ Up = Literal[UP_AXES]
 Method = Literal[METHODS]
 
 MEMORY = 16
-"""Surfaces (and scans) remembered; the least recently used is forgotten first."""
+"""Surfaces remembered (with their recipes); the least recently used is forgotten first."""
+RESULTS = 32
+"""Isolations, fits and changes kept; the least recently used is forgotten first."""
 
 
 class ShortOfDegree(UserWarning):
@@ -83,12 +92,14 @@ def compute_breast_isolation(mesh: Mesh, *, side: SideOrAuto = "auto", units: Un
                              voxel_mm: float = 2.0) -> Mesh:
     """Isolate one breast of a scan: its points (no faces), input frame, mm.
 
-    `mesh`: a scan of the patient's upper body (points, or a triangle mesh whose surface is sampled);
-    `side`: the patient's breast (auto: a remembered surface's side, else left); `units`, `up`: the
-    input's units and superior axis; `voxel_mm`: the spacing of the points kept (as `ingest --voxel`)."""
-    record = _isolated(mesh, side, units, up, voxel_mm)
-    return _remember(Mesh(transform_points(np.linalg.inv(record.scan.camera_to_breast), record.scan.points)),
-                     record)
+    `mesh`: a scan of the patient's upper body (points, or a triangle mesh whose surface is sampled),
+    or a remembered surface (its chain's scan isolated with these parameters); `side`: the patient's
+    breast (auto: a remembered surface's side, else left); `units`, `up`: the input's units and
+    superior axis (a remembered surface's: its chain's scan's); `voxel_mm`: the spacing of the points
+    kept (as `ingest --voxel`)."""
+    recipe = replace(_recipe(mesh, side, voxel_mm), fit=None, changes=())
+    _, scan = _isolated(recipe, units, up)
+    return _remember(Mesh(transform_points(np.linalg.inv(scan.camera_to_breast), scan.points)), recipe)
 
 
 @filter("compute_breast_fit", check=_fit_options)
@@ -98,11 +109,11 @@ def compute_breast_fit(mesh: Mesh, *, side: SideOrAuto = "auto", units: Units = 
 
     `mesh`: a scan (isolated first) or a remembered isolated breast; `lattice`, `max_iterations`: the
     FFD lattice's control points per axis and iteration budget (as `fit`). Given a remembered fitted
-    or deformed surface, the fitted surface of that breast."""
-    record = _fitted(mesh, side, units, up, _option(FitOptions, lattice=lattice, max_iterations=max_iterations))
-    record = replace(record, changes=(), change=None)
-    plan = record.fitted
-    return _remember(Mesh(plan.surface_input, plan.fit.faces), record)
+    or deformed surface, that breast fitted with these parameters (its changes left out)."""
+    fit = _option(FitOptions, lattice=lattice, max_iterations=max_iterations)
+    recipe = replace(_recipe(mesh, side), fit=fit, changes=())
+    _, plan = _fitted(recipe, units, up)
+    return _remember(Mesh(plan.surface_input, plan.fit.faces), recipe)
 
 
 @filter("apply_breast_ptosis", check=_check_degree)
@@ -145,38 +156,41 @@ def get_breast_measures(mesh: Mesh, *, side: SideOrAuto = "auto", units: Units =
     (`plan.measures.breast_measures`). `fit_volume_cc`, `rms_mm`, `normalised_residual`,
     `stopping_rule_met`, `converged` describe the fit; `changes` the changes applied."""
     from breastplan.plan.measures import BodyLandmarks, breast_measures
-    from breastplan.plan.surface import PlannedChange
 
-    record = _fitted(mesh, side, units, up, FitOptions())
-    plan, fit = record.fitted, record.fitted.fit
-    nipple, vertices = plan.scan.nipple_camera_mm, plan.surface_input
-    if record.change is not None:
-        planned = PlannedChange.of(plan, record.change)
-        nipple, vertices = planned.model(nipple[None])[0], planned.model(vertices)
-    axes = plan.frames.breast_to_input[:3, :3]                      # breast frame → input frame: x the patient's left, y up
+    recipe = _recipe(mesh, side)
+    recipe = replace(recipe, fit=recipe.fit or FitOptions())
+    plan, _, change = _changed(recipe, units, up)
+    fit = plan.fit
+    nipple = _moved(plan, change, np.asarray(plan.scan.nipple_camera_mm, float)[None])[0]
+    vertices = _moved(plan, change, plan.surface_input)
+    axes = plan.frames.breast_to_input[:3, :3]        # breast frame → input frame: x the patient's left, y up
     landmarks = BodyLandmarks(nipple, nipple, axes[:, 0], axes[:, 1])
     measures = breast_measures(landmarks, nipple, vertices, fit.faces)
-    details = [d for change in ([record.change] if record.change is not None else []) for d in change.details]
+    details = [] if change is None else list(change.details)
     return {"side": plan.side, **{k: measures[k] for k in MEASURES}, "nipple_mm": np.asarray(nipple, float),
             "fit_volume_cc": float(fit.volume_cc), "rms_mm": float(fit.residuals_mm["rms"]),
             "normalised_residual": float(fit.normalised_residual), "stopping_rule_met": bool(fit.stopping_rule_met),
             "converged": bool(fit.converged), "points": int(fit.points),
             "changes": [{"kind": d["kind"], "degree": float(d["degree"]), "degree_reached": float(d["degree_reached"]),
                          "reached": bool(d["reached"]), "method": method}
-                        for d, (_, _, method) in zip(details, record.changes)]}
+                        for d, (_, _, method) in zip(details, recipe.changes)]}
 
 
 # --- what the filters share -------------------------------------------------------------------
 
 @dataclass(frozen=True, eq=False)
-class _Record:
-    """A breast behind a surface: its scan (isolated), its fit (if fitted) and its changes (if any)."""
+class _Recipe:
+    """How a surface was made: the scan of the patient its chain began with (`origin`; `origin_key`, a
+    hash of its content), the breast isolated from it and the voxel size, the fit's options (None:
+    isolated only) and the changes applied. `units` and `up` are no part of it: every filter is given
+    its own (they describe `origin`, in whose frame every surface of the chain lies)."""
 
-    key: str                                            # the scan's: its content and isolation options
-    scan: Scan
-    fitted: SidePlan | None = None                      # the scan and fit, in memory (no case folder)
+    origin: Mesh
+    origin_key: str
+    side: str
+    voxel_mm: float
+    fit: FitOptions | None = None
     changes: tuple[tuple[str, float, str], ...] = ()    # (kind, degree, method), in the model's order
-    change: Change | None = None                        # the changes solved together
 
 
 class _Memory:
@@ -204,12 +218,16 @@ class _Memory:
             self.items.clear()
 
 
-_MEMORY = _Memory(MEMORY)
+_SURFACES = _Memory(MEMORY)
+"""surface_key → the _Recipe of a surface a filter gave."""
+_RESULTS = _Memory(RESULTS)
+"""The isolations, fits and changes computed, each keyed on every option it depends on."""
 
 
 def forget() -> None:
-    """Forget every remembered surface and scan."""
-    _MEMORY.clear()
+    """Forget every remembered surface, isolation, fit and change."""
+    _SURFACES.clear()
+    _RESULTS.clear()
 
 
 def surface_key(vertices) -> str:
@@ -219,25 +237,35 @@ def surface_key(vertices) -> str:
     return "surface:" + hashlib.sha256(repr(v.shape).encode() + v.tobytes()).hexdigest()
 
 
-def _scan_key(mesh: Mesh, options: dict) -> str:
-    digest = hashlib.sha256(np.ascontiguousarray(mesh.vertices).tobytes())
+def _content_key(mesh: Mesh) -> str:
+    """A scan's content, exactly: its vertices (float64) and faces."""
+    digest = hashlib.sha256(repr(mesh.vertices.shape).encode() + np.ascontiguousarray(mesh.vertices).tobytes())
     if mesh.faces is not None:
         digest.update(np.ascontiguousarray(mesh.faces).tobytes())
-    return f"scan:{digest.hexdigest()}:{json.dumps(options, sort_keys=True)}"
+    return digest.hexdigest()
 
 
-def _remember(mesh: Mesh, record: _Record) -> Mesh:
-    _MEMORY.put(surface_key(mesh.vertices), record)
+def _options_key(options) -> str:
+    return json.dumps(options.as_dict(), sort_keys=True)
+
+
+def _remember(mesh: Mesh, recipe: _Recipe) -> Mesh:
+    _SURFACES.put(surface_key(mesh.vertices), recipe)
     return mesh
 
 
-def _remembered(mesh: Mesh, side: str) -> _Record | None:
-    """The record of a remembered surface (BadInputError if it is of the other side than `side`), or None."""
-    record = _MEMORY.get(surface_key(mesh.vertices))
-    if record is not None and side not in ("auto", record.scan.side):
-        raise BadInputError(None, f"is a surface of the {record.scan.side} breast, not the {side} one; "
-                                  f"give side={record.scan.side}")
-    return record
+def _recipe(mesh: Mesh, side: str, voxel_mm: float | None = None) -> _Recipe:
+    """The recipe of a filter's input: a remembered surface's (BadInputError if it is of the other side
+    than `side`; `voxel_mm`, if given, replaces its own), else that of `mesh` taken as a scan of the
+    patient (`side` auto: the left breast)."""
+    recipe = _SURFACES.get(surface_key(mesh.vertices))
+    if recipe is None:
+        return _Recipe(mesh, _content_key(mesh), SIDES[0] if side == "auto" else side,
+                       2.0 if voxel_mm is None else voxel_mm)
+    if side not in ("auto", recipe.side):
+        raise BadInputError(None, f"is a surface of the {recipe.side} breast, not the {side} one; "
+                                  f"give side={recipe.side}")
+    return recipe if voxel_mm is None else replace(recipe, voxel_mm=voxel_mm)
 
 
 def _option(kind, **values):
@@ -248,15 +276,12 @@ def _option(kind, **values):
         raise ParameterError(exc.option, f"{exc.option}: {exc}") from None
 
 
-def _isolated(mesh: Mesh, side: str, units: str, up: str, voxel_mm: float = 2.0) -> _Record:
-    """The breast behind a remembered surface, or `side`'s breast isolated from `mesh` as a scan."""
-    record = _remembered(mesh, side)
-    if record is not None:
-        return record
-    options = _option(IngestOptions, side=SIDES[0] if side == "auto" else side, voxel_mm=voxel_mm, units=units, up=up)
-    key = _scan_key(mesh, options.as_dict())
-    record = _MEMORY.get(key)
-    if record is None:
+def _isolated(recipe: _Recipe, units: str, up: str) -> tuple[str, Scan]:
+    """(key, scan) of the recipe's breast isolated from its origin read with `units` and `up`."""
+    options = _option(IngestOptions, side=recipe.side, voxel_mm=recipe.voxel_mm, units=units, up=up)
+    key = f"scan:{recipe.origin_key}:{_options_key(options)}"
+    scan = _RESULTS.get(key)
+    if scan is None:
         from threadpoolctl import threadpool_limits
 
         from breastplan.case import Provenance, Source
@@ -264,53 +289,76 @@ def _isolated(mesh: Mesh, side: str, units: str, up: str, voxel_mm: float = 2.0)
         from breastplan.ingest.pipeline import ingest_cloud
         from breastplan.ingest.scan import scan_record
 
-        cloud = scan_cloud(mesh.vertices, mesh.faces, None, units, name="the input")
+        origin = recipe.origin
+        cloud = scan_cloud(origin.vertices, origin.faces, None, units, name="the input")
         with threadpool_limits(1, "blas"):               # small dense solves: threads only add overhead
             found = ingest_cloud(cloud, options)
-        record = _Record(key, scan_record(found, Source("file", cloud.description), options, Provenance()))
-        _MEMORY.put(key, record)
-    return record
+        scan = scan_record(found, Source("file", cloud.description), options, Provenance())
+        _RESULTS.put(key, scan)
+    return key, scan
 
 
-def _fitted(mesh: Mesh, side: str, units: str, up: str, options: FitOptions) -> _Record:
-    """The fitted breast behind a remembered surface, or the breast of `mesh` isolated and fitted."""
-    record = _isolated(mesh, side, units, up)
-    if record.fitted is not None:
-        return record
-    key = f"{record.key}:fit:{json.dumps(options.as_dict(), sort_keys=True)}"
-    fitted = _MEMORY.get(key)
-    if fitted is None:
+def _fitted(recipe: _Recipe, units: str, up: str) -> tuple[str, SidePlan]:
+    """(key, side plan without changes) of the recipe's breast isolated and fitted with its fit options."""
+    scan_key, scan = _isolated(recipe, units, up)
+    key = f"{scan_key}:fit:{_options_key(recipe.fit)}"
+    plan = _RESULTS.get(key)
+    if plan is None:
         from threadpoolctl import threadpool_limits
 
         from breastplan.fitting.breast_fit import fit_scan
         from breastplan.plan.result import SidePlan
 
         with threadpool_limits(1, "blas"):
-            fit = fit_scan(record.scan, options).artefact()
-        fitted = replace(record, fitted=SidePlan(record.scan.side, None, record.scan, fit, ()))
-        _MEMORY.put(key, fitted)
-    return fitted
+            fit = fit_scan(scan, recipe.fit).artefact()
+        plan = SidePlan(scan.side, None, scan, fit, ())
+        _RESULTS.put(key, plan)
+    return key, plan
+
+
+def _changed(recipe: _Recipe, units: str, up: str) -> tuple[SidePlan, list[Change], Change | None]:
+    """The recipe's fitted breast, each of its changes solved alone on it, and their combination (None
+    without changes)."""
+    from threadpoolctl import threadpool_limits
+
+    from breastplan.plan.changes import Method, combine, solve_change
+
+    fit_key, plan = _fitted(recipe, units, up)
+    singles = []
+    for kind, degree, method in recipe.changes:
+        key = f"{fit_key}:change:{json.dumps([kind, degree, method])}"
+        single = _RESULTS.get(key)
+        if single is None:
+            with threadpool_limits(1, "blas"):
+                single = solve_change(plan.local_surface, kind, degree, plan.primitive, Method(method))
+            _RESULTS.put(key, single)
+        singles.append(single)
+    change = None if not singles else singles[0] if len(singles) == 1 else combine(singles)
+    return plan, singles, change
+
+
+def _moved(plan: SidePlan, change: Change | None, points: np.ndarray) -> np.ndarray:
+    """Input-frame points of the fitted model moved by `change` (None: as they are)."""
+    if change is None:
+        return points
+    from breastplan.plan.surface import PlannedChange
+
+    return PlannedChange.of(plan, change).model(points)
 
 
 def _apply(kind: str, mesh: Mesh, degree: float, method: str, side: str, units: str, up: str) -> Mesh:
     """The fitted breast behind `mesh` with `kind` at `degree` (and the changes it carries), input frame."""
     _check_degree({"degree": degree})
-    from threadpoolctl import threadpool_limits
+    from breastplan.plan.changes import short_of
 
-    from breastplan.plan.changes import Method as Resolved, combine, short_of, solve_change
-    from breastplan.plan.surface import PlannedChange
-
-    record = _fitted(mesh, side, units, up, FitOptions())
+    recipe = _recipe(mesh, side)
     order = list(KIND_PARAMS)
-    changes = tuple(sorted([c for c in record.changes if c[0] != kind] + [(kind, float(degree), method)],
+    changes = tuple(sorted([c for c in recipe.changes if c[0] != kind] + [(kind, float(degree), method)],
                            key=lambda c: order.index(c[0])))
-    plan = record.fitted
-    with threadpool_limits(1, "blas"):
-        singles = [solve_change(plan.local_surface, k, d, plan.primitive, Resolved.resolve(m)) for k, d, m in changes]
+    recipe = replace(recipe, fit=recipe.fit or FitOptions(), changes=changes)
+    plan, singles, change = _changed(recipe, units, up)
     asked = next(single for single, (k, _, _) in zip(singles, changes) if k == kind)
     short = short_of(asked.details[0], method)
     if short is not None:
         warnings.warn(f"{kind} reaches {short}", ShortOfDegree, stacklevel=4)   # the caller of the filter
-    change = singles[0] if len(singles) == 1 else combine(singles)
-    vertices = PlannedChange.of(plan, change).model(plan.surface_input)
-    return _remember(Mesh(vertices, plan.fit.faces), replace(record, changes=changes, change=change))
+    return _remember(Mesh(_moved(plan, change, plan.surface_input), plan.fit.faces), recipe)
