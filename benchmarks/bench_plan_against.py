@@ -5,8 +5,8 @@ Each revision (REV, and the working tree's HEAD unless --head-rev says otherwise
 `git archive` in a temporary folder as setuptools' package-dir mapping lays it out (`breastplan` =
 core/, `breastplan.plan` = plan/, …, by symbolic links) and put first on PYTHONPATH, so the command
 run imports that revision, not the editable install; both run with this venv's Python and packages.
-The two alternate, one plan each per round, after a warm-up of each, so both see the same load of the
-(shared, noisy) machine. Prints the median seconds of each and their ratio (HEAD / REV; target ≤ 1.05:
+The two alternate, one plan each per round, after a warm-up of each (which also compiles each
+revision's bytecode), so both see the same load of the (shared, noisy) machine. Prints the median seconds of each and their ratio (HEAD / REV; target ≤ 1.05:
 no slower, within the machine's noise) and one JSON line.
 
 Run:  .venv/bin/python benchmarks/bench_plan_against.py REV [--head-rev REV] [--repeats N]   (default 5)
@@ -50,7 +50,7 @@ def lay_out(rev: str, folder: Path) -> Path:
 
 def plan_seconds(site: Path, out: Path) -> float:
     """Wall seconds of one whole `breastplan plan --out out` process importing from `site`."""
-    env = {**os.environ, "PYTHONPATH": str(site), "PYTHONDONTWRITEBYTECODE": "1"}
+    env = {**os.environ, "PYTHONPATH": str(site)}
     start = time.perf_counter()
     subprocess.run([sys.executable, "-c", CLI, "plan", "--out", str(out)], env=env, check=True,
                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
