@@ -34,13 +34,15 @@ def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Prog
              method: Method | None = None) -> Plan:
     """Plan `options` on `input` (None: the bundled sample) into the case folder `out`, by `method`
     (`options.method` resolved; resolved here when not given)."""
+    from threadpoolctl import threadpool_limits
+
     from .compute import compute_plan
     from .record import write_plan
 
     source = sample_recording() if input is None else Path(input)
     method = method or _resolved(options.method)
     clock = Clock()
-    with building(out, "plan") as folder:
+    with threadpool_limits(1, "blas"), building(out, "plan") as folder:   # small dense solves: threads only add overhead
         fitted = fitted_sides(source, folder, options, clock, progress)
         progress("changes and measures")
         earlier = None if options.wall_from is None else earlier_volumes(Path(options.wall_from))
