@@ -93,7 +93,7 @@ def _json(plan, out: Path, seconds: float) -> dict:
                     "model_volume_cc": volume["model_volume_cc"], "stopping_rule_met": sp.fit.stopping_rule_met,
                     "changes": [st.key for st in plan.changes], "reused": list(sp.reused)}
         if sp.follow_up is not None:
-            sides[s]["wall_from"] = {**follow_up_record(sp.follow_up, sp.fit.volume_cc),
+            sides[s]["wall_from"] = {**follow_up_record(sp),
                                      **skin_change_record(plan.skin_changes.get(s))}
     return {"case": str(out), "report": str(out / "report.html"), "plan": str(out / "plan.json"),
             "input": str(plan.input), "sides": sides, "measures": measures_record(plan), "seconds": seconds}
@@ -141,9 +141,9 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
                      f"{fit.normalised_residual:.4f}" + (f"; reused: {', '.join(sp.reused)}" if sp.reused else ""))
         if sp.follow_up is not None:
             f, skin = sp.follow_up, plan.skin_changes.get(s)
-            change = fit.volume_cc - f.earlier_volume_cc
-            stdout.print(f"{s} since {f.case}: the model {change:+.1f} cc "
-                         f"({100.0 * change / f.earlier_volume_cc:+.1f} %; then {f.earlier_volume_cc:.1f} cc, measured "
+            cc, pct = sp.model_change
+            stdout.print(f"{s} since {f.case}: the model {cc:+.1f} cc "
+                         f"({pct:+.1f} %; then {f.earlier_volume_cc:.1f} cc, measured "
                          f"down to its chest wall, registered at rms {f.registration.rms_mm:.2f} mm)"
                          + (f"; on her skin, on the earlier wall: {skin.on_wall_cc:+.1f} cc" if skin else ""))
     if m.symmetry["before"]:

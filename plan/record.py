@@ -19,7 +19,7 @@ from breastplan.fitting.ffd import STOP_RESIDUAL
 from breastplan.options import SIDES
 
 from .plan_file import PLAN_SCHEMA
-from .result import FollowUp, Plan, PlanState, SidePlan, SkinChange
+from .result import Plan, PlanState, SidePlan, SkinChange
 
 SUMMARY = "summary.png"
 
@@ -38,7 +38,7 @@ def write_plan(plan: Plan, folder: Path) -> dict:
                            "volume": volume_record(plan, side), "fit": fit_record(sp), "reused": list(sp.reused),
                            "changes": [_save_change(sp, st, folder, stage) for st in plan.changes]}
             if sp.follow_up is not None:
-                sides[side]["wall_from"] = {**follow_up_record(sp.follow_up, sp.fit.volume_cc),
+                sides[side]["wall_from"] = {**follow_up_record(sp),
                                             **skin_change_record(plan.skin_changes.get(side))}
         torso_files = {}
         record = {"schema": PLAN_SCHEMA, "version": __version__, "input": input_record(plan),
@@ -83,12 +83,11 @@ def volume_record(plan: Plan, side: str) -> dict:
             "footprint_input_mm": np.round(measured.footprint_input_mm, 1).tolist()}
 
 
-def follow_up_record(follow_up: FollowUp, volume_cc: float) -> dict:
-    """plan.json's `wall_from` of a side whose fitted breast now measures `volume_cc` on the earlier wall."""
-    change = volume_cc - follow_up.earlier_volume_cc
-    return {"case": str(follow_up.case), **follow_up.registration.as_dict(),
-            "earlier_volume_cc": round(follow_up.earlier_volume_cc, 2), "volume_change_cc": round(change, 2),
-            "volume_change_pct": round(100.0 * change / follow_up.earlier_volume_cc, 2)}
+def follow_up_record(sp: SidePlan) -> dict:
+    """plan.json's `wall_from` of a follow-up's side: the earlier case, the registration, the fitted model's change."""
+    (cc, pct), f = sp.model_change, sp.follow_up
+    return {"case": str(f.case), **f.registration.as_dict(), "earlier_volume_cc": round(f.earlier_volume_cc, 2),
+            "volume_change_cc": round(cc, 2), "volume_change_pct": round(pct, 2)}
 
 
 def skin_change_record(change: SkinChange | None) -> dict:

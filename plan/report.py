@@ -227,9 +227,8 @@ def tables(plan: Plan) -> str:
         rows = []
         for s, sp in since.items():
             f, skin = sp.follow_up, plan.skin_changes.get(s)
-            change = sp.fit.volume_cc - f.earlier_volume_cc
-            rows.append([s, str(f.case), f.earlier_volume_cc, sp.fit.volume_cc, f"{change:+.1f}",
-                         f"{100.0 * change / f.earlier_volume_cc:+.1f}",
+            cc, pct = sp.model_change
+            rows.append([s, str(f.case), f.earlier_volume_cc, sp.fit.volume_cc, f"{cc:+.1f}", f"{pct:+.1f}",
                          f"{skin.on_wall_cc:+.1f} ({skin.on_wall_pct:+.1f} %)" if skin else "—",
                          f.registration.rms_mm, f"{100 * f.registration.agreement:.0f} %"])
         parts.append("<h2>Since the earlier scan (the model, measured down to its chest wall)</h2>" + _table(

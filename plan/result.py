@@ -113,6 +113,15 @@ class SidePlan:
         return at_bounds(dict(zip(DEFORMATION_PARAMS, map(float, self.fit.deformation))))
 
     @property
+    def model_change(self) -> tuple[float, float] | None:
+        """A follow-up's change of the fitted model's volume since the earlier visit, each fitted down to
+        its chest wall (now: the earlier one carried over): cc, and % of then; None without a follow-up."""
+        if self.follow_up is None:
+            return None
+        then = self.follow_up.earlier_volume_cc
+        return self.fit.volume_cc - then, 100.0 * (self.fit.volume_cc - then) / then
+
+    @property
     def ptosis_params(self) -> tuple[float, float]:
         """The fitted ptosis parameters b0, b1 (model units)."""
         d = self.fit.deformation

@@ -67,9 +67,8 @@ def summary_png(plan: Plan, path: Path) -> Path:
         if sp.at_bounds:
             text.append(f"at an end of the plausible range: {', '.join(sp.at_bounds)}")
         if sp.follow_up is not None:
-            then = sp.follow_up.earlier_volume_cc
-            text.append(f"since the earlier scan: {fit.volume_cc - then:+.1f} cc "
-                        f"of the model on the earlier wall ({then:.1f} → {fit.volume_cc:.1f} cc)")
+            text.append(f"since the earlier scan: {sp.model_change[0]:+.1f} cc of the model on the earlier wall "
+                        f"({sp.follow_up.earlier_volume_cc:.1f} → {fit.volume_cc:.1f} cc)")
         row[2].axis("off")
         row[2].text(0, 1, "\n".join(text), va="top", family="monospace", fontsize=8)
     fig.legend(handles=[Line2D([], [], color=BEFORE["colors"], linestyle=BEFORE["linestyles"], label="before"),
