@@ -1,7 +1,7 @@
 """`breastplan batch` of 20 realistic patients' recordings: throughput with 1 and 2 local workers, and on
 a Dask LocalCluster of 2 workers.
 
-The folder: 20 MakeHuman patients (`ingest.makehuman.BodyOptions`: cup 0.3–0.9, firmness 0.2–0.8,
+The folder: 20 MakeHuman patients (`scenes.makehuman.BodyOptions`: cup 0.3–0.9, firmness 0.2–0.8,
 weight 0.3–0.7, asymmetry −0.4..0.4, poses a-pose / arms-down / hands-on-hips), each recorded through
 depthai as `scan-synth` does (8 depth frames, 640×400, camera 600–750 mm, pitch −8..8°, yaw −6..6°,
 wall 400 mm), drawn from a fixed seed. Each round, one after the other so that all three see the same
@@ -42,8 +42,8 @@ RUNS = {"--jobs 1": ["--jobs", "1"], "--jobs 2": ["--jobs", "2"],
 
 def write_patients(folder: Path, seed: int = 0) -> None:
     """20 realistic recordings in `folder`."""
-    from breastplan.ingest.makehuman import BodyOptions
-    from breastplan.ingest.realistic import CameraOptions, make_body_scene
+    from breastplan.scenes.makehuman import BodyOptions
+    from breastplan.scenes.realistic import CameraOptions, make_body_scene
     from breastplan.ingest.recording import write_recording
 
     rng = np.random.default_rng(seed)

@@ -66,7 +66,7 @@ from breastplan.fitting.breast_fit import MESH_GRID, BreastFit, fit_breast, mode
 from breastplan.fitting.ffd import FIT_POINTS, STOP_RESIDUAL, _closest
 from breastplan.fitting.sampling import seeded_subset
 from breastplan.fitting.superquadric import fit_superquadric, initial_guess
-from breastplan.ingest import synthetic
+from breastplan.scenes import synthetic
 from breastplan.ingest.pipeline import ingest_frames
 from breastplan.options import FitOptions, IngestOptions
 from breastplan.ingest.recording import DepthFrames

@@ -29,9 +29,9 @@ from threadpoolctl import threadpool_limits
 from breastplan.case import Provenance, Source
 from breastplan.fitting.breast_fit import fit_scan
 from breastplan.ingest.follow_up import carried_wall
-from breastplan.ingest.makehuman import BodyOptions, make_body
+from breastplan.scenes.makehuman import BodyOptions, make_body
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import BodyScene, CameraOptions, camera_pose
+from breastplan.scenes.realistic import BodyScene, CameraOptions, camera_pose
 from breastplan.ingest.recording import DepthFrames
 from breastplan.ingest.scan import scan_record
 from breastplan.options import SIDES, IngestOptions

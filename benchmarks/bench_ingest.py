@@ -39,7 +39,7 @@ from rich.console import Console
 from rich.table import Table
 from threadpoolctl import threadpool_limits
 
-from breastplan.ingest import synthetic
+from breastplan.scenes import synthetic
 from breastplan.ingest.pipeline import ingest_frames
 from breastplan.ingest.recording import DepthFrames, read_recording, write_recording
 from breastplan.ingest.scan import ingest

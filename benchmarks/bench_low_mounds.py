@@ -24,9 +24,9 @@ import numpy as np
 from rich.console import Console
 
 from breastplan import BadInputError
-from breastplan.ingest.makehuman import BodyOptions
+from breastplan.scenes.makehuman import BodyOptions
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import CameraOptions, make_back_scene, make_body_scene
+from breastplan.scenes.realistic import CameraOptions, make_back_scene, make_body_scene
 from breastplan.ingest.recording import DepthFrames
 from breastplan.options import SIDES, IngestOptions
 

@@ -1,16 +1,16 @@
 """Breast isolation and fitting on realistic bodies (MakeHuman), with the Chen torso as the baseline.
 
-Realistic scenes: 4 pairs of MakeHuman bodies (`ingest.makehuman.BodyOptions`), each pair differing
+Realistic scenes: 4 pairs of MakeHuman bodies (`scenes.makehuman.BodyOptions`), each pair differing
 in one thing only — two in cup (0.3 vs 0.8, 0.2 vs 1.0), two in firmness (0 vs 1) — with weights
 0.2–0.9, muscle 0.3–0.7 and modifiers (asymmetry ±, breast_trans, torso_width). Each pair is seen
 from 3 of the 8 views of VIEWS (pose a-pose / arms-down / hands-on-hips; camera 500–900 mm, pitch
 −15..15°, yaw −10..10°, 640×400 / 800×600 / 1280×800, wall at 400 mm or none): 8 bodies × 3 views =
-24 scenes, 8 noisy depth frames each (`ingest.realistic.make_body_scene(...).frames(8, view)`; both
+24 scenes, 8 noisy depth frames each (`scenes.realistic.make_body_scene(...).frames(8, view)`; both
 bodies of a pair share the view and its noise seed). Each scene goes through `ingest_frames` for the
 left and the right side (automatic isolation, no nipple given); a side that returns is fitted with
 `fit_scan(ingested)` (`fit_breast` on the chest wall ingest found: volumes down to that wall).
 Baseline scenes, in the same run and interleaved with the realistic ones (so that both see the
-same load): 6 Chen torsos (`ingest.synthetic.make_scene`), seeds 0, 1, 2 as drawn and with all five semi-axes × CHEN_SCALE (a known volume change), 8 frames
+same load): 6 Chen torsos (`scenes.synthetic.make_scene`), seeds 0, 1, 2 as drawn and with all five semi-axes × CHEN_SCALE (a known volume change), 8 frames
 (640×400), through the same calls.
 
 Figures (a side is *isolated* when ingest returns and its nipple lies within ISOLATED_MM of the truth;
@@ -23,7 +23,7 @@ volume and ptosis figures only when its side is isolated):
 3. nipple asymmetry: per scene with both sides isolated, (left − right) nipple offsets in the body
    frame (found nipples taken there by the inverse of `scene.camera_from_body`), horizontal (X) and
    vertical (Y), minus the true offsets: worst |error| ≤ 4 mm;
-3b. (no target) the breast's boundary, per isolated realistic side (`ingest.realistic.crop_against_truth`):
+3b. (no target) the breast's boundary, per isolated realistic side (`scenes.realistic.crop_against_truth`):
    the share of the crop's points whose nearest body vertex is one of MakeHuman's breast (`breast_region`:
    the vertices its breast targets move), worst; and the share of the body pixels the camera sees within
    CORE_MM of the true nipple that the crop holds, median and worst;
@@ -81,10 +81,10 @@ from threadpoolctl import threadpool_limits
 
 from breastplan import BadInputError, transform_points
 from breastplan.fitting.breast_fit import fit_scan, ptosis_sag_mm
-from breastplan.ingest import synthetic
-from breastplan.ingest.makehuman import BodyOptions
+from breastplan.scenes import synthetic
+from breastplan.scenes.makehuman import BodyOptions
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import CORE_MM, BodyScene, CameraOptions, crop_against_truth, make_body_scene
+from breastplan.scenes.realistic import CORE_MM, BodyScene, CameraOptions, crop_against_truth, make_body_scene
 from breastplan.ingest.recording import DepthFrames
 from breastplan.options import SIDES, IngestOptions
 from breastplan.plan.measures import find_landmarks

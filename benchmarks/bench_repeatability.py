@@ -31,10 +31,10 @@ from threadpoolctl import threadpool_limits
 
 from breastplan.clock import Clock
 from breastplan.fitting.breast_fit import BreastFit, fit_scan
-from breastplan.ingest import synthetic
+from breastplan.scenes import synthetic
 from breastplan.ingest.depth import depth_range, fuse, to_points
 from breastplan.ingest.pipeline import Ingested, isolate
-from breastplan.ingest.realistic import make_body_scene
+from breastplan.scenes.realistic import make_body_scene
 from breastplan.options import SIDES, IngestOptions
 
 from bench_realistic import FRAMES, PAIRS, VIEWS, new_table

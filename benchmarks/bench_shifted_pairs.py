@@ -20,8 +20,8 @@ import statistics
 import numpy as np
 from rich.console import Console
 
-from breastplan.ingest import synthetic
-from breastplan.ingest.realistic import make_body_scene
+from breastplan.scenes import synthetic
+from breastplan.scenes.realistic import make_body_scene
 from breastplan.options import SIDES
 
 from bench_realistic import FRAMES, PAIRS, SAG_TIE_MM, TARGETS, VIEWS, chen_scene, chen_specs, new_table

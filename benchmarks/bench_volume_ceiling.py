@@ -57,7 +57,7 @@ from breastplan.case import Provenance, Source
 from breastplan.fitting.breast_fit import fit_scan
 from breastplan.ingest.follow_up import carried_wall, carry_wall, chest_around_breast
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import make_body_scene
+from breastplan.scenes.realistic import make_body_scene
 from breastplan.ingest.recording import DepthFrames
 from breastplan.ingest.scan import scan_record
 from breastplan.options import IngestOptions

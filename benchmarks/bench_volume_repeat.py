@@ -2,8 +2,8 @@
 
 `plan.breast_volume.measure_breasts` measures each breast as the tissue in front of one chest wall
 inside the breast's footprint, from the torso ingest found, the nipples found and the landmarks'
-body frame. This script scans MakeHuman bodies (`ingest.makehuman`, rendered by
-`ingest.realistic.BodyScene`, 8 noisy depth frames at 800×600, `ingest_frames` for both sides,
+body frame. This script scans MakeHuman bodies (`scenes.makehuman`, rendered by
+`scenes.realistic.BodyScene`, 8 noisy depth frames at 800×600, `ingest_frames` for both sides,
 automatic isolation) and gives each scene to `measure_breasts` (the torso, the nipples found, the
 viewing frame and the wall's plumb of the left side's ingest) and, in the same run, to the fitted
 model (`fit_scan(ingested).volume_cc` per side, BLAS on one thread as `breastplan fit` runs it):
@@ -71,9 +71,9 @@ from threadpoolctl import threadpool_limits
 
 from breastplan import BadInputError, transform_points
 from breastplan.fitting.breast_fit import fit_scan
-from breastplan.ingest.makehuman import Body, BodyOptions, make_body
+from breastplan.scenes.makehuman import Body, BodyOptions, make_body
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import BodyScene, CameraOptions, camera_pose
+from breastplan.scenes.realistic import BodyScene, CameraOptions, camera_pose
 from breastplan.ingest.recording import DepthFrames
 from breastplan.options import SIDES, IngestOptions
 from breastplan.plan.breast_volume import measure_breasts

@@ -21,7 +21,7 @@ from mcap_surgery import damage_chunk, declare_chunk_size, flip_byte_of_message,
 
 @functools.cache
 def _intact() -> Path:
-    from breastplan.ingest import synthetic
+    from breastplan.scenes import synthetic
     from breastplan.ingest.recording import write_recording
 
     folder = Path(tempfile.mkdtemp(prefix="bench_recording_"))

@@ -1,8 +1,8 @@
 """The `scan-synth` command: a synthetic patient's depth frames, recorded through depthai.
 
-Two bodies: `chen`, the parametric torso with primitive breasts of ingest/synthetic.py, and
-`makehuman`, a realistic MakeHuman body (ingest/makehuman.py) seen by the camera of
-ingest/realistic.py, which can also write what the camera sees as a scan file.
+Two bodies: `chen`, the parametric torso with primitive breasts of scenes/synthetic.py, and
+`makehuman`, a realistic MakeHuman body (scenes/makehuman.py) seen by the camera of
+scenes/realistic.py, which can also write what the camera sees as a scan file.
 """
 from __future__ import annotations
 
@@ -104,7 +104,7 @@ def scan_synth(
     from breastplan import PARAM_NAMES
     from breastplan.deform.names import DEFORMATION_PARAMS
     from breastplan.atomic import atomic_set
-    from breastplan.ingest import synthetic
+    from breastplan.scenes import synthetic
     from breastplan.ingest.recording import write_recording
 
     overrides = _side_overrides(side_params, set(PARAM_NAMES) | set(DEFORMATION_PARAMS))
@@ -140,8 +140,8 @@ def _scan_makehuman(clock: Clock, as_json: bool, *, out, truth, frames, seed, pi
     modifiers = parse_pairs(modifier, "MakeHuman modifier", "--modifier")
 
     from breastplan.options import OptionError
-    from breastplan.ingest import realistic          # light: it imports open3d only to render
-    from breastplan.ingest.makehuman import MODIFIERS, BodyOptions
+    from breastplan.scenes import realistic          # light: it imports open3d only to render
+    from breastplan.scenes.makehuman import MODIFIERS, BodyOptions
 
     outputs = _outputs({"--out": out, "--truth": truth, "--scan-file": scan_file}, realistic.SCAN_SUFFIXES)
     if units is not None and units not in realistic.SCAN_UNITS:

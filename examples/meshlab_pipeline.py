@@ -44,8 +44,8 @@ trunk and the breasts are found."""
 def default_scan() -> tuple[Path, dict]:
     """The default scan (a MakeHuman body of average build, arms in A-pose, seen from 650 mm, no
     wall; mm, up +y), made if missing, and its true nipples (mm, the scan's frame)."""
-    from breastplan.ingest.makehuman import BodyOptions, make_body
-    from breastplan.ingest.realistic import CameraOptions, make_body_scene, write_scan_file
+    from breastplan.scenes.makehuman import BodyOptions, make_body
+    from breastplan.scenes.realistic import CameraOptions, make_body_scene, write_scan_file
 
     if not DEFAULT_SCAN.is_file():
         scene = make_body_scene(BodyOptions(), CameraOptions(wall_mm=None))

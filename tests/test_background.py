@@ -9,9 +9,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from breastplan.ingest.background import FACING_DEG, WALL_AREA_MM2, plumb_wall
-from breastplan.ingest.makehuman import BodyOptions
+from breastplan.scenes.makehuman import BodyOptions
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
+from breastplan.scenes.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
 from breastplan.ingest.recording import DepthFrames
 from breastplan.ingest.scan import ingest
 from breastplan.options import IngestOptions

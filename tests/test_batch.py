@@ -17,8 +17,8 @@ from clitools import run
 
 from breastplan.batch.inputs import find_inputs
 from breastplan.case import sha256
-from breastplan.ingest.makehuman import BodyOptions
-from breastplan.ingest.realistic import CameraOptions, make_body_scene, write_scan_file
+from breastplan.scenes.makehuman import BodyOptions
+from breastplan.scenes.realistic import CameraOptions, make_body_scene, write_scan_file
 from breastplan.options import BatchOptions, OptionError
 from breastplan.plan.job import sample_recording
 

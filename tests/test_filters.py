@@ -20,8 +20,8 @@ import pytest
 from breastplan import BadInputError, read_ply, write_ply
 from breastplan.filters import (Filter, Mesh, ParameterError, UnknownFilterError, filter, filters, get,
                                 registry)
-from breastplan.ingest.makehuman import BodyOptions, make_body
-from breastplan.ingest.realistic import CameraOptions, make_body_scene, write_scan_file
+from breastplan.scenes.makehuman import BodyOptions, make_body
+from breastplan.scenes.realistic import CameraOptions, make_body_scene, write_scan_file
 from breastplan.plan.job import sample_recording
 
 from clitools import assert_bad_input, run

@@ -3,7 +3,7 @@ command line), each test a few seconds on fits shared through the filters' own m
 
 The body is MakeHuman's (average build, A-pose, a wall 400 mm behind her), written as
 `scan-synth --scan-file` writes it twice: in mm with her up on +y (the body frame) and in metres with
-her up on +x (`ingest.realistic.file_from_body`, a rotation the test inverts exactly). Truths:
+her up on +x (`scenes.realistic.file_from_body`, a rotation the test inverts exactly). Truths:
 
 * her nipples: MakeHuman's nipple rings, in her body frame;
 * a frame's invariance: the same body in another frame and units gives the same breast in her body
@@ -26,8 +26,8 @@ from breastplan import BadInputError, read_ply, transform_points
 from breastplan.filters import (Mesh, ShortOfDegree, apply_breast_ptosis, apply_breast_top_shape,
                                 apply_breast_turn, compute_breast_fit, compute_breast_isolation, forget,
                                 get_breast_measures)
-from breastplan.ingest.makehuman import BodyOptions
-from breastplan.ingest.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
+from breastplan.scenes.makehuman import BodyOptions
+from breastplan.scenes.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
 
 NIPPLE_MM = 2.0
 """How far the nipple found may lie from MakeHuman's nipple ring's centroid (it lies within 1 mm)."""

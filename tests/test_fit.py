@@ -58,7 +58,7 @@ def _edges_shared_twice(faces):
 
 
 def test_fit_of_ingested_synthetic_scans_is_within_1_mm_of_the_true_breast_and_3_percent_in_volume():
-    from breastplan.ingest import synthetic
+    from breastplan.scenes import synthetic
     from breastplan.ingest.pipeline import ingest_frames
     from breastplan.options import IngestOptions
     from breastplan.ingest.recording import DepthFrames
@@ -79,9 +79,9 @@ def test_fit_of_ingested_synthetic_scans_is_within_1_mm_of_the_true_breast_and_3
 def realistic_breast(side: str, **body):
     """One breast of a MakeHuman body (`BodyOptions`; modifiers as (name, value) pairs), as
     `ingest_frames` gives it (points and chest wall), seen from the front (a-pose, 650 mm, 800×600, wall at 400 mm, 8 frames)."""
-    from breastplan.ingest.makehuman import BodyOptions
+    from breastplan.scenes.makehuman import BodyOptions
     from breastplan.ingest.pipeline import ingest_frames
-    from breastplan.ingest.realistic import CameraOptions, make_body_scene
+    from breastplan.scenes.realistic import CameraOptions, make_body_scene
     from breastplan.ingest.recording import DepthFrames
     from breastplan.options import IngestOptions
 
@@ -123,7 +123,7 @@ def test_a_larger_cup_is_fitted_with_most_of_its_true_volume_change():
     90 mm from the nipple; a breast's flat base alone, its chest wall ignored, kept 81 %; the old
     ring-fitted wall, 58 %) and by no more than 120 %."""
     from breastplan.fitting.breast_fit import fit_scan
-    from breastplan.ingest.makehuman import BodyOptions, make_body
+    from breastplan.scenes.makehuman import BodyOptions, make_body
 
     body = dict(firmness=0.5, weight=0.5, muscle=0.5)
     small, large = (fit_scan(b).volume_cc

@@ -13,11 +13,11 @@ import pytest
 from breastplan import BadInputError, transform_points
 from breastplan.case import Provenance, Source
 from breastplan.fitting.breast_fit import fit_scan
-from breastplan.ingest import synthetic
+from breastplan.scenes import synthetic
 from breastplan.ingest.follow_up import carried_wall, chest_around_breast
-from breastplan.ingest.makehuman import BodyOptions
+from breastplan.scenes.makehuman import BodyOptions
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import CameraOptions, make_body_scene
+from breastplan.scenes.realistic import CameraOptions, make_body_scene
 from breastplan.ingest.recording import DepthFrames
 from breastplan.options import IngestOptions
 

@@ -11,7 +11,7 @@ from hypothesis import given, settings, strategies as st
 
 from breastplan import read_ply, to_mm, write_ply
 from breastplan.chest_wall import ChestWall
-from breastplan.ingest import synthetic
+from breastplan.scenes import synthetic
 from breastplan.ingest.chest_wall import fit_chest_wall
 from breastplan.ingest.depth import fuse
 from breastplan.ingest.pipeline import ingest_frames

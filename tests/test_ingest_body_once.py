@@ -5,8 +5,8 @@ import pytest
 
 from breastplan.ingest import pipeline
 from breastplan.ingest.files import read_scan_file
-from breastplan.ingest.makehuman import BodyOptions
-from breastplan.ingest.realistic import CameraOptions, make_body_scene, write_scan_file
+from breastplan.scenes.makehuman import BodyOptions
+from breastplan.scenes.realistic import CameraOptions, make_body_scene, write_scan_file
 from breastplan.ingest.recording import read_recording, write_recording
 from breastplan.ingest.scan import ingest_sides
 from breastplan.options import SIDES, IngestOptions

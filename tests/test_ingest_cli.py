@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from breastplan import read_ply, write_ply
-from breastplan.ingest import synthetic
+from breastplan.scenes import synthetic
 from breastplan.ingest.recording import END_OF_RECORDING, depthai, record_messages, write_recording
 
 from clitools import assert_bad_input, run

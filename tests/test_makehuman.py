@@ -1,4 +1,4 @@
-"""The realistic body (ingest/makehuman.py), its scene (ingest/realistic.py) and `scan-synth --body makehuman`.
+"""The realistic body (scenes/makehuman.py), its scene (scenes/realistic.py) and `scan-synth --body makehuman`.
 
 Each test checks a truth found independently of the code under test: brute-force integration,
 the divergence theorem, analytic volumes, mirror symmetry, rigid arm turns, a plane's depth.
@@ -14,9 +14,9 @@ from scipy.spatial import cKDTree
 
 from breastplan import read_ply
 from breastplan.ingest.files import read_scan_file
-from breastplan.ingest.makehuman import POSES, Body, BodyOptions, breast_region, make_body
+from breastplan.scenes.makehuman import POSES, Body, BodyOptions, breast_region, make_body
 from breastplan.meshes import positive_part_mean
-from breastplan.ingest.realistic import CameraOptions, load_body_truth, make_body_scene
+from breastplan.scenes.realistic import CameraOptions, load_body_truth, make_body_scene
 from breastplan.ingest.recording import read_recording
 
 from clitools import run

@@ -13,9 +13,9 @@ from hypothesis import strategies as st
 from breastplan import BadInputError, Primitive, transform_points
 from breastplan.case import Provenance, Source
 from breastplan.fitting.breast_fit import fit_breast
-from breastplan.ingest.makehuman import NOTCH_VERTICES, BodyOptions, make_body
+from breastplan.scenes.makehuman import NOTCH_VERTICES, BodyOptions, make_body
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import CameraOptions, make_body_scene
+from breastplan.scenes.realistic import CameraOptions, make_body_scene
 from breastplan.ingest.recording import DepthFrames
 from breastplan.ingest.scan import scan_record
 from breastplan.options import FitOptions, IngestOptions

@@ -17,8 +17,8 @@ import pytest
 from breastplan import BadInputError, write_ply
 from breastplan import meshlab
 from breastplan.filters import ParameterError, filters
-from breastplan.ingest.makehuman import BodyOptions, make_body
-from breastplan.ingest.realistic import CameraOptions, make_body_scene, write_scan_file
+from breastplan.scenes.makehuman import BodyOptions, make_body
+from breastplan.scenes.realistic import CameraOptions, make_body_scene, write_scan_file
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "meshlab_pipeline.py"
 NIPPLE_MM = 8.0

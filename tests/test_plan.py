@@ -21,8 +21,8 @@ from clitools import assert_bad_input, run
 
 from breastplan import read_ply, transform_points
 from breastplan.deform.global_deformations import Deformation
-from breastplan.ingest.makehuman import BodyOptions
-from breastplan.ingest.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
+from breastplan.scenes.makehuman import BodyOptions
+from breastplan.scenes.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
 from breastplan.deform.by_degree import pick_condition
 from breastplan.deform.inverse import solve_degree
 from breastplan.deform.names import DD

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from breastplan import read_ply, write_ply
-from breastplan.ingest.makehuman import BodyOptions
-from breastplan.ingest.realistic import CameraOptions, make_body_scene, write_scan_file
+from breastplan.scenes.makehuman import BodyOptions
+from breastplan.scenes.realistic import CameraOptions, make_body_scene, write_scan_file
 
 
 def _plan(cli, scan, out, threads: int) -> dict:

@@ -15,16 +15,16 @@ from hypothesis import strategies as st
 
 from breastplan import BadInputError, transform_points, write_ply
 from breastplan.ingest import breast
-from breastplan.ingest.makehuman import BodyOptions
+from breastplan.scenes.makehuman import BodyOptions
 from breastplan.ingest.pipeline import find_body, ingest_frames
-from breastplan.ingest.realistic import (CameraOptions, crop_against_truth, file_axes, file_from_body,
+from breastplan.scenes.realistic import (CameraOptions, crop_against_truth, file_axes, file_from_body,
                                           load_body_truth, make_back_scene, make_body_scene, visible_points,
                                           write_scan_file)
 from breastplan.ingest.files import read_scan_file
 from breastplan.ingest.scan import ingest
 from breastplan.units import extent
 from breastplan.ingest.recording import DepthFrames, write_recording
-from breastplan.ingest.rendering import noisy_frames
+from breastplan.scenes.rendering import noisy_frames
 from breastplan.options import IngestOptions
 
 from clitools import assert_bad_input, run

@@ -1,4 +1,4 @@
-"""Realistic ptosis pairs (ingest/realistic_pairs.py): MakeHuman bodies firm (before) and sagging (after),
+"""Realistic ptosis pairs (scenes/realistic_pairs.py): MakeHuman bodies firm (before) and sagging (after),
 seen by the simulated depth camera, written as a pairs folder in one breast frame.
 
 Truths the module does not compute: the MakeHuman meshes rebuilt here (both scans must lie on their
@@ -14,8 +14,8 @@ import pytest
 from scipy.spatial import cKDTree
 
 from breastplan import read_ply, transform_points
-from breastplan.ingest.makehuman import BodyOptions, make_body
-from breastplan.ingest.realistic_pairs import PairsOptions, frame_from_comments, scan_pairs, write_realistic_pairs
+from breastplan.scenes.makehuman import BodyOptions, make_body
+from breastplan.scenes.realistic_pairs import PairsOptions, frame_from_comments, scan_pairs, write_realistic_pairs
 from breastplan.learn.pair_folder import breast_cloud, read_pairs
 from breastplan.options import OptionError
 

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from breastplan.ingest import recording, synthetic
+from breastplan.ingest import recording
+from breastplan.scenes import synthetic
 from breastplan.ingest.recording import read_recording, write_recording
 
 from clitools import assert_bad_input, run

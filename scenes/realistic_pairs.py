@@ -5,7 +5,7 @@
 (a `BodyOptions`; its own firmness is ignored) the *before* is that body at firmness 1 (MakeHuman's
 max: a firm breast) and each *after* the same body, pose and camera at a lower firmness — in
 MakeHuman a real sagging of the breast (ptosis). Every scan is rendered by the simulated depth camera
-(`ingest.realistic`: noisy frames, fused) and written as a breast PLY (mm, the before's breast frame:
+(`scenes.realistic`: noisy frames, fused) and written as a breast PLY (mm, the before's breast frame:
 base on the chest wall at z = 0, y superior, z anterior; docs/model.md §1), named
 `before/body<i>.ply` and `after/body<i>-f<firmness>.ply`; pairs.csv holds one row per after:
 type `ptosis`, its degree in [1, 8] and its split.
@@ -235,7 +235,7 @@ def _degree(firmness: float, extent: float, full: float, how: str) -> float:
 
 def _camera_points(depth: np.ndarray, K: np.ndarray) -> np.ndarray:
     """Fused depth frames → camera points (mm), as ingest fuses and back-projects them."""
-    from .depth import depth_range, fuse, to_points
+    from breastplan.ingest.depth import depth_range, fuse, to_points
 
     image = fuse(depth)
     return to_points(image, K, *depth_range(image))
