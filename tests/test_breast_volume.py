@@ -11,9 +11,9 @@ from scipy.spatial import cKDTree
 from threadpoolctl import threadpool_limits
 
 from breastplan import transform_points
-from breastplan.ingest.makehuman import BodyOptions, make_body
+from breastplan.scenes.makehuman import BodyOptions, make_body
 from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.realistic import BodyScene, CameraOptions, camera_pose
+from breastplan.scenes.realistic import BodyScene, CameraOptions, camera_pose
 from breastplan.ingest.recording import DepthFrames
 from breastplan.options import IngestOptions
 from breastplan.plan.breast_volume import measure_breasts
