@@ -426,7 +426,7 @@ def scan_rows(seeds) -> list[dict]:
         for side in synthetic.SIDES:
             scan = ingest_frames(frames, IngestOptions(side))
             fit = fit_breast(scan.points)
-            to_camera = np.linalg.inv(scan.camera_to_breast)
+            to_camera = np.linalg.inv(scan.input_to_breast)
             d = scene.surface_distance(side, transform_points(to_camera, fit.vertices[MESH_GRID[1]:-1]))
             d_scan = scene.surface_distance(side, transform_points(to_camera, scan.points))
             rows.append({"seed": seed, "side": side, "rms_mm": float(np.sqrt(np.mean(d ** 2))),

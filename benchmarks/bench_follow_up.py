@@ -56,7 +56,7 @@ def visit(body: BodyOptions, camera: CameraOptions, seed: int):
                             Provenance()) for s in SIDES}
     first = scans["left"]
     measured = measure_breasts(first.torso_camera, {s: scans[s].nipple_camera_mm for s in SIDES},
-                               first.view_from_camera, first.plumb_camera)
+                               first.input_to_view, first.plumb_camera)
     return scans, measured, made.half_volumes_cc()
 
 

@@ -63,7 +63,7 @@ BASELINE_NOTE = (
 
 def to_camera(result) -> tuple[np.ndarray, np.ndarray]:
     """The ingested points (breast frame) and the breast z axis, in the camera frame."""
-    inv = np.linalg.inv(result.camera_to_breast)
+    inv = np.linalg.inv(result.input_to_breast)
     return result.points @ inv[:3, :3].T + inv[:3, 3], inv[:3, 2]
 
 

@@ -247,7 +247,7 @@ def run_side(frames: DepthFrames, side: str, truth_camera: np.ndarray, scene: Bo
     out.status = "isolated" if out.nipple_mm <= ISOLATED_MM else "far"
     out.points = int(len(ingested.points))
     if scene is not None:
-        crop = transform_points(np.linalg.inv(ingested.camera_to_breast), ingested.points)
+        crop = transform_points(np.linalg.inv(ingested.input_to_breast), ingested.points)
         shares = crop_against_truth(scene, side, crop)
         out.on_breast, out.core_held = shares["on_breast"], shares["core_held"]
     t0 = time.perf_counter()
@@ -288,7 +288,7 @@ def landmark_errors(runs: dict, camera_from_body: np.ndarray, truth_body: dict, 
     ingested = runs["left"][1]
     nipples = {s: side.nipple_camera for s, (side, _) in runs.items()}
     try:
-        found = find_landmarks(ingested.torso_camera, nipples, ingested.view_from_camera, ingested.plumb_camera)
+        found = find_landmarks(ingested.torso_camera, nipples, ingested.input_to_view, ingested.plumb_camera)
     except BadInputError as exc:
         return {"error": str(exc)}
     angle = lambda a, b: float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))  # noqa: E731

@@ -67,9 +67,9 @@ def fits_under_shifts(points: np.ndarray, side: str, shifts) -> Iterator[tuple[n
     """(shift, ingested, fit) of the breast on `side` for each shift (mm) of the camera points, the
     viewing frame shifted with them."""
     for shift in np.array(shifts, float):
-        view_from_camera = np.eye(4)
-        view_from_camera[:3, 3] = shift
-        ingested = isolate(points + shift, view_from_camera, IngestOptions(side=side), Clock(), viewer=shift)
+        input_to_view = np.eye(4)
+        input_to_view[:3, 3] = shift
+        ingested = isolate(points + shift, input_to_view, IngestOptions(side=side), Clock(), viewer=shift)
         with threadpool_limits(1, "blas"):
             fit = fit_scan(ingested)
         yield shift, ingested, fit

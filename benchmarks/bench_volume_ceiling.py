@@ -84,8 +84,8 @@ def member(pair, view: int, m: int, side: str) -> dict:
     ingested = ingest_frames(DepthFrames(scene.frames(FRAMES, view), scene.camera.K, "synthetic"), options)
     with threadpool_limits(1, "blas"):
         fit = fit_scan(ingested)
-    view_from_body = ingested.view_from_camera @ scene.camera_from_body
-    view_from_breast = ingested.view_from_camera @ np.linalg.inv(ingested.camera_to_breast)
+    view_from_body = ingested.input_to_view @ scene.camera_from_body
+    view_from_breast = ingested.input_to_view @ np.linalg.inv(ingested.input_to_breast)
     return {"scene": scene, "ingested": ingested, "fit": fit, "view_from_body": view_from_body,
             "scan": scan_record(ingested, Source("recording", "synthetic"), options, Provenance()),
             "crop_view": transform_points(view_from_breast, ingested.points), "half_cc": scene.body.half_volumes_cc()[side]}

@@ -134,7 +134,7 @@ def measured_volume(scan: Scan, folder: Path):
         twin = Case(other).load_scan()
         if twin.side != scan.side and np.array_equal(twin.torso_camera, scan.torso_camera):
             nipples[twin.side] = twin.nipple_camera_mm
-    measured = measure_breasts(scan.torso_camera, nipples, scan.view_from_camera, scan.plumb_camera)
+    measured = measure_breasts(scan.torso_camera, nipples, scan.input_to_view, scan.plumb_camera)
     return measured.sides[scan.side], len(nipples) == 2
 
 

@@ -92,8 +92,8 @@ class Scan:
     points: np.ndarray               # (N, 3)
     normals: np.ndarray              # (N, 3) outward unit normals
     torso_camera: np.ndarray         # (M, 3)
-    camera_to_breast: np.ndarray     # (4, 4) input frame → breast frame
-    view_from_camera: np.ndarray     # (4, 4) input frame → viewing frame
+    input_to_breast: np.ndarray      # (4, 4) input frame → breast frame
+    input_to_view: np.ndarray        # (4, 4) input frame → viewing frame
     side: str
     nipple_camera_mm: np.ndarray     # (3,)
     chest_wall: ChestWall            # viewing frame
@@ -110,7 +110,7 @@ class Scan:
 
     @property
     def nipple_breast_mm(self) -> np.ndarray:
-        T = np.asarray(self.camera_to_breast, float)
+        T = np.asarray(self.input_to_breast, float)
         return T[:3, :3] @ self.nipple_camera_mm + T[:3, 3]
 
 
@@ -217,9 +217,9 @@ class Case:
                        else "frame input (the scan file's own frame; mm)")
         roi = scan.roi_camera_mm
         arrays = {
-            "transform_camera_to_breast": scan.camera_to_breast, "side": np.str_(scan.side),
+            "transform_camera_to_breast": scan.input_to_breast, "side": np.str_(scan.side),
             "nipple_camera_mm": scan.nipple_camera_mm, "nipple_breast_mm": scan.nipple_breast_mm,
-            "chest_wall": scan.chest_wall.as_array(), "view_from_camera": scan.view_from_camera,
+            "chest_wall": scan.chest_wall.as_array(), "view_from_camera": scan.input_to_view,
             "crop_mound_centre_view_mm": scan.mound_centre_view_mm,
             "crop_mound_radius_mm": np.float64(scan.mound_radius_mm),
             "crop_height_mm": np.float64(scan.crop_height_mm),
@@ -281,7 +281,7 @@ class Case:
         source = Source(str(art["source_kind"]), str(art["source"]), int(art["frames"]), art["intrinsics"],
                         art["image_size"])
         return Scan(points=breast.points, normals=breast.normals, torso_camera=torso.points,
-                    camera_to_breast=art["transform_camera_to_breast"], view_from_camera=art["view_from_camera"],
+                    input_to_breast=art["transform_camera_to_breast"], input_to_view=art["view_from_camera"],
                     side=side, nipple_camera_mm=art["nipple_camera_mm"], chest_wall=wall,
                     mound_centre_view_mm=art["crop_mound_centre_view_mm"],
                     mound_radius_mm=float(art["crop_mound_radius_mm"]), crop_height_mm=float(art["crop_height_mm"]),

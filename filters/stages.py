@@ -99,7 +99,7 @@ def compute_breast_isolation(mesh: Mesh, *, side: SideOrAuto = "auto", units: Un
     kept (as `ingest --voxel`)."""
     recipe = replace(_recipe(mesh, side, voxel_mm), fit=None, changes=())
     _, scan = _isolated(recipe, units, up)
-    return _remember(Mesh(transform_points(np.linalg.inv(scan.camera_to_breast), scan.points)), recipe)
+    return _remember(Mesh(transform_points(np.linalg.inv(scan.input_to_breast), scan.points)), recipe)
 
 
 @filter("compute_breast_fit", check=_fit_options)

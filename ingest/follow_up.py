@@ -80,7 +80,7 @@ def chest_around_breast(scan) -> np.ndarray:
     """The torso points of a scan (input frame, mm) within CHEST_MM of its nipple in (x, y) of its
     viewing frame, and beyond CHEST_MM[0] of the other breast's nipple, taken as the mirror image
     of this one across the torso's middle at the nipple's height."""
-    view = transform_points(scan.view_from_camera, scan.torso_camera)
+    view = transform_points(scan.input_to_view, scan.torso_camera)
     nipple = _nipple_view(scan)
     level = view[np.abs(view[:, 1] - nipple[1]) < LEVEL_MM, 0]
     other = np.array([np.sum(np.percentile(level, [2, 98])) - nipple[0], nipple[1]]) if len(level) else nipple[:2]
@@ -98,7 +98,7 @@ def register(earlier, later) -> Registration:
         raise BadInputError(None, f"cannot be registered with the follow-up: {which} shows too little chest around "
                                   f"the breast ({CHEST_MM[0]:g}–{CHEST_MM[1]:g} mm from the nipple)")
     target.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=15.0, max_nn=30))
-    T = np.linalg.inv(earlier.camera_to_breast) @ later.camera_to_breast
+    T = np.linalg.inv(earlier.input_to_breast) @ later.input_to_breast
     reg = o3d.pipelines.registration
     for distance in PASSES_MM:
         loss = reg.TukeyLoss(k=distance)
@@ -124,8 +124,8 @@ def carried_wall(earlier, later) -> tuple[ChestWall, Registration]:
                                   f"{100 * registration.agreement:.0f} % of the chest both show lies within "
                                   f"{PASSES_MM[-1]:g} mm of it (at least {100 * MIN_AGREEMENT:.0f} % for the same "
                                   "patient)")
-    later_from_earlier_view = (later.view_from_camera @ np.linalg.inv(registration.earlier_from_later)
-                               @ np.linalg.inv(earlier.view_from_camera))
+    later_from_earlier_view = (later.input_to_view @ np.linalg.inv(registration.earlier_from_later)
+                               @ np.linalg.inv(earlier.input_to_view))
     return carry_wall(earlier.chest_wall, later_from_earlier_view, _nipple_view(earlier)[:2]), registration
 
 
@@ -140,7 +140,7 @@ def carry_wall(wall: ChestWall, to_frame: np.ndarray, around_xy: np.ndarray) -> 
 
 def _nipple_view(scan) -> np.ndarray:
     """A scan's nipple in its viewing frame (mm)."""
-    return transform_points(scan.view_from_camera, np.asarray(scan.nipple_camera_mm, float)[None])[0]
+    return transform_points(scan.input_to_view, np.asarray(scan.nipple_camera_mm, float)[None])[0]
 
 
 def _cloud(points: np.ndarray) -> o3d.geometry.PointCloud:

@@ -48,12 +48,12 @@ class Ingested:
 
     points: np.ndarray               # (N, 3) mm, breast frame
     normals: np.ndarray              # (N, 3) outward unit normals, breast frame
-    camera_to_breast: np.ndarray     # (4, 4) input (camera) frame → breast frame, mm
+    input_to_breast: np.ndarray      # (4, 4) input (camera) frame → breast frame, mm
     side: str
     nipple_camera: np.ndarray        # (3,) mm, input frame
     nipple_found: str                # how: "areola" (centre of the raised disc), "apex" or "given"
     chest_wall: ChestWall            # in the viewing frame
-    view_from_camera: np.ndarray     # (4, 4) input frame → viewing frame
+    input_to_view: np.ndarray        # (4, 4) input frame → viewing frame
     crop: dict                       # mound centre, radius, roi, thresholds
     torso_camera: np.ndarray         # (M, 3) the background-free torso, input frame
     plumb_camera: np.ndarray | None = None   # (3,) a wall's normal behind her, input frame (ingest.background)
@@ -81,7 +81,7 @@ def find_body(points: np.ndarray) -> BodyInView:
 class BodyScan:
     """What every side's breast is isolated from: the body in view and its chest (viewing frame, mm)."""
 
-    view_from_camera: np.ndarray     # (4, 4) input frame → viewing frame
+    input_to_view: np.ndarray        # (4, 4) input frame → viewing frame
     viewer: np.ndarray               # (3,) where the camera is
     trunk: Trunk
     torso: np.ndarray                # (M, 3) the trunk's points
@@ -215,13 +215,13 @@ def _trunk_bulge(body: BodyInView | None) -> float:
     return 2.0 * float(coef[3])
 
 
-def isolate(points: np.ndarray, view_from_camera: np.ndarray, options: IngestOptions, clock: Clock,
+def isolate(points: np.ndarray, input_to_view: np.ndarray, options: IngestOptions, clock: Clock,
             viewer: np.ndarray) -> Ingested:
     """The breast of `options.side` among points in the viewing frame (`viewer`: where the camera is)."""
-    return isolate_side(isolate_body(points, view_from_camera, clock, viewer), options, clock)
+    return isolate_side(isolate_body(points, input_to_view, clock, viewer), options, clock)
 
 
-def isolate_body(points: np.ndarray, view_from_camera: np.ndarray, clock: Clock, viewer: np.ndarray,
+def isolate_body(points: np.ndarray, input_to_view: np.ndarray, clock: Clock, viewer: np.ndarray,
                  found: BodyInView | None = None, beyond: np.ndarray | None = None,
                  up: str | None = None) -> BodyScan:
     """The body among points in the viewing frame (`viewer`: where the camera is; `found`: the body
@@ -245,16 +245,16 @@ def isolate_body(points: np.ndarray, view_from_camera: np.ndarray, clock: Clock,
         wall = fit_chest_wall(coarse, 2)
     with clock("mounds (height basins) + breasts"):
         mounds = tuple(B.find_mounds(coarse, wall, trunk.midline_x, COARSE_MM))
-    return BodyScan(view_from_camera, viewer, trunk, torso, coarse, wall, mounds, plumb, dict(clock.ms))
+    return BodyScan(input_to_view, viewer, trunk, torso, coarse, wall, mounds, plumb, dict(clock.ms))
 
 
 def isolate_side(body: BodyScan, options: IngestOptions, clock: Clock) -> Ingested:
     """The breast of `options.side` on the body; its steps timed on `clock` (which should hold the body's)."""
     roi, nipple, side = options.roi_camera_mm, options.nipple_camera_mm, options.side
-    view_from_camera, torso = body.view_from_camera, body.torso
-    to_camera = np.linalg.inv(view_from_camera)
+    input_to_view, torso = body.input_to_view, body.torso
+    to_camera = np.linalg.inv(input_to_view)
     in_roi = _roi_test(roi, to_camera)
-    nipple_view = None if nipple is None else transform_points(view_from_camera, nipple)
+    nipple_view = None if nipple is None else transform_points(input_to_view, nipple)
     with clock("mounds (height basins) + breasts"):
         mound = _breast_mound(body.mounds, body.trunk, options, nipple_view, in_roi)
         wall = B.chest_wall_under(body.coarse, mound, body.wall)
@@ -280,14 +280,14 @@ def isolate_side(body: BodyScan, options: IngestOptions, clock: Clock) -> Ingest
         cloud.transform(frame.matrix)
     return Ingested(
         points=np.asarray(cloud.points), normals=np.asarray(cloud.normals),
-        camera_to_breast=frame.matrix @ view_from_camera,
+        input_to_breast=frame.matrix @ input_to_view,
         side=mound.side if nipple is not None or roi is not None else side,
         nipple_camera=transform_points(to_camera, nipple_view), nipple_found=nipple_found, chest_wall=wall,
-        view_from_camera=view_from_camera,
+        input_to_view=input_to_view,
         crop={"mound_centre_view_mm": mound.centre, "mound_radius_mm": mound.radius, "mound_peak_mm": mound.peak_mm,
               "roi_camera_mm": None if roi is None else np.asarray(roi, float), "crop_height_mm": B.CROP_MM},
         torso_camera=transform_points(to_camera, torso),
-        plumb_camera=None if body.plumb is None else view_from_camera[:3, :3].T @ body.plumb, timings_ms=clock.ms)
+        plumb_camera=None if body.plumb is None else input_to_view[:3, :3].T @ body.plumb, timings_ms=clock.ms)
 
 
 def _upside_down(up: str | None) -> str:

@@ -88,7 +88,7 @@ def scan_record(result: Ingested, source: Source, options: IngestOptions, proven
     """The case's record of an ingested breast."""
     crop = result.crop
     return Scan(points=result.points, normals=result.normals, torso_camera=result.torso_camera,
-                camera_to_breast=result.camera_to_breast, view_from_camera=result.view_from_camera,
+                input_to_breast=result.input_to_breast, input_to_view=result.input_to_view,
                 side=result.side, nipple_camera_mm=result.nipple_camera, nipple_found=result.nipple_found,
                 chest_wall=result.chest_wall,
                 mound_centre_view_mm=np.asarray(crop["mound_centre_view_mm"], float),

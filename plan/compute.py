@@ -93,7 +93,7 @@ def measure_scans(scans: dict) -> BreastVolumes:
     """The breasts of these scans (side → `Scan`, of one torso) measured on her skin."""
     first = next(iter(scans.values()))
     return measure_breasts(first.torso_camera, {s: scan.nipple_camera_mm for s, scan in scans.items()},
-                           first.view_from_camera, first.plumb_camera)
+                           first.input_to_view, first.plumb_camera)
 
 
 def planned_torso(sides: dict[str, SidePlan], state: PlanState) -> np.ndarray:

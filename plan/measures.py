@@ -124,7 +124,7 @@ def find_landmarks(torso_mm, nipples: dict, view_from_input=None, plumb=None) ->
 
     torso_mm: (M, 3) the body's points without background, input frame, mm; nipples: side →
     (3,) the nipples found on it (one or both); view_from_input: (4, 4) input → viewing frame
-    (`Scan.view_from_camera`; None: the input frame is the viewing frame, as for a recording);
+    (`Scan.input_to_view`; None: the input frame is the viewing frame, as for a recording);
     plumb: (3,) unit normal of a wall behind her, input frame (`Scan.plumb_camera`), or None.
     BadInputError when the torso shows no midline above the nipples."""
     P = _finite_points(torso_mm, "the torso")

@@ -49,7 +49,7 @@ class BreastFrames:
         (the model's breast is a right one, its −x lateral, docs/model.md §1, §3), so both sides plan
         the same change, medial and lateral alike."""
         mirror = np.diag([-1.0, 1.0, 1.0, 1.0]) if side == "left" else np.eye(4)
-        return cls(np.asarray(scan.camera_to_breast, float), np.asarray(scan.view_from_camera, float),
+        return cls(np.asarray(scan.input_to_breast, float), np.asarray(scan.input_to_view, float),
                    mirror @ np.linalg.inv(fit.pose))
 
     @cached_property

@@ -119,7 +119,7 @@ def _fit(case: Case, scan: Scan, earlier: Case | None) -> tuple[Fit, list[str], 
         inputs, options = {**inputs, **more_inputs}, {**options, **more_options}
         earlier_scan = earlier.load_scan()
         then = _own_wall_fit(earlier, earlier_scan)
-        later_from_earlier = np.linalg.inv(earlier_scan.camera_to_breast @ registration.earlier_from_later)
+        later_from_earlier = np.linalg.inv(earlier_scan.input_to_breast @ registration.earlier_from_later)
         follow_up = FollowUp(earlier.folder, registration, then.volume_cc,
                              transform_points(later_from_earlier, then.vertices), then.faces)
     wanted = Provenance.of(inputs, options)

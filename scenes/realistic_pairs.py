@@ -173,7 +173,7 @@ def scan_pairs(body: BodyOptions, firmness_levels: Sequence[float], side: str = 
     firm = make_body_scene(replace(body, firmness=FIRM), camera)
     ingested = ingest_frames(DepthFrames(firm.frames(options.frames, seed=seed), camera.K, "synthetic"),
                              IngestOptions(side=side, voxel_mm=options.voxel_mm))
-    to_breast = ingested.camera_to_breast
+    to_breast = ingested.input_to_breast
     body_to_breast = to_breast @ firm.camera_from_body
     crop = transform_points(np.linalg.inv(body_to_breast), ingested.points)       # the before's crop, body frame
     crop_tree = cKDTree(crop)

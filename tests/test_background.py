@@ -75,7 +75,7 @@ def test_ingest_finds_the_wall_behind_a_heavy_patient_and_her_up_axis_from_it(wa
     R = scene.camera_from_body[:3, :3]
     plumb = scans["left"].plumb_camera
     found = find_landmarks(scans["left"].torso_camera, {s: scan.nipple_camera for s, scan in scans.items()},
-                           scans["left"].view_from_camera, plumb)
+                           scans["left"].input_to_view, plumb)
     if wall_mm is None:
         assert plumb is None and found.up_from == "midline profile"
         return
@@ -95,5 +95,5 @@ def test_a_scan_file_with_a_wall_gives_its_normal_in_the_files_own_frame(tmp_pat
     plumb = scans["left"].plumb_camera
     assert plumb is not None and degrees(plumb, turn[:, 2]) < WALL_DEG
     found = find_landmarks(scans["left"].torso_camera, {s: scan.nipple_camera_mm for s, scan in scans.items()},
-                           scans["left"].view_from_camera, plumb)
+                           scans["left"].input_to_view, plumb)
     assert found.up_from == "wall" and degrees(found.up_axis, turn[:, 1]) < 1.0

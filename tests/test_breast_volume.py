@@ -34,7 +34,7 @@ def scanned(body: str, distance=650.0, pitch=5.0, yaw=0.0, height=0.0, wall=400.
     frames = DepthFrames(scene.frames(8, seed), camera.K, "test")
     sides = {side: ingest_frames(frames, IngestOptions(side)) for side in ("left", "right")}
     first = sides["left"]
-    return (first.torso_camera, {s: i.nipple_camera for s, i in sides.items()}, first.view_from_camera,
+    return (first.torso_camera, {s: i.nipple_camera for s, i in sides.items()}, first.input_to_view,
             first.plumb_camera, made.half_volumes_cc())
 
 

@@ -29,7 +29,7 @@ def a_scan(n=60, provenance=Provenance()):
     T[:3, 3] = [10.0, -20.0, -600.0]
     normals = rng.normal(size=(n, 3))
     return Scan(points=rng.normal(size=(n, 3)) * 30, normals=normals / np.linalg.norm(normals, axis=1, keepdims=True),
-                torso_camera=rng.normal(size=(5 * n, 3)) * 200, camera_to_breast=T, view_from_camera=np.eye(4),
+                torso_camera=rng.normal(size=(5 * n, 3)) * 200, input_to_breast=T, input_to_view=np.eye(4),
                 side="right", nipple_camera_mm=np.array([-100.0, 0.0, 650.0]),
                 chest_wall=ChestWall.from_array(np.r_[2.0, 0.0, 0.0, 1.0, 700.0, np.arange(1.0, 6.0)]),  # 52 mm behind
                 mound_centre_view_mm=np.array([-90.0, 5.0]), mound_radius_mm=80.0, crop_height_mm=2.0,
@@ -60,14 +60,14 @@ def test_scan_round_trip(tmp_path):
     written = case.save_scan(scan)
     assert set(written) == {"scan.ply", "camera.ply", "scan.npz"} and Case.holds(case.folder)
     back = case.load_scan()
-    for name in ("points", "normals", "torso_camera", "camera_to_breast", "nipple_camera_mm"):
+    for name in ("points", "normals", "torso_camera", "input_to_breast", "nipple_camera_mm"):
         assert np.array_equal(getattr(back, name), getattr(scan, name)), name
     assert np.array_equal(back.chest_wall.as_array(), scan.chest_wall.as_array())
     assert back.side == "right" and back.roi_camera_mm is None and back.source.frames == 3
     assert back.nipple_found == "areola"
     assert back.source.description == scan.source.description and np.array_equal(back.source.K, scan.source.K)
     assert back.provenance == scan.provenance
-    T = scan.camera_to_breast                        # the nipple in the breast frame, by hand
+    T = scan.input_to_breast                        # the nipple in the breast frame, by hand
     assert np.allclose(back.nipple_breast_mm, T[:3, :3] @ scan.nipple_camera_mm + T[:3, 3])
     assert back.plumb_camera is None                 # no wall was seen behind her
 
@@ -263,8 +263,8 @@ MISMATCHED_WALL = "'chest_wall' whose coefficients do not match its degree"
 
 
 @pytest.mark.parametrize("field, value, problem", [
-    ("camera_to_breast", np.zeros((4, 4)), "'transform_camera_to_breast' that is not a rigid transform"),
-    ("view_from_camera", np.diag([2.0, 1.0, 1.0, 1.0]), "'view_from_camera' that is not a rigid transform"),
+    ("input_to_breast", np.zeros((4, 4)), "'transform_camera_to_breast' that is not a rigid transform"),
+    ("input_to_view", np.diag([2.0, 1.0, 1.0, 1.0]), "'view_from_camera' that is not a rigid transform"),
     ("chest_wall", ChestWall(np.arange(6.0), 3, np.zeros(2), 1.0), MISMATCHED_WALL),
     ("chest_wall", ChestWall(np.arange(6.0), 2.5, np.zeros(2), 1.0), MISMATCHED_WALL),
     ("chest_wall", ChestWall(np.r_[np.nan, np.zeros(5)], 2, np.zeros(2), 1.0), "NaN or infinite values in 'chest_wall'"),
@@ -290,11 +290,11 @@ def test_a_scan_written_by_another_tool_in_other_number_types_is_read_as_float64
     """Truth: an identity stored in float16 is still the identity, and an 800×600 image in uint16 still
     800×600; readers get float64 and int64, which linear algebra and arithmetic take without wrapping."""
     case = Case(tmp_path / "case")
-    case.save_scan(dataclasses.replace(a_scan(), view_from_camera=np.eye(4)))
-    _rewrite_npz(case.path(Case.SCAN_NPZ), view_from_camera=np.eye(4, dtype=np.float16),
+    case.save_scan(dataclasses.replace(a_scan(), input_to_view=np.eye(4)))
+    _rewrite_npz(case.path(Case.SCAN_NPZ), input_to_view=np.eye(4, dtype=np.float16),
                  image_size=np.array([800, 600], np.uint16))
     scan = case.load_scan()
-    assert scan.view_from_camera.dtype == np.float64 and np.array_equal(scan.view_from_camera, np.eye(4))
+    assert scan.input_to_view.dtype == np.float64 and np.array_equal(scan.input_to_view, np.eye(4))
     assert scan.source.image_size.dtype == np.int64 and (scan.source.image_size - 1000).tolist() == [-200, -400]
 
 

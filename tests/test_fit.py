@@ -69,7 +69,7 @@ def test_fit_of_ingested_synthetic_scans_is_within_1_mm_of_the_true_breast_and_3
         scan = ingest_frames(frames, IngestOptions(side))
         fit = fit_breast(scan.points)
         side_vertices = fit.vertices[MESH_GRID[1]:-1]                     # all but the base cap
-        d = scene.surface_distance(side, transform_points(np.linalg.inv(scan.camera_to_breast), side_vertices))
+        d = scene.surface_distance(side, transform_points(np.linalg.inv(scan.input_to_breast), side_vertices))
         assert np.sqrt(np.mean(d ** 2)) <= 1.0
         assert abs(fit.volume_cc / scene.breasts[side].primitive.volume_cc - 1) <= 0.03  # its deformations are shears
         assert _edges_shared_twice(fit.faces)                             # closed, watertight
@@ -216,7 +216,7 @@ def test_fit_command_writes_the_artefacts_it_reports(cli, case):
 @pytest.mark.parametrize("field, value, words", [
     ("chest_wall", ChestWall(np.zeros(6), 3, np.zeros(2), 1.0),
      "'chest_wall' whose coefficients do not match its degree"),
-    ("view_from_camera", np.diag([1.0, 1.0, 0.0, 1.0]), "'view_from_camera' that is not a rigid transform"),
+    ("input_to_view", np.diag([1.0, 1.0, 0.0, 1.0]), "'view_from_camera' that is not a rigid transform"),
 ])
 def test_fit_of_a_case_whose_chest_wall_or_frames_are_damaged_is_bad_input(cli, case, tmp_path, field, value, words):
     """Truth: the fit evaluates the case's chest wall and inverts its transforms; a scan.npz that

@@ -32,7 +32,7 @@ def scanned(tmp_path_factory):
 
 
 def errors_in_camera(result, truth, side):
-    inv = np.linalg.inv(result.camera_to_breast)
+    inv = np.linalg.inv(result.input_to_breast)
     points = result.points @ inv[:3, :3].T + inv[:3, 3]
     return synthetic.scan_errors(points, result.nipple_camera, inv[:3, 2], truth, side)
 
@@ -221,7 +221,7 @@ def test_case_folder_artefacts(scanned, tmp_path):
     assert np.allclose(ply.points, result.points) and ply.normals is not None
     assert np.array_equal(scan.points, result.points) and np.array_equal(scan.normals, result.normals)
     assert scan.side == "left" and scan.source.frames == 10 and scan.voxel_mm == 3.0
-    T = scan.camera_to_breast
+    T = scan.input_to_breast
     assert np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3)) and np.linalg.det(T[:3, :3]) == pytest.approx(1.0)
     assert np.allclose(T[:3, :3] @ scan.nipple_camera_mm + T[:3, 3], scan.nipple_breast_mm)
     assert np.allclose(scan.source.K, truth["K"])

@@ -52,8 +52,8 @@ def test_both_sides_at_once_are_each_side_alone_with_the_body_clustered_once(sou
     for scan, one in zip(both, alone):
         assert scan.side == one.side and scan.nipple_found == one.nipple_found
         for mine, theirs in [(scan.points, one.points), (scan.normals, one.normals),
-                             (scan.torso_camera, one.torso_camera), (scan.camera_to_breast, one.camera_to_breast),
-                             (scan.view_from_camera, one.view_from_camera), (scan.nipple_camera_mm, one.nipple_camera),
+                             (scan.torso_camera, one.torso_camera), (scan.input_to_breast, one.input_to_breast),
+                             (scan.input_to_view, one.input_to_view), (scan.nipple_camera_mm, one.nipple_camera),
                              (scan.plumb_camera, one.plumb_camera),
                              (scan.mound_centre_view_mm, one.crop["mound_centre_view_mm"]),
                              (scan.mound_radius_mm, one.crop["mound_radius_mm"]),

@@ -64,7 +64,7 @@ def built(name):
                                                                              np.array(scene.camera.size)),
                                       options, Provenance())
         landmarks = find_landmarks(scans["left"].torso_camera, {s: scans[s].nipple_camera_mm for s in SIDES},
-                                   scans["left"].view_from_camera, scans["left"].plumb_camera)
+                                   scans["left"].input_to_view, scans["left"].plumb_camera)
         _built[name] = scene, scans, landmarks
     return _built[name]
 
@@ -84,7 +84,7 @@ def measured(name, side):
     """breast_measures of one side as the plan job calls it: the fitted mesh in the input frame."""
     _, scans, landmarks = built(name)
     scan, fit = scans[side], fitted(name, side)
-    vertices = transform_points(np.linalg.inv(scan.camera_to_breast), fit.vertices)
+    vertices = transform_points(np.linalg.inv(scan.input_to_breast), fit.vertices)
     return breast_measures(landmarks, scan.nipple_camera_mm, vertices, fit.faces)
 
 
@@ -134,7 +134,7 @@ def test_landmarks_follow_a_rigid_motion_of_the_input(name):
     T = _rigid(rng.normal(size=4), rng.uniform(-800, 800, 3))
     moved = find_landmarks(transform_points(T, scan.torso_camera),
                            {s: transform_points(T, scans[s].nipple_camera_mm) for s in SIDES},
-                           scan.view_from_camera @ np.linalg.inv(T)).transformed(np.linalg.inv(T))
+                           scan.input_to_view @ np.linalg.inv(T)).transformed(np.linalg.inv(T))
     # the 4 and 8 mm voxels and 5 mm bins do not turn with the body: a few mm of resampling
     assert np.linalg.norm(moved.sternal_notch - found.sternal_notch) < 3.0
     assert degrees(moved.up_axis, found.up_axis) < 1.5 and degrees(moved.left_axis, found.left_axis) < 1.5

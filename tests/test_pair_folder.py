@@ -42,7 +42,7 @@ def pairs_folder(root: Path, csv_text: str | bytes) -> Path:
 def a_scan(points):
     normals = points / np.linalg.norm(points, axis=1, keepdims=True)
     return Scan(points=points, normals=normals, torso_camera=hemisphere(500, 300.0, seed=9),
-                camera_to_breast=np.diag([1.0, -1.0, -1.0, 1.0]), view_from_camera=np.eye(4), side="left",
+                input_to_breast=np.diag([1.0, -1.0, -1.0, 1.0]), input_to_view=np.eye(4), side="left",
                 nipple_camera_mm=np.array([0.0, 0.0, -60.0]),             # 60 mm in front of the wall at z = 0
                 chest_wall=ChestWall.from_array(np.r_[2.0, 0.0, 0.0, 1.0, np.zeros(6)]),
                 mound_centre_view_mm=np.zeros(2), mound_radius_mm=80.0, crop_height_mm=2.0,

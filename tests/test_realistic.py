@@ -116,7 +116,7 @@ def test_the_isolated_breast_is_the_breast_and_all_of_its_core(name, side):
     the camera sees within CORE_MM of the true nipple (each such pixel within HELD_MM of a point)."""
     scene, _ = scene_and_frames(name)
     result = ingested(name, side)
-    shares = crop_against_truth(scene, side, transform_points(np.linalg.inv(result.camera_to_breast), result.points))
+    shares = crop_against_truth(scene, side, transform_points(np.linalg.inv(result.input_to_breast), result.points))
     assert shares["on_breast"] >= 0.99, f"{name}, {side}: {100 * (1 - shares['on_breast']):.1f} % off the breast"
     missed = 100 * (1 - shares["core_held"])
     assert shares["core_held"] >= 0.98, f"{name}, {side}: the crop misses {missed:.1f} % of the core"
@@ -144,7 +144,7 @@ def test_small_flat_breasts_are_found_by_their_nipples(side):
     assert result.side == side and result.nipple_found == "areola"
     error = np.linalg.norm(result.nipple_camera - scene.nipples_camera()[side])
     assert error <= NIPPLE_MM, f"{side}: nipple {error:.1f} mm from the truth"
-    shares = crop_against_truth(scene, side, transform_points(np.linalg.inv(result.camera_to_breast), result.points))
+    shares = crop_against_truth(scene, side, transform_points(np.linalg.inv(result.input_to_breast), result.points))
     assert shares["on_breast"] >= 0.99
 
 
@@ -346,7 +346,7 @@ def test_a_wall_behind_her_in_a_scan_file_does_not_turn_her_viewing_frame(wall_m
         path = tmp_path / f"wall-{wall}.ply"
         write_scan_file(path, scene, units="m")
         scan = ingest(path, IngestOptions("left", units="m"))
-        axes.append(np.linalg.inv(scan.camera_to_breast)[:3, 2])          # the breast's z in the file frame
+        axes.append(np.linalg.inv(scan.input_to_breast)[:3, 2])          # the breast's z in the file frame
         to_file = file_from_body("+y", "mm")
         truth = transform_points(to_file, scene.body.nipples["left"][None])[0]
         nipples.append(np.linalg.norm(scan.nipple_camera_mm - truth))

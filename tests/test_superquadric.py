@@ -79,7 +79,7 @@ def test_fit_of_an_ingested_synthetic_scan_matches_the_true_breast():
         scan = ingest_frames(frames, IngestOptions(side))
         fit = fit_superquadric(scan.points, deformations=("turn-top", "ptosis", "turn"))
         model = to_mm(fit.deformation.apply(fit.primitive.sample(60, 96), fit.primitive))
-        camera = transform_points(np.linalg.inv(scan.camera_to_breast), transform_points(fit.pose, model))
+        camera = transform_points(np.linalg.inv(scan.input_to_breast), transform_points(fit.pose, model))
         d = scene.surface_distance(side, camera)
         assert np.sqrt(np.mean(d ** 2)) <= 1.0                          # within 1 mm RMS
         assert abs(fit.primitive.volume_cc / scene.breasts[side].primitive.volume_cc - 1) <= 0.03  # shears keep volume

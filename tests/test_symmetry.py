@@ -37,7 +37,7 @@ def scanned(body: str):
     frames = DepthFrames(BodyScene(made, camera, camera_pose(target, camera)).frames(8, 0), camera.K, "test")
     sides = {side: ingest_frames(frames, IngestOptions(side)) for side in ("left", "right")}
     first = sides["left"]
-    return made, first.torso_camera, {s: i.nipple_camera for s, i in sides.items()}, first.view_from_camera, \
+    return made, first.torso_camera, {s: i.nipple_camera for s, i in sides.items()}, first.input_to_view, \
         first.plumb_camera
 
 
