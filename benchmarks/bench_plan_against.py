@@ -23,29 +23,21 @@ import sys
 import tarfile
 import tempfile
 import time
-import tomllib
 from pathlib import Path
+
+from package_layout import lay_out
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET = 1.05
 CLI = "import sys; from breastplan.cli.main import main; sys.argv[0] = 'breastplan'; main()"
 
 
-def lay_out(rev: str, folder: Path) -> Path:
+def revision(rev: str, folder: Path) -> Path:
     """The site folder holding `rev`'s `breastplan` package (symbolic links into its extracted tree)."""
-    repo, site = folder / "repo", folder / "site"
     archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev], capture_output=True, check=True).stdout
     with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
-        tar.extractall(repo, filter="data")
-    mapping = tomllib.loads((repo / "pyproject.toml").read_text())["tool"]["setuptools"]["package-dir"]
-    top = site / "breastplan"
-    top.mkdir(parents=True)
-    for entry in (repo / mapping["breastplan"]).iterdir():
-        (top / entry.name).symlink_to(entry)
-    for package, source in mapping.items():
-        if package != "breastplan":
-            (top / package.split(".", 1)[1]).symlink_to(repo / source, target_is_directory=True)
-    return site
+        tar.extractall(folder / "repo", filter="data")
+    return lay_out(folder / "repo", folder / "site")
 
 
 def plan_seconds(site: Path, out: Path) -> float:
@@ -64,7 +56,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        sites = {name: lay_out(rev, Path(tmp) / name) for name, rev in (("head", args.head_rev), ("rev", args.rev))}
+        sites = {name: revision(rev, Path(tmp) / name) for name, rev in (("head", args.head_rev), ("rev", args.rev))}
         times: dict[str, list[float]] = {name: [] for name in sites}
         for round_ in range(args.repeats + 1):
             for name, site in sites.items():

@@ -3,6 +3,7 @@ exact half-body volumes, a bump of closed-form volume added to one breast, her m
 from __future__ import annotations
 
 from functools import lru_cache
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -129,3 +130,91 @@ def test_a_torso_that_shows_too_little_chest_around_the_breasts_is_refused_in_a_
     neck = (torso[:, 1] < centre[1] - 150.0) & (np.abs(torso[:, 0] - centre[0]) < 40.0)     # her midline's notch
     with pytest.raises(BadInputError, match="too little of her chest"):
         measure_breasts(torso[near | neck], nipples, view_from, plumb)
+
+
+def _cells(height, footprint, wall):
+    from breastplan.plan.breast_volume import SkinCells
+
+    nx, ny = height.shape
+    x = 5.0 * (np.arange(nx) - (nx - 1) / 2)                       # symmetric about x = 0
+    y = -300.0 + 5.0 * np.arange(ny)
+    return SkinCells(x, y, height, np.ones(height.shape, bool), footprint, wall)
+
+
+def test_a_breasts_volume_is_its_skins_heights_above_the_wall_over_its_footprint():
+    """docs/volume.md: the heights (mm) of her skin above the wall summed over the footprint's 5 mm cells,
+    25 mm² each; skin behind the wall (a negative height) is no tissue, not negative tissue; her left is
+    x > 0."""
+    rng = np.random.default_rng(7)
+    height = rng.uniform(-20.0, 60.0, (20, 12))
+    footprint = np.zeros(height.shape, bool)
+    footprint[12:18, 3:9] = True
+    footprint |= footprint[::-1]
+    cells = _cells(height, footprint, np.zeros(height.shape))
+    assert (height[12:18, 3:9] < 0).any() and (height[2:8, 3:9] < 0).any()
+    for side, block in (("left", height[12:18, 3:9]), ("right", height[2:8, 3:9])):
+        assert cells.volume_cc(side) == pytest.approx(np.clip(block, 0.0, None).sum() * 25.0 / 1000.0, rel=1e-12)
+
+
+def _skin_points(cells, skin, hidden=None) -> np.ndarray:
+    """Body-frame points whose median anterior coordinate on each cell is `skin` (nx, ny), mm: five points
+    round each cell's centre, three (too few to be seen) on the `hidden` cells."""
+    offsets = np.array([[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0], [0.0, 0.0]])
+    spread = np.array([-0.5, 0.5, 0.0, -0.2, 0.2])
+    points = []
+    for i in range(len(cells.x)):
+        for j in range(len(cells.y)):
+            k = 3 if hidden is not None and hidden[i, j] else 5
+            xy = np.array([cells.x[i], cells.y[j]]) + offsets[:k]
+            points.append(np.column_stack([xy, skin[i, j] + spread[:k]]))
+    return np.concatenate(points)
+
+
+def test_a_cell_the_camera_did_not_see_takes_its_mirror_cells_height():
+    """`SkinCells.moved`: her skin's height on each cell is the median anterior coordinate of its points
+    less the wall; a cell with under four points is unseen and takes the height of its mirror image across
+    her midline (x → −x, the same y), or 0 when that is unseen too."""
+    nx, ny = 16, 10
+    rng = np.random.default_rng(3)
+    truth = rng.uniform(0.0, 50.0, (nx, ny))
+    wall = rng.uniform(80.0, 120.0, (nx, ny))
+    cells = _cells(np.zeros((nx, ny)), np.zeros((nx, ny), bool), wall)
+    hidden = np.zeros((nx, ny), bool)
+    hidden[11:14, 2:5] = True                                        # her left: their mirror cells are seen
+    hidden[1, 7] = hidden[nx - 2, 7] = True                          # a cell and its mirror both unseen
+    moved = cells.moved(_skin_points(cells, wall + truth, hidden))
+    want = np.where(hidden, truth[::-1], truth)
+    want[1, 7] = want[nx - 2, 7] = 0.0
+    assert np.array_equal(moved.seen, ~hidden)
+    assert np.allclose(moved.height_mm, want, atol=1e-9)
+
+
+def test_a_breast_grown_past_its_earlier_footprint_is_measured_on_it_grown_and_mirrored():
+    """`change_on_earlier_wall` on cells whose heights are known: the later skin (the same frame: the
+    registration the identity) rises over FOOT_MM (5 mm) in a column next to the left footprint. Both
+    visits are measured on the earlier wall inside the earlier footprint grown over that column and joined
+    with its mirror image (x → −x): each side's volume then and now is the sum of its heights (those above
+    0) over those cells, 25 mm² each; the right side's grown footprint takes in the mirror of the left's
+    new column, whose low skin (under 3 mm) then counts on both visits."""
+    from breastplan.plan.breast_volume import change_on_earlier_wall
+
+    nx, ny = 20, 12
+    rng = np.random.default_rng(11)
+    wall = rng.uniform(50.0, 60.0, (nx, ny))
+    then = rng.uniform(0.0, 3.0, (nx, ny))                          # no breast: under 5 mm in front of the wall
+    footprint = np.zeros((nx, ny), bool)
+    footprint[13:17, 2:7] = True                                     # her left breast (x > 0), low on the grid
+    footprint |= footprint[::-1]
+    then[footprint] = rng.uniform(20.0, 40.0, footprint.sum())
+    now = then.copy()
+    now[footprint] += 4.0
+    now[17, 2:7] = rng.uniform(10.0, 15.0, 5)                        # grown past the left footprint
+    earlier = SimpleNamespace(cells=_cells(then, footprint, wall), body_from_input=np.eye(4))
+    grown = footprint.copy()
+    grown[17, 2:7] = grown[nx - 1 - 17, 2:7] = True
+    for side, half in (("left", slice(nx // 2, nx)), ("right", slice(0, nx // 2))):
+        mask = np.zeros((nx, ny), bool)
+        mask[half] = grown[half]
+        before, after = change_on_earlier_wall(earlier, _skin_points(earlier.cells, wall + now), np.eye(4), side)
+        assert before == pytest.approx(then[mask].sum() * 25.0 / 1000.0, rel=1e-12), side
+        assert after == pytest.approx(now[mask].sum() * 25.0 / 1000.0, rel=1e-12), side

@@ -146,3 +146,51 @@ def test_one_breast_alone_has_no_symmetry_measures():
     m, nipples = measured("symmetric")
     assert symmetry_measures(m, {"left": nipples["left"]}) == {}
     assert symmetry_measures(dataclasses.replace(m, sides={"left": m.sides["left"]}), nipples) == {}
+
+
+def _hanging_cells(depth_mm: float) -> "SkinCells":
+    """Synthetic skin cells (5 mm, her body frame): the chest wall flat at height 0, seen everywhere, and
+    each breast a block standing `depth_mm` in front of it over x ∈ [62.5, 137.5] (mirrored on her right),
+    y ∈ [−250, −150] (cell centres); the footprint is both blocks."""
+    from breastplan.plan.breast_volume import SkinCells
+
+    x = -147.5 + 5.0 * np.arange(60)
+    y = -400.0 + 5.0 * np.arange(80)
+    block = ((np.abs(x) >= 62.5) & (np.abs(x) <= 137.5))[:, None] & ((y >= -250.0) & (y <= -150.0))[None, :]
+    zeros = np.zeros(block.shape)
+    return SkinCells(x, y, np.where(block, depth_mm, 0.0), np.ones(block.shape, bool), block, zeros)
+
+
+# (depth of the breast's lowest cell in front of the wall, the nipple's height above the fold, Regnault's grade)
+REGNAULT = [(100.0, 6.0, "pseudoptosis"), (100.0, 4.0, "I"), (100.0, -9.0, "I"), (100.0, -11.0, "II"),
+            (100.0, -29.0, "II"), (100.0, -31.0, "III"), (60.0, -16.0, "II"), (60.0, -18.0, "III"),
+            (60.0, 6.0, "pseudoptosis"), (40.0, 6.0, "0"), (50.0, 6.0, "pseudoptosis"),
+            (20.0, 6.0, "0"), (20.0, 4.0, "I"), (20.0, -9.0, "I"), (20.0, -11.0, "III")]
+
+
+@pytest.mark.parametrize("depth, above_fold, grade", REGNAULT)
+def test_regnaults_grade_follows_the_nipples_height_above_the_fold(depth, above_fold, grade):
+    """docs/symmetry.md on cells whose fold is known in closed form. The breast's lower contour: its lowest
+    cell's centre (y = −250) less the fraction (d − 5)/d of a cell where the skin falls through 5 mm above the
+    wall. A breast ending in a cliff (over 25 mm in front of the wall) hides its fold, put 0.45 × the depth
+    above that contour; a low one (20 mm) meets the wall in view: the fold is where its skin comes within
+    2 mm of the skin below, (20 − 2)/20 of a cell below its lowest centre. Then Regnault: above the fold by
+    over 5 mm, "0" — or "pseudoptosis" when the contour hangs over 20 mm below the fold; to 1 cm below,
+    "I"; to 3 cm below with the nipple over 1 cm above the contour, "II"; lower, "III"."""
+    from breastplan.plan.symmetry import ptosis_from_cells
+
+    cells = _hanging_cells(depth)
+    contour = -250.0 - 5.0 * (depth - 5.0) / depth
+    if depth > 25.0:
+        fold, lowest, fold_from = contour + 0.45 * depth, contour, "estimated"
+    else:
+        fold = -250.0 - 5.0 * (depth - 2.0) / depth
+        lowest, fold_from = min(contour, fold), "seen"
+    for side, x in (("left", 100.0), ("right", -100.0)):
+        nipple = np.array([x, fold + above_fold, depth])
+        p = ptosis_from_cells(nipple, cells, side)
+        assert p["fold_from"] == fold_from
+        assert p["nipple_to_fold_mm"] == pytest.approx(above_fold, abs=1e-9)
+        assert p["lowest_to_fold_mm"] == pytest.approx(lowest - fold, abs=1e-9)
+        assert p["nipple_to_lowest_mm"] == pytest.approx(fold + above_fold - lowest, abs=1e-9)
+        assert p["grade"] == grade, (side, p)
