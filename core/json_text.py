@@ -6,8 +6,6 @@ from __future__ import annotations
 import json
 import math
 
-import numpy as np
-
 
 def to_json(value, **kwargs) -> str:
     """`value` as strict JSON text; `kwargs` go to json.dumps (indent, separators)."""
@@ -26,6 +24,8 @@ def from_json(text: str | bytes):
 def measure_values(x):
     """Measures as plain JSON values: floats to 4 decimals below 10, else 2 (None where not finite);
     arrays to lists; dicts item by item."""
+    import numpy as np                      # not at import: the command starts without numpy
+
     if isinstance(x, dict):
         return {k: measure_values(v) for k, v in x.items()}
     if isinstance(x, np.ndarray):
