@@ -65,6 +65,7 @@ def fit(
         from breastplan.ingest.follow_up import earlier_case
 
         earlier = earlier_case(wall_from, scan.side)           # in a plan's folder, the case of this side
+        earlier_scan = earlier.load_scan()
     writable(out or folder, folder=True)
 
     from breastplan.case import Case, Provenance
@@ -73,7 +74,7 @@ def fit(
 
     inputs, carried = {source.name: source}, {}
     if earlier is not None:
-        scan, _, earlier_inputs, carried = on_earlier_wall(scan, earlier)
+        scan, _, earlier_inputs, carried = on_earlier_wall(scan, earlier, earlier_scan)
         inputs.update(earlier_inputs)
     result = fit_one_thread(points if scan is None else scan, options, source)
     fit = result.artefact(Provenance.of(inputs, {**options.as_dict(), **carried}))

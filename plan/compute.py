@@ -17,7 +17,7 @@ from breastplan.options import PlanOptions
 from .breast_volume import BreastVolumes, change_on_earlier_wall, measure_breasts
 from .changes import Change, Method, change_name, combine, solve_change
 from .measures import asymmetry, breast_measures
-from .result import COMBINED, Measures, Plan, PlanState, SidePlan, SkinChange
+from .result import COMBINED, Measures, Plan, PlanState, SidePlan, SkinChange, planned_states
 from .surface import PlannedChange
 from .symmetry import bcct_measures, ptosis_from_cells
 
@@ -40,7 +40,7 @@ def compute_plan(source: Path, fitted: dict[str, SidePlan], options: PlanOptions
     with clock("volumes on her skin"):
         volumes = measure_sides(sides)
     with clock("measures"):
-        requested = [next(st for st in states if st.key == c.name) for c in next(iter(sides.values())).changes]
+        requested = planned_states(states, next(iter(sides.values())))
         torsos = tuple(planned_torso(sides, st) for st in requested)
         measures = plan_measures(sides, volumes, requested[-1], torsos[-1])
         skin = {} if earlier is None else skin_changes(sides, volumes, earlier)
@@ -111,29 +111,28 @@ def plan_measures(sides: dict[str, SidePlan], volumes: BreastVolumes, shown: Pla
     their asymmetry (left − right). The volume is hers, measured on her skin; as planned, it changes by
     as much as the fitted model's does."""
     landmarks = volumes.landmarks
-    before, after = {}, {}
+    before, after, nipples = {}, {}, {"before": {}, "after": {}}
     for side, sp in sides.items():
         verts, nipple, planned = sp.surface_input, sp.scan.nipple_camera_mm, shown.planned[side]
+        nipples["before"][side], nipples["after"][side] = nipple, planned.model(nipple[None])[0]
         before[side] = breast_measures(landmarks, nipple, verts, sp.fit.faces)
-        after[side] = breast_measures(landmarks, planned.model(nipple[None])[0], planned.model(verts), sp.fit.faces)
+        after[side] = breast_measures(landmarks, nipples["after"][side], planned.model(verts), sp.fit.faces)
         measured = volumes.sides[side].volume_cc
         after[side]["volume_cc"] = measured + after[side]["volume_cc"] - before[side]["volume_cc"]
         before[side]["volume_cc"] = measured
     asym = {when: {k: v["left_minus_right"] for k, v in asymmetry(m).items()} for when, m in
             (("before", before), ("after", after))}
-    symmetry, ptosis = _symmetry(sides, volumes, shown, torso)
+    symmetry, ptosis = _symmetry(volumes, nipples, torso)
     return Measures(before, after, asym if len(before) == 2 else {}, symmetry, ptosis)
 
 
-def _symmetry(sides: dict[str, SidePlan], volumes: BreastVolumes, shown: PlanState, torso: np.ndarray):
+def _symmetry(volumes: BreastVolumes, nipples_input: dict, torso: np.ndarray):
     """BCCT.core's measures (both sides) and each side's ptosis grade, before and as planned, from her
-    skin's cells (`plan.symmetry`)."""
+    skin's cells (`plan.symmetry`); `nipples_input`: "before"/"after" → side → (3,), input frame, mm."""
     T, cells = volumes.body_from_input, volumes.cells
-    nipples = {"before": {}, "after": {}}
-    for side, sp in sides.items():
-        nipple = sp.scan.nipple_camera_mm[None]
-        nipples["before"][side] = transform_points(T, nipple)[0]
-        nipples["after"][side] = transform_points(T, shown.planned[side].model(nipple))[0]
+    nipples = {when: {s: transform_points(T, n[None])[0] for s, n in by_side.items()}
+               for when, by_side in nipples_input.items()}
+    sides = list(nipples["before"])
     states = {"before": cells, "after": cells.moved(transform_points(T, torso))}
     symmetry = {when: bcct_measures(nipples[when], states[when]) if len(sides) == 2 else {} for when in states}
     ptosis = {when: {s: ptosis_from_cells(nipples[when][s], states[when], s) for s in sides} for when in states}

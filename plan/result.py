@@ -165,6 +165,12 @@ class Measures:
     ptosis: dict[str, dict[str, dict]]        # "before"/"after" → side → grade and what it rests on
 
 
+def planned_states(states, side: SidePlan) -> tuple[PlanState, ...]:
+    """Of `states`, those of `side`'s planned changes, in their order (the combination last)."""
+    by_key = {st.key: st for st in states}
+    return tuple(by_key[c.name] for c in side.changes)
+
+
 @dataclass(frozen=True, eq=False)
 class Plan:
     """A computed plan: its input and options, each breast, her volumes measured on her skin, every
@@ -198,9 +204,7 @@ class Plan:
     @property
     def changes(self) -> tuple[PlanState, ...]:
         """The planned states in order: each requested change, then (for more than one) the combination."""
-        names = [c.name for c in self.first.changes]
-        by_key = {st.key: st for st in self.states}
-        return tuple(by_key[n] for n in names)
+        return planned_states(self.states, self.first)
 
     @property
     def shown(self) -> PlanState:

@@ -115,9 +115,10 @@ def _fit(case: Case, scan: Scan, earlier: Case | None) -> tuple[Fit, list[str], 
     scan_ply = case.path(Case.SCAN_PLY)
     inputs, options, follow_up = {scan_ply.name: scan_ply}, FitOptions().as_dict(), None
     if earlier is not None:
-        scan, registration, more_inputs, more_options = on_earlier_wall(scan, earlier)
+        with about(earlier.folder):
+            earlier_scan = earlier.load_scan()
+        scan, registration, more_inputs, more_options = on_earlier_wall(scan, earlier, earlier_scan)
         inputs, options = {**inputs, **more_inputs}, {**options, **more_options}
-        earlier_scan = earlier.load_scan()
         then = _own_wall_fit(earlier, earlier_scan)
         later_from_earlier = np.linalg.inv(earlier_scan.input_to_breast @ registration.earlier_from_later)
         follow_up = FollowUp(earlier.folder, registration, then.volume_cc,
@@ -130,14 +131,14 @@ def _fit(case: Case, scan: Scan, earlier: Case | None) -> tuple[Fit, list[str], 
     return fit, [], follow_up
 
 
-def on_earlier_wall(scan: Scan, earlier: Case) -> tuple[Scan, Registration, dict, dict]:
+def on_earlier_wall(scan: Scan, earlier: Case, earlier_scan: Scan) -> tuple[Scan, Registration, dict, dict]:
     """`scan` with an earlier case's chest wall carried over (`ingest.follow_up.carried_wall`: the two
-    chests registered), the registration, and the inputs and options it adds to the fit's provenance.
-    Bad input names the earlier case."""
+    chests registered; `earlier_scan`: the earlier case's scan, loaded), the registration, and the inputs
+    and options it adds to the fit's provenance. Bad input names the earlier case."""
     from breastplan.ingest.follow_up import carried_wall
 
     with about(earlier.folder):
-        wall, registration = carried_wall(earlier.load_scan(), scan)
+        wall, registration = carried_wall(earlier_scan, scan)
     return (replace(scan, chest_wall=wall), registration, *registration.provenance(earlier.folder))
 
 
