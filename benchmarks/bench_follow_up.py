@@ -55,8 +55,7 @@ def visit(body: BodyOptions, camera: CameraOptions, seed: int):
     scans = {s: scan_record(ingest_frames(frames, IngestOptions(s)), Source("recording", "bench"), IngestOptions(s),
                             Provenance()) for s in SIDES}
     first = scans["left"]
-    measured = measure_breasts(first.torso_camera, {s: scans[s].nipple_camera_mm for s in SIDES},
-                               first.input_to_view, first.plumb_camera)
+    measured = measure_breasts(first.body, {s: scans[s].nipple_camera_mm for s in SIDES})
     return scans, measured, made.half_volumes_cc()
 
 

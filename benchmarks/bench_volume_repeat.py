@@ -237,7 +237,7 @@ def run_scene(shot: Shot) -> SceneResult:
     nipples = {side: np.asarray(i.nipple_camera, float) for side, i in ing.items()}
     t0 = time.perf_counter()
     try:
-        m = measure_breasts(first.torso_camera, nipples, first.input_to_view, first.plumb_camera)
+        m = measure_breasts(first.body, nipples)
     except Exception as exc:  # noqa: BLE001 — the API is young: a failure is reported, not fatal
         out.errors.append(("measure", f"{type(exc).__name__}: {exc}"))
         m = None

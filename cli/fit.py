@@ -123,8 +123,6 @@ def fit(
 def measured_volume(scan: Scan, folder: Path):
     """The breast's `BreastVolume` measured on her skin, and whether both sides were: with the other
     side's nipple when a case of it made from the same torso stands beside this one (a plan's case folder)."""
-    import numpy as np
-
     from breastplan.case import Case
     from breastplan.options import SIDES
     from breastplan.plan.breast_volume import measure_breasts
@@ -133,9 +131,9 @@ def measured_volume(scan: Scan, folder: Path):
     other = Path(folder).resolve().parent / next(s for s in SIDES if s != scan.side)
     if Path(folder).resolve().name == scan.side and Case.holds(other):
         twin = Case(other).load_scan()
-        if twin.side != scan.side and np.array_equal(twin.torso_camera, scan.torso_camera):
+        if twin.side != scan.side and twin.body.same(scan.body):
             nipples[twin.side] = twin.nipple_camera_mm
-    measured = measure_breasts(scan.torso_camera, nipples, scan.input_to_view, scan.plumb_camera)
+    measured = measure_breasts(scan.body, nipples)
     return measured.sides[scan.side], len(nipples) == 2
 
 

@@ -23,6 +23,7 @@ import numpy as np
 from . import __version__
 from .artefacts import load_npz, save_npz
 from .atomic import Stage, atomic_set, recover
+from .body import Body
 from .chest_wall import ChestWall
 from .errors import ArtefactError, BadInputError, NewerArtefactError
 from .frames import is_rigid, transform_points
@@ -107,6 +108,11 @@ class Scan:
     plumb_camera: np.ndarray | None = None  # (3,) unit normal of a wall behind her, input frame; None: no wall
     timings_ms: dict = field(default_factory=dict)
     provenance: Provenance = field(default_factory=Provenance)
+
+    @property
+    def body(self) -> Body:
+        """Her body as this scan saw it (shared by both sides of one recording)."""
+        return Body(self.torso_camera, self.input_to_view, self.plumb_camera)
 
     @property
     def nipple_breast_mm(self) -> np.ndarray:

@@ -153,8 +153,8 @@ def _fit_breast(points_mm, options: FitOptions, chest: ChestBeneath | None) -> B
 def fit_scan(scan, options: FitOptions = FitOptions()) -> BreastFit:
     """`fit_breast` of an ingested breast (a case's `Scan`, or `ingest_frames`' result) on the chest
     wall ingest found beneath it."""
-    breast_from_view = np.asarray(scan.input_to_breast, float) @ np.linalg.inv(scan.input_to_view)
-    return fit_breast(scan.points, options, partial(scan.chest_wall.beneath, breast_from_view))
+    view_to_breast = np.asarray(scan.input_to_breast, float) @ np.linalg.inv(scan.input_to_view)
+    return fit_breast(scan.points, options, partial(scan.chest_wall.beneath, view_to_breast))
 
 
 def ptosis_sag_mm(primitive: Primitive, params) -> float:

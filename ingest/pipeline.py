@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import open3d as o3d
 from breastplan import BadInputError, transform_points
+from breastplan.body import Body
 from breastplan.chest_wall import ChestWall
 from breastplan.clock import Clock
 from breastplan.options import IngestOptions
@@ -58,6 +59,10 @@ class Ingested:
     torso_camera: np.ndarray         # (M, 3) the background-free torso, input frame
     plumb_camera: np.ndarray | None = None   # (3,) a wall's normal behind her, input frame (ingest.background)
     timings_ms: dict = field(default_factory=dict)
+
+    @property
+    def body(self) -> Body:
+        return Body(self.torso_camera, self.input_to_view, self.plumb_camera)
 
 
 @dataclass(frozen=True)

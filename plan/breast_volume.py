@@ -34,6 +34,7 @@ import numpy as np
 from scipy import ndimage
 
 from breastplan import BadInputError, transform_points
+from breastplan.body import Body
 from breastplan.point_order import canonical_order
 
 from .measures import BodyLandmarks, find_landmarks
@@ -162,14 +163,13 @@ def body_frame(landmarks: BodyLandmarks) -> np.ndarray:
     return T
 
 
-def measure_breasts(torso_mm, nipples: dict, view_from_input=None, plumb=None) -> BreastVolumes:
+def measure_breasts(body: Body, nipples: dict) -> BreastVolumes:
     """Each breast's volume between her skin and the chest wall, inside its footprint (module docstring).
 
-    torso_mm: (M, 3) the body's points without background, input frame, mm; nipples: side → (3,)
-    input frame; view_from_input, plumb: as `find_landmarks` takes them."""
-    P = np.asarray(torso_mm, float)
+    body: her torso as scanned; nipples: side → (3,) input frame, mm."""
+    P = np.asarray(body.torso_input, float)
     P = P[canonical_order(P)]                          # the result is the surface's, whatever the order
-    landmarks = find_landmarks(P, nipples, view_from_input, plumb)
+    landmarks = find_landmarks(P, nipples, body.input_to_view, body.plumb_input)
     T = body_frame(landmarks)
     grid = _SkinGrid(transform_points(T, P), {s: transform_points(T, np.asarray(n, float)[None])[0]
                                              for s, n in nipples.items()})

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from breastplan import transform_points
+from breastplan.body import Body, shared_body
 from breastplan.case import sha256
 from breastplan.clock import Clock
 from breastplan.options import PlanOptions
@@ -37,14 +38,15 @@ def compute_plan(source: Path, fitted: dict[str, SidePlan], options: PlanOptions
             sides[side] = replace(sp, changes=solve_changes(sp, options, method))
     with clock("states"):
         states = tuple(_states(sides, options, method))
+    body = shared_body({s: sp.scan.body for s, sp in sides.items()}, source)
     with clock("volumes on her skin"):
-        volumes = measure_sides(sides)
+        volumes = measure_breasts(body, {s: sp.scan.nipple_camera_mm for s, sp in sides.items()})
     with clock("measures"):
         requested = planned_states(states, next(iter(sides.values())))
-        torsos = tuple(planned_torso(sides, st) for st in requested)
+        torsos = tuple(planned_torso(body, sides, st) for st in requested)
         measures = plan_measures(sides, volumes, requested[-1], torsos[-1])
-        skin = {} if earlier is None else skin_changes(sides, volumes, earlier)
-    return Plan(source, options, sides, volumes, states, torsos, measures, earlier, skin,
+        skin = {} if earlier is None else skin_changes(body, sides, volumes, earlier)
+    return Plan(source, options, body, sides, volumes, states, torsos, measures, earlier, skin,
                 None if source.is_dir() else sha256(source), versions(), clock.ms)
 
 
@@ -84,24 +86,18 @@ def _state(sides: dict[str, SidePlan], key: str, kind, degree, changes: dict[str
     return PlanState(key, kind, degree, changes, {s: PlannedChange.of(sp, changes[s]) for s, sp in sides.items()})
 
 
-def measure_sides(sides: dict[str, SidePlan]) -> BreastVolumes:
-    """Both breasts measured on her skin (`plan.breast_volume`), from the torso the sides share."""
-    return measure_scans({s: sp.scan for s, sp in sides.items()})
+def measure_scans(scans: dict, where: Path | None = None) -> BreastVolumes:
+    """The breasts of these scans (side → `Scan`, of one body; `where` is named if they are not)
+    measured on her skin (`plan.breast_volume`)."""
+    body = shared_body({s: scan.body for s, scan in scans.items()}, where)
+    return measure_breasts(body, {s: scan.nipple_camera_mm for s, scan in scans.items()})
 
 
-def measure_scans(scans: dict) -> BreastVolumes:
-    """The breasts of these scans (side → `Scan`, of one torso) measured on her skin."""
-    first = next(iter(scans.values()))
-    return measure_breasts(first.torso_camera, {s: scan.nipple_camera_mm for s, scan in scans.items()},
-                           first.input_to_view, first.plumb_camera)
-
-
-def planned_torso(sides: dict[str, SidePlan], state: PlanState) -> np.ndarray:
-    """Her torso (`Scan.torso_camera`, input frame, mm) in `state`, both sides moved."""
-    torso = next(iter(sides.values())).scan.torso_camera
-    moved = torso.copy()
+def planned_torso(body: Body, sides: dict[str, SidePlan], state: PlanState) -> np.ndarray:
+    """Her torso (input frame, mm) in `state`, both sides moved."""
+    moved = body.torso_input.copy()
     for side in sides:
-        moved += state.planned[side].displacement(torso)
+        moved += state.planned[side].displacement(body.torso_input)
     return moved
 
 
@@ -139,7 +135,8 @@ def _symmetry(volumes: BreastVolumes, nipples_input: dict, torso: np.ndarray):
     return symmetry, ptosis
 
 
-def skin_changes(sides: dict[str, SidePlan], volumes: BreastVolumes, earlier: BreastVolumes) -> dict[str, SkinChange]:
+def skin_changes(body: Body, sides: dict[str, SidePlan], volumes: BreastVolumes,
+                 earlier: BreastVolumes) -> dict[str, SkinChange]:
     """A follow-up's change of each breast's volume on her skin: on the earlier visit's wall and
     footprint (this torso carried there by the side's registration), and from each visit's own scan
     and wall alone. Sides the earlier visit has no volume for are left out."""
@@ -148,7 +145,7 @@ def skin_changes(sides: dict[str, SidePlan], volumes: BreastVolumes, earlier: Br
         then = earlier.sides.get(side)
         if then is None or not then.volume_cc > 0 or sp.follow_up is None:
             continue
-        before, after = change_on_earlier_wall(earlier, sp.scan.torso_camera,
+        before, after = change_on_earlier_wall(earlier, body.torso_input,
                                                sp.follow_up.registration.earlier_from_later, side)
         alone = volumes.sides[side].volume_cc - then.volume_cc
         out[side] = SkinChange(before, after - before, 100.0 * (after - before) / before, alone,

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from breastplan import Primitive, transform_points
+from breastplan.body import Body
 from breastplan.case import Case, Fit, Scan
 from breastplan.deform.names import DEFORMATION_PARAMS, at_bounds
 from breastplan.options import PlanOptions
@@ -173,12 +174,13 @@ def planned_states(states, side: SidePlan) -> tuple[PlanState, ...]:
 
 @dataclass(frozen=True, eq=False)
 class Plan:
-    """A computed plan: its input and options, each breast, her volumes measured on her skin, every
+    """A computed plan: its input and options, her body, each breast, her volumes measured on her skin, every
     state (the requested changes, their combination and the slider's degrees), her torso as planned,
     the measures, and for a follow-up the earlier visit's volumes and each side's change since."""
 
     input: Path
     options: PlanOptions
+    body: Body                                # her torso as scanned, shared by the sides
     sides: dict[str, SidePlan]
     volumes: BreastVolumes
     states: tuple[PlanState, ...]
@@ -198,7 +200,7 @@ class Plan:
 
     @property
     def first(self) -> SidePlan:
-        """The first side: its scan holds the torso both sides share."""
+        """The first side planned."""
         return next(iter(self.sides.values()))
 
     @property

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from breastplan import BadInputError, transform_points
+from breastplan.body import shared_body
 from breastplan.case import Case, Fit, Provenance, Scan
 from breastplan.clock import Clock
 from breastplan.errors import about
@@ -37,6 +38,7 @@ def fitted_sides(source: Path, folder: Path, options: PlanOptions, clock: Clock,
         scans, reused = {}, {}
         for side, case in cases.items():
             scans[side], reused[side] = case.load_scan(), ["ingest"]
+        shared_body({s: scan.body for s, scan in scans.items()}, source)    # one patient, before any fit
     else:
         cases = {side: Case(folder / side) for side in options.sides}
         scans, reused = _ingest(source, cases, options, clock, progress)
@@ -179,4 +181,4 @@ def earlier_volumes(folder: Path) -> BreastVolumes:
     from breastplan.ingest.follow_up import earlier_cases
 
     with about(folder):
-        return measure_scans({side: case.load_scan() for side, case in earlier_cases(folder).items()})
+        return measure_scans({side: case.load_scan() for side, case in earlier_cases(folder).items()}, folder)

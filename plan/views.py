@@ -58,9 +58,8 @@ class Views:
 
 def build_views(plan: Plan) -> Views:
     """Every state of the plan in the display frame."""
-    first = plan.first
-    to_display = VIEW_TO_DISPLAY @ first.frames.input_to_view                # input frame → display frame
-    torso_in = first.scan.torso_camera
+    to_display = VIEW_TO_DISPLAY @ plan.body.input_to_view                  # input frame → display frame
+    torso_in = plan.body.torso_input
     keep = np.random.default_rng(0).permutation(len(torso_in))[:TORSO_POINTS]
     torso_in = torso_in[np.sort(keep)]
     near = np.zeros(len(torso_in), bool)
@@ -84,7 +83,7 @@ def _landmarks(plan: Plan, show) -> dict[str, np.ndarray]:
     marks = plan.volumes.landmarks
     notch, up, left = marks.sternal_notch, marks.up_axis, marks.left_axis
     offset, top = float(left @ notch), float(up @ notch)
-    height, front = midline_profile(plan.first.scan.torso_camera, left, offset, up, top)
+    height, front = midline_profile(plan.body.torso_input, left, offset, up, top)
     keep = (height <= top + MIDLINE_MM[0]) & (height >= top + MIDLINE_MM[1])
     profile = offset * left + np.outer(height[keep], up) + np.outer(front[keep], np.cross(left, up))
     return {"sternal notch": show(notch[None]), "midline": show(profile[::-1]),

@@ -12,6 +12,7 @@ from scipy.spatial import cKDTree
 from threadpoolctl import threadpool_limits
 
 from breastplan import transform_points
+from breastplan.body import Body
 from breastplan.scenes.makehuman import BodyOptions, make_body
 from breastplan.ingest.pipeline import ingest_frames
 from breastplan.scenes.realistic import BodyScene, CameraOptions, camera_pose
@@ -41,7 +42,7 @@ def scanned(body: str, distance=650.0, pitch=5.0, yaw=0.0, height=0.0, wall=400.
 
 def measured(body: str, **view):
     torso, nipples, view_from, plumb, _ = scanned(body, **view)
-    return measure_breasts(torso, nipples, view_from, plumb)
+    return measure_breasts(Body(torso, view_from, plumb), nipples)
 
 
 @pytest.mark.parametrize("view", [dict(yaw=10.0, wall=None), dict(yaw=-8.0, pitch=8.0)])
@@ -65,7 +66,7 @@ def test_tissue_added_to_one_breast_is_measured_there_and_not_on_the_other():
     """A raised-cosine bump of closed-form volume, π r² h (1/2 − 2/π²), pushed onto the left breast's skin
     along her anterior axis, is measured on the left and not on the right."""
     torso, nipples, view_from, plumb, _ = scanned(SYMMETRIC)
-    before = measure_breasts(torso, nipples, view_from, plumb)
+    before = measure_breasts(Body(torso, view_from, plumb), nipples)
     T = before.body_from_input
     body = transform_points(T, torso)
     centre = transform_points(T, nipples["left"][None])[0]
@@ -73,7 +74,7 @@ def test_tissue_added_to_one_breast_is_measured_there_and_not_on_the_other():
     d = np.linalg.norm(body[:, :2] - centre[:2], axis=1)
     bump = np.where(d < r, 0.5 * h * (1.0 + np.cos(np.pi * d / r)), 0.0)
     body[:, 2] += bump
-    after = measure_breasts(transform_points(np.linalg.inv(T), body), nipples, view_from, plumb)
+    after = measure_breasts(Body(transform_points(np.linalg.inv(T), body), view_from, plumb), nipples)
     added_cc = np.pi * r * r * h * (0.5 - 2.0 / np.pi ** 2) / 1000.0      # ∫ 2π ρ ½h(1 + cos πρ/r) dρ
     gain = after.sides["left"].volume_cc - before.sides["left"].volume_cc
     assert gain == pytest.approx(added_cc, rel=0.15)
@@ -113,7 +114,7 @@ def test_the_measure_depends_on_her_surface_alone_not_the_points_order_nor_the_b
     runs = []
     for points, threads in ((torso, 1), (torso[order], 1), (torso[::-1], 2)):
         with threadpool_limits(threads, "blas"):
-            m = measure_breasts(np.ascontiguousarray(points), nipples, view_from, plumb)
+            m = measure_breasts(Body(np.ascontiguousarray(points), view_from, plumb), nipples)
         runs.append({s: (round(v.volume_cc, 1), round(v.uncertainty_cc, 1), v.footprint_input_mm.round(1).tobytes())
                      for s, v in m.sides.items()})
     assert runs[0] == runs[1] == runs[2]
@@ -129,7 +130,7 @@ def test_a_torso_that_shows_too_little_chest_around_the_breasts_is_refused_in_a_
     centre = 0.5 * (nipples["left"] + nipples["right"])
     neck = (torso[:, 1] < centre[1] - 150.0) & (np.abs(torso[:, 0] - centre[0]) < 40.0)     # her midline's notch
     with pytest.raises(BadInputError, match="too little of her chest"):
-        measure_breasts(torso[near | neck], nipples, view_from, plumb)
+        measure_breasts(Body(torso[near | neck], view_from, plumb), nipples)
 
 
 def _cells(height, footprint, wall):

@@ -626,3 +626,17 @@ def test_summary_outline_covers_a_sampled_disc_and_fills_its_hole(radius, hole, 
     assert abs(area - np.pi * radius**2) <= 2 * np.pi * radius * CELL_MM
     inside = occupied[np.searchsorted(y, centre[1]), np.searchsorted(x, centre[0])]
     assert inside == 1.0                                                    # the hole is filled
+
+
+def test_a_case_whose_sides_are_two_womens_is_refused(planned, cli, tmp_path):
+    """Her left breast from the sample, a right breast ingested from another woman's scan file beside it:
+    the case is refused before anything is fitted or written, naming it."""
+    case = tmp_path / "case"
+    shutil.copytree(planned[0] / "left", case / "left")
+    other = tmp_path / "other.ply"
+    write_scan_file(other, make_body_scene(BodyOptions(cup=0.8), CameraOptions(resolution="640x400")))
+    assert run(cli, "ingest", other, "--side", "right", "--out", case / "right").returncode == 0
+    res = run(cli, "plan", case, "--out", tmp_path / "out-case")
+    assert_bad_input(res, case, tmp_path)
+    assert "different recordings" in res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["case", "other.ply"]

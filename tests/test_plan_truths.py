@@ -21,6 +21,7 @@ import pytest
 import reference_model as ref
 
 from breastplan import read_ply, transform_points
+from breastplan.body import Body
 
 CHANGES = ("ptosis:3", "turn:2.5", "top-shape:4")
 KINDS = ("ptosis", "turn", "top-shape")
@@ -362,11 +363,11 @@ def test_a_follow_ups_change_on_her_skin_is_the_tissue_added_with_its_sign(sampl
     body[:, 2] += np.where(d < r, 0.5 * h * (1.0 + np.cos(np.pi * d / r)), 0.0)
     later_torso = transform_points(np.linalg.inv(T), body)
     nipples = {s: sp.scan.nipple_camera_mm for s, sp in plan.sides.items()}
-    later = measure_breasts(later_torso, nipples, scan.input_to_view, scan.plumb_camera)
-    sides = {s: SimpleNamespace(scan=SimpleNamespace(torso_camera=later_torso),
-                                follow_up=SimpleNamespace(registration=SimpleNamespace(earlier_from_later=np.eye(4))))
+    later_body = Body(later_torso, scan.input_to_view, scan.plumb_camera)
+    later = measure_breasts(later_body, nipples)
+    sides = {s: SimpleNamespace(follow_up=SimpleNamespace(registration=SimpleNamespace(earlier_from_later=np.eye(4))))
              for s in plan.sides}
-    out = skin_changes(sides, later, earlier)
+    out = skin_changes(later_body, sides, later, earlier)
     added_cc = np.pi * r * r * h * (0.5 - 2.0 / np.pi ** 2) / 1000.0
     left, right = out["left"], out["right"]
     assert left.on_wall_cc == pytest.approx(added_cc, rel=0.15)

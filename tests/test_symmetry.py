@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from breastplan import transform_points
+from breastplan.body import Body
 from breastplan.scenes.makehuman import BodyOptions, make_body
 from breastplan.ingest.pipeline import ingest_frames
 from breastplan.scenes.realistic import BodyScene, CameraOptions, camera_pose
@@ -44,7 +45,7 @@ def scanned(body: str):
 @lru_cache(maxsize=None)
 def measured(body: str):
     made, torso, nipples, view_from, plumb = scanned(body)
-    return measure_breasts(torso, nipples, view_from, plumb), nipples
+    return measure_breasts(Body(torso, view_from, plumb), nipples), nipples
 
 
 def test_a_symmetric_woman_measures_symmetric():
@@ -86,7 +87,7 @@ def test_a_breast_moved_down_moves_its_contour_and_nipple_by_as_much():
     shift = 10.0 * np.where(d < 100.0, 1.0, np.where(d < 150.0, 0.5 * (1.0 + np.cos(np.pi * (d - 100.0) / 50.0)), 0.0))
     body[:, 1] -= np.where(body[:, 0] > 0, shift, 0.0)
     moved = dict(nipples, left=transform_points(np.linalg.inv(T), (nipple - [0.0, 10.0, 0.0])[None])[0])
-    after = measure_breasts(transform_points(np.linalg.inv(T), body), moved, view_from, plumb)
+    after = measure_breasts(Body(transform_points(np.linalg.inv(T), body), view_from, plumb), moved)
     s = symmetry_measures(after, moved)
     assert s["UNR_mm"] == pytest.approx(10.0, abs=2.0)
     assert s["BRA_mm"] == pytest.approx(10.0, abs=2.5)
