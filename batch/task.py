@@ -1,8 +1,9 @@
 """One case of a batch, as a worker runs it, and how the batch tells a finished case.
 
 A case folder appears whole or not at all: a new case is built in a hidden sibling and renamed into
-place by `run_plan`; a case planned before from other input or options is copied to a hidden sibling,
-planned there (its unchanged stages reused) and swapped in. A batch killed at any moment leaves
+place by `run_plan`; a case planned before is planned again in a hidden sibling — from a copy of it
+when its input is unchanged (its unchanged stages reused), afresh when the file's content changed — and
+swapped in (`swap_in`). A batch killed at any moment leaves
 finished cases intact and only hidden folders (`LEFTOVER`), which the next batch removes.
 """
 from __future__ import annotations
@@ -13,7 +14,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from breastplan.building import LEFTOVER, sibling
+from breastplan.building import LEFTOVER, sibling, swap_in
 
 
 
@@ -64,13 +65,10 @@ def _plan(task: Task) -> None:
     work = sibling(case, "batch")
     try:
         planned = _plan_file(case)
-        if planned is not None and planned.current:     # reuse its stages; else plan afresh
-            shutil.copytree(case, work, symlinks=True)
+        if planned is not None and planned.current and planned.input_sha256 == task.sha256:
+            shutil.copytree(case, work, symlinks=True)  # the same input: reuse its stages; else plan afresh
         run_plan(Path(task.input), work, options)
-        old = sibling(case, "stale")
-        os.rename(case, old)
-        os.rename(work, case)
-        shutil.rmtree(old, ignore_errors=True)
+        swap_in(work, case)
     finally:
         shutil.rmtree(work, ignore_errors=True)
 

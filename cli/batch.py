@@ -9,7 +9,7 @@ import typer
 from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, BatchOptions, OptionError, PlanOptions
 
 from .app import JSON, UNITS_HELP, UP_HELP, command
-from .output import real, report, stderr, stdout, usage_error, writable
+from .output import read_only, real, report, stderr, stdout, usage_error, writable
 from .plan import FLAGS as PLAN_FLAGS
 from .plan import check_method
 
@@ -50,9 +50,8 @@ def batch(
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
     check_method(method)
-    if wall_from is not None and real(wall_from) == real(out):
-        raise usage_error(f"it names the output folder this batch writes ({out}); give the earlier batch's",
-                          "--wall-from")
+    if wall_from is not None:
+        read_only(wall_from, out)
     if real(out) == real(input):
         raise usage_error(f"it names IN_DIR itself ({input}), whose case folders the next batch would take for "
                           "scans; give another folder (one inside IN_DIR is left out of the search)", "--out")

@@ -13,7 +13,7 @@ from breastplan.errors import about, require_folder
 from breastplan.options import DEFORMATIONS, FitOptions, OptionError
 
 from .app import JSON, command
-from .output import report, stderr, usage_error, writable
+from .output import read_only, report, stderr, usage_error, writable
 
 if TYPE_CHECKING:
     import numpy as np
@@ -63,6 +63,8 @@ def fit(
     earlier = None
     if wall_from is not None:
         from breastplan.ingest.follow_up import earlier_case
+
+        read_only(wall_from, out or folder)
 
         earlier = earlier_case(wall_from, scan.side)           # in a plan's folder, the case of this side
         earlier_scan = earlier.load_scan()

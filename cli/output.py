@@ -76,6 +76,27 @@ def real(path: Path) -> Path:
     return Path(os.path.realpath(path))
 
 
+def inside(path: Path, folder: Path) -> bool:
+    """Whether `path` is `folder` or lies in it (both as `real` gives them)."""
+    return path == folder or folder in path.parents
+
+
+def read_only(earlier: Path, out: Path) -> None:
+    """A usage error (exit 2) when writing the folder `out` could write into the earlier case folder
+    given to --wall-from (`out` is it, lies in it or holds it): an earlier visit is only read."""
+    a, b = real(out), real(earlier)
+    how = "that very folder" if a == b else "a folder inside it" if inside(a, b) else "a folder that holds it" \
+        if inside(b, a) else None
+    if how:
+        raise usage_error(f"{earlier} is the earlier visit, which is only read, and this command writes "
+                          f"{out}, {how}; write the new visit into a folder of its own", "--wall-from")
+
+
+def holds_plan(folder: Path) -> bool:
+    """Whether `folder` holds a plan.json (a plan's case folder), however damaged."""
+    return (Path(folder) / "plan.json").is_file()
+
+
 def apart(out: Path, input: Path, option: str = "--out") -> Path:
     """`out` unless writing it would replace what the command reads: `input` itself (by whatever path or
     link), or one of the files of the case folder it is in; a usage error (exit 2) then."""

@@ -9,10 +9,10 @@ import typer
 
 from breastplan.clock import Clock
 from breastplan.errors import require_file
-from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, OptionError, PlanOptions
+from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, SIDES, OptionError, PlanOptions
 
 from .app import JSON, UNITS_HELP, UP_HELP, command, scan_file_options
-from .output import real, report, stderr, usage_error, writable
+from .output import holds_plan, inside, read_only, real, report, stderr, usage_error, writable
 
 FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method", "units": "--units", "up": "--up"}
 
@@ -36,6 +36,8 @@ def plan(
                                              "(a plan's, or one side's from `ingest`): each breast is measured "
                                              "down to that case's chest wall, and its volume change since then "
                                              "reported (a follow-up scan)."),
+    force: bool = typer.Option(False, "--force", help="Replace a case folder that holds another recording's "
+                               "case: it is planned afresh and nothing of the old case is kept."),
     as_json: bool = JSON,
 ):
     """Plan changes on a patient's scan: ingest, fit, each change and their combination, measures and
@@ -51,9 +53,15 @@ def plan(
     scan_file_options(input, units, up)
     if out is None:
         out = input if input is not None and input.is_dir() else Path(f"{(input or Path('sample')).stem}-plan")
-    if wall_from is not None and real(out) in (real(wall_from), real(wall_from).parent):
-        raise usage_error(f"it names the case folder this plan writes ({out}); give the earlier visit's",
-                          "--wall-from")
+    if wall_from is not None:
+        read_only(wall_from, out)
+    if real(out).name in SIDES and holds_plan(real(out).parent):
+        raise usage_error(f"{out} is one side of the plan in {out.parent}: planned alone, the plan there would "
+                          f"name files it no longer has; plan {out.parent} (both sides), or give --out a new "
+                          "folder", "--out")
+    if force and input is not None and inside(real(input), real(out)):
+        raise usage_error(f"--force would replace {out}, which holds the input {input}; give --out a new folder",
+                          "--out")
     writable(out, folder=True)
 
     from breastplan.plan.breast_volume import model_differs_much
@@ -61,7 +69,7 @@ def plan(
     from breastplan.plan.job import run_plan
 
     with _progress() as step:
-        planned = run_plan(input, out, options, step, resolved)
+        planned = run_plan(input, out, options, step, resolved, force)
     if as_json:
         report(_json(planned, out, clock.seconds), True, "")
     else:

@@ -29,25 +29,44 @@ def sibling(out: Path, kind: str) -> Path:
 
 
 @contextlib.contextmanager
-def building(out: Path, kind: str) -> Iterator[Path]:
-    """The folder to build `out` in: `out` itself if it exists, else a locked hidden sibling renamed to
-    `out` once the block ends without error (removed if it fails, and by a later build if this one is
-    killed). OSErrors name `out`, not the sibling."""
-    if out.exists():
+def building(out: Path, kind: str, replace: bool = False) -> Iterator[Path]:
+    """The folder to build `out` in: `out` itself if it exists (and not `replace`), else a locked hidden
+    sibling put in its place once the block ends without error (`swap_in`; removed if it fails, and by a
+    later build if this one is killed). A failed build leaves none of the parent folders it made.
+    OSErrors name `out`, not the sibling."""
+    if out.exists() and not replace:
         yield out
         return
     work = sibling(out, kind)
+    made = [p for p in (out.parent, *out.parent.parents) if not p.exists()]
+    done = False
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         with _locked_folder(work, work.name[:-8]):
             yield work
-            os.rename(work, out)
+            swap_in(work, out)
+            done = True
     except OSError as exc:
         where = str(exc.filename or out)
         raise OSError(exc.errno, exc.strerror, str(out) + where[len(str(work)):] if where.startswith(str(work))
                       else where) from None
     finally:
         shutil.rmtree(work, ignore_errors=True)
+        for folder in made if not done else ():
+            with contextlib.suppress(OSError):        # only if still empty: another process may have filled it
+                folder.rmdir()
+
+
+def swap_in(work: Path, out: Path) -> None:
+    """Put the folder `work` in the place of `out`, whole: an `out` there is first moved aside to a
+    hidden sibling, then removed (and by a later build if this process is killed in between)."""
+    if not out.exists():
+        os.rename(work, out)
+        return
+    old = sibling(out, "stale")
+    os.rename(out, old)
+    os.rename(work, out)
+    shutil.rmtree(old, ignore_errors=True)
 
 
 @contextlib.contextmanager

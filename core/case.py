@@ -368,6 +368,13 @@ class Case:
         return self._write_set(plys, f"{stem}.npz", CHANGE_SCHEMA, arrays, record, provenance, stage=stage)
 
     # --- provenance -------------------------------------------------------------------
+    def provenance(self, npz_name: str) -> Provenance:
+        """What made the NPZ; empty when it is missing or cannot be read."""
+        try:
+            return Provenance.from_meta(self._meta(npz_name))
+        except ArtefactError:
+            return Provenance()
+
     def is_fresh(self, npz_name: str, wanted: Provenance) -> bool:
         """Whether the NPZ exists, was made from inputs of the same content with the same options,
         and its set is whole (a stage that can be reused)."""
@@ -375,8 +382,7 @@ class Case:
         if not self.path(npz_name).is_file():
             return False
         try:
-            schema = _schema_of(npz_name)
-            meta = load_npz(self.path(npz_name), schema, meta_spec=_META[schema]).meta
+            meta = self._meta(npz_name)
             found = Provenance.from_meta(meta)
             if (found.inputs, found.options) != (wanted.inputs, wanted.options):
                 return False
@@ -386,6 +392,12 @@ class Case:
         except ArtefactError:
             return False
         return True
+
+    def _meta(self, npz_name: str) -> dict:
+        """The NPZ's meta, its set recovered first; ArtefactError when it cannot be read."""
+        self._recover()
+        schema = _schema_of(npz_name)
+        return load_npz(self.path(npz_name), schema, meta_spec=_META[schema]).meta
 
     # --- sets -------------------------------------------------------------------------
     def _write_set(self, plys: dict[str, dict], npz: str, schema: str, arrays: dict, meta: dict,

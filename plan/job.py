@@ -6,7 +6,7 @@ and, at its top, `report.html`, `summary.png` and `plan.json` (docs/artefacts.md
 a recording, a scan file, a case folder (a plan's, or one side's from `ingest`), or nothing (the
 bundled sample recording). Stages whose inputs and options hash as before are reused. A new case
 folder is built beside its target and renamed into place when whole, so a failed plan leaves none;
-an existing one is updated one artefact set at a time, each all or nothing.
+an existing one (of the same input) is updated one artefact set at a time, each all or nothing.
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from breastplan.options import PlanOptions
 
 from .changes import Method
 from .result import Plan
-from .stages import Progress, earlier_volumes, fitted_sides
+from .stages import Progress, check_own_case, earlier_volumes, fitted_sides
 
 
 def sample_recording() -> Path:
@@ -31,9 +31,10 @@ def sample_recording() -> Path:
 
 
 def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Progress = lambda _: None,
-             method: Method | None = None) -> Plan:
+             method: Method | None = None, force: bool = False) -> Plan:
     """Plan `options` on `input` (None: the bundled sample) into the case folder `out`, by `method`
-    (`options.method` resolved; resolved here when not given)."""
+    (`options.method` resolved; resolved here when not given). A folder `out` holding the case of
+    another input is refused, or with `force` planned afresh and put in its place whole."""
     from threadpoolctl import threadpool_limits
 
     from .compute import compute_plan
@@ -41,8 +42,10 @@ def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Prog
 
     source = sample_recording() if input is None else Path(input)
     method = method or _resolved(options.method)
+    if not force:
+        check_own_case(source, out)
     clock = Clock()
-    with threadpool_limits(1, "blas"), building(out, "plan") as folder:   # small dense solves: threads only add overhead
+    with threadpool_limits(1, "blas"), building(out, "plan", force) as folder:   # small dense solves: threads only add overhead
         fitted = fitted_sides(source, folder, options, clock, progress)
         progress("changes and measures")
         earlier = None if options.wall_from is None else earlier_volumes(Path(options.wall_from))

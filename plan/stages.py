@@ -13,10 +13,10 @@ import numpy as np
 
 from breastplan import BadInputError, transform_points
 from breastplan.body import shared_body
-from breastplan.case import Case, Fit, Provenance, Scan
+from breastplan.case import Case, Fit, Provenance, Scan, sha256
 from breastplan.clock import Clock
-from breastplan.errors import about
-from breastplan.options import FitOptions, IngestOptions, PlanOptions
+from breastplan.errors import ArtefactError, NewerArtefactError, about
+from breastplan.options import SIDES, FitOptions, IngestOptions, PlanOptions
 
 from .breast_volume import BreastVolumes
 from .compute import measure_scans
@@ -34,11 +34,11 @@ def fitted_sides(source: Path, folder: Path, options: PlanOptions, clock: Clock,
     with `wall_from`); no changes solved yet."""
     earlier = {} if options.wall_from is None else _earlier_cases(Path(options.wall_from), options.sides)
     if source.is_dir():
-        cases = _cases_of(source, folder, options)
-        scans, reused = {}, {}
-        for side, case in cases.items():
-            scans[side], reused[side] = case.load_scan(), ["ingest"]
+        held = _cases_of(source, options)
+        scans = {side: _held_scan(case, side) for side, case in held.items()}
         shared_body({s: scan.body for s, scan in scans.items()}, source)    # one patient, before any fit
+        cases = _copied(held, source, folder)
+        reused = {side: ["ingest"] for side in cases}
     else:
         cases = {side: Case(folder / side) for side in options.sides}
         scans, reused = _ingest(source, cases, options, clock, progress)
@@ -51,24 +51,76 @@ def fitted_sides(source: Path, folder: Path, options: PlanOptions, clock: Clock,
     return sides
 
 
-def _cases_of(source: Path, folder: Path, options: PlanOptions) -> dict[str, Case]:
-    """The side cases a case folder holds for the requested sides, copied into `folder` unless the
-    plan is made in place. A one-side case from `ingest` plans its own side."""
+def check_own_case(source: Path, out: Path) -> None:
+    """BadInputError when the folder `out` holds the case of another input than the file `source` (by
+    content): a case is one patient's, of one recording."""
+    if source.is_dir() or not out.is_dir():
+        return
+    try:
+        planned = read_plan_file(out)
+    except (OSError, ValueError):
+        planned = None
+    held = {planned.input_sha256} if planned is not None and planned.input_sha256 else \
+        {sha for case in _side_cases(out) for sha in case.provenance(Case.SCAN_NPZ).inputs.values()}
+    if held and sha256(source) not in held:
+        raise BadInputError(out, f"holds the case of another input than {source} (another content): a case "
+                                 "is one recording's; plan into a new folder, or give --force to replace it")
+
+
+def _side_cases(folder: Path) -> list[Case]:
+    """The cases in `folder`: itself (one side's, from `ingest`) or its sides'."""
+    return [c for c in (Case(folder), *(Case(folder / s) for s in SIDES)) if Case.holds(c.folder)]
+
+
+def _cases_of(source: Path, options: PlanOptions) -> dict[str, Case]:
+    """The side cases a case folder holds for the requested sides. A one-side case from `ingest`
+    plans its own side."""
     _check_schema(source)
     held = Case.of_sides(source)
-    found = {s: case.folder for s, case in held.items() if s in options.sides}
+    found = {s: case for s, case in held.items() if s in options.sides}
     missing = [] if found and Case.holds(source) else [s for s in options.sides if s not in held]
     if missing:
         raise BadInputError(source, f"holds no scan of the {' and '.join(missing)} breast; plan it from the "
                                     "recording or scan file")
-    in_place = folder.resolve() == source.resolve()
-    cases = {}
-    for side, path in found.items():
-        target = path if in_place else folder / side
-        if not in_place:
-            shutil.copytree(path, target, dirs_exist_ok=True)
-        cases[side] = Case(target)
-    return cases
+    return found
+
+
+def _copied(cases: dict[str, Case], source: Path, folder: Path) -> dict[str, Case]:
+    """`cases` (of the case folder `source`) copied into `folder`, unless the plan is made in place."""
+    if folder.resolve() == source.resolve():
+        return cases
+    for side, case in cases.items():
+        shutil.copytree(case.folder, folder / side, dirs_exist_ok=True)
+    return {side: Case(folder / side) for side in cases}
+
+
+def _held_scan(case: Case, side: str) -> Scan:
+    """The scan a case folder holds for `side`: it cannot be made again without her recording, so a
+    damaged one is refused saying so, and one of the other breast (a folder renamed) is refused."""
+    try:
+        scan = case.load_scan()
+    except NewerArtefactError:
+        raise
+    except ArtefactError as exc:
+        raise ArtefactError(exc.path, f"{exc.problem}; a case folder's scan cannot be made again: plan her "
+                                      "recording or scan file again") from None
+    if scan.side != side:
+        raise BadInputError(case.folder, f"is the {side} side's case but holds a scan of her {scan.side} breast "
+                                         "(scan.npz): a case's sides are not renamed; plan her recording again")
+    return scan
+
+
+def _reused(load: Callable, fresh: bool):
+    """`load()` of a stage whose artefact is fresh; None (to be made again) when it is not, or is
+    damaged or implausible. An artefact a newer breastplan wrote is refused, never made again over."""
+    if not fresh:
+        return None
+    try:
+        return load()
+    except NewerArtefactError:
+        raise
+    except ArtefactError:
+        return None
 
 
 def _check_schema(folder: Path) -> None:
@@ -97,8 +149,10 @@ def _ingest(source: Path, cases: dict[str, Case], options: PlanOptions, clock: C
     scans, reused = {}, {}
     stale = []
     for side, case in cases.items():
-        if case.is_fresh(Case.SCAN_NPZ, Provenance.of({source.name: source}, wanted[side].as_dict())):
-            scans[side], reused[side] = case.load_scan(), ["ingest"]
+        scan = _reused(case.load_scan, case.is_fresh(Case.SCAN_NPZ, Provenance.of({source.name: source},
+                                                                                    wanted[side].as_dict())))
+        if scan is not None and scan.side == side:
+            scans[side], reused[side] = scan, ["ingest"]
         else:
             stale.append(side)
             reused[side] = []
@@ -126,8 +180,9 @@ def _fit(case: Case, scan: Scan, earlier: Case | None) -> tuple[Fit, list[str], 
         follow_up = FollowUp(earlier.folder, registration, then.volume_cc,
                              transform_points(later_from_earlier, then.vertices), then.faces)
     wanted = Provenance.of(inputs, options)
-    if case.is_fresh(Case.FIT_NPZ, wanted):
-        return case.load_fit(), ["fit"], follow_up
+    fit = _reused(case.load_fit, case.is_fresh(Case.FIT_NPZ, wanted))
+    if fit is not None:
+        return fit, ["fit"], follow_up
     fit = fit_one_thread(scan, FitOptions(), scan_ply).artefact(wanted)
     case.save_fit(fit)
     return fit, [], follow_up
@@ -149,9 +204,8 @@ def _own_wall_fit(case: Case, scan: Scan) -> Fit:
     the default options, else fitted now (and not written: the earlier case is only read)."""
     scan_ply = case.path(Case.SCAN_PLY)
     wanted = Provenance.of({scan_ply.name: scan_ply}, FitOptions().as_dict())
-    if case.is_fresh(Case.FIT_NPZ, wanted):
-        return case.load_fit()
-    return fit_one_thread(scan, FitOptions(), scan_ply).artefact(wanted)
+    return _reused(case.load_fit, case.is_fresh(Case.FIT_NPZ, wanted)) or \
+        fit_one_thread(scan, FitOptions(), scan_ply).artefact(wanted)
 
 
 def fit_one_thread(scan: Scan | np.ndarray, options: FitOptions, source: Path):
