@@ -1,10 +1,11 @@
 """Where a batch's cases run: `local` worker processes or the workers of a Dask cluster.
 
 Both run `plan_case` on each task in a process of its own — a local worker, or a Dask worker's child
-process (`plan_in_child`) — one case at a time with one BLAS thread, and yield (task, result) as cases
-finish, in any order. A worker that dies (killed, out of memory) fails the case it was planning, not the
-batch. Those processes die with whoever started them (Linux: the parent-death signal), so a killed batch
-leaves no worker writing behind it.
+process (`plan_in_child`) — one case at a time with one BLAS thread, in no more processes than there are
+cases — and yield the (task, result) pairs of the cases finished since the last yield, in any order. A
+worker that dies (killed, out of memory) fails the case it was planning, not the batch. Those processes
+die with whoever started them (Linux: the parent-death signal), so a killed batch leaves no worker
+writing behind it.
 """
 from __future__ import annotations
 
@@ -35,11 +36,14 @@ take the interpreter lock and the CPU from the case being planned (with the defa
 its time in a local worker process on a 2-core machine); no spilling to disk and no work stealing (each task
 returns a small dict, and the scheduler's queue already hands a free worker the next case); workers that
 are not daemons, so that they may start the process their cases run in (`plan_in_child`)."""
+REACH_SECONDS, ANSWER_SECONDS = 20, 5
+"""How long a batch waits for a Dask scheduler's address to take a connection, and then for what took it
+to answer as a scheduler."""
 ATTEMPTS = 2
 """A case whose worker died this many times is failed; the others it took down are retried."""
 PR_SET_PDEATHSIG = 1
 
-Results = Iterator[tuple[Task, dict]]
+Results = Iterator[list[tuple[Task, dict]]]
 
 
 def one_thread_environment() -> None:
@@ -62,7 +66,7 @@ def run_local(tasks: list[Task], jobs: int) -> Results:
     attempts: Counter = Counter()
     pending = list(tasks)
     while pending:
-        pool = ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"),
+        pool = ProcessPoolExecutor(min(jobs, len(pending)), mp_context=multiprocessing.get_context("spawn"),
                                    initializer=_local_worker, initargs=(os.getpid(),))
         broken, running = [], set()
         try:
@@ -71,11 +75,14 @@ def run_local(tasks: list[Task], jobs: int) -> Results:
             while waiting:
                 running = {futures[f].case for f in waiting if f.running()} or running
                 done, waiting = wait(waiting, return_when=FIRST_COMPLETED)
+                settled = []
                 for future in done:
                     try:
-                        yield futures[future], future.result()
+                        settled.append((futures[future], future.result()))
                     except BrokenProcessPool:
                         broken.append(futures[future])
+                if settled:
+                    yield settled
         except BaseException:       # interrupted (Ctrl-C) or closed: the cases being planned are dropped, unfinished
             for process in list((pool._processes or {}).values()):      # Python < 3.14 has no public kill
                 process.kill()
@@ -83,13 +90,12 @@ def run_local(tasks: list[Task], jobs: int) -> Results:
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
         suspects = {t.case for t in broken} & running or {t.case for t in broken}
-        pending = []
         for task in broken:                       # the cases being planned when a worker died are charged
             attempts[task.case] += task.case in suspects
-            if attempts[task.case] >= ATTEMPTS:
-                yield task, _died(task)
-            else:
-                pending.append(task)
+        pending = [t for t in broken if attempts[t.case] < ATTEMPTS]
+        failed = [(t, _died(t)) for t in broken if attempts[t.case] >= ATTEMPTS]
+        if failed:
+            yield failed
 
 
 def run_dask(tasks: list[Task], jobs: int, scheduler: str | None) -> Results:
@@ -97,18 +103,25 @@ def run_dask(tasks: list[Task], jobs: int, scheduler: str | None) -> Results:
     single-threaded worker processes. The workers write the case folders: with a remote scheduler the
     output folder must be on storage they share."""
     from distributed import as_completed
-    from distributed.client import FutureCancelledError
 
-    with _cluster(scheduler, jobs) as cluster, dask_client(cluster if scheduler is None else scheduler) as client:
+    if not tasks:
+        return
+    with _cluster(scheduler, min(jobs, len(tasks))) as cluster, \
+            dask_client(cluster if scheduler is None else scheduler) as client:
         futures = {client.submit(plan_in_child, t, pure=False, key=f"plan-{t.sha256[:12]}-{os.path.basename(t.case)}"): t
                    for t in tasks}
-        for future in as_completed(futures):
-            task = futures[future]
-            try:
-                yield task, future.result()
-            except (FutureCancelledError, Exception) as exc:  # a worker lost (KilledWorker) or a task undeliverable
-                yield task, {"status": "failed", "seconds": 0.0,
-                             "error": f"{task.input}: the Dask task failed ({type(exc).__name__}: {exc})."}
+        for done in as_completed(futures).batches():
+            yield [(futures[f], _dask_result(f, futures[f])) for f in done]
+
+
+def _dask_result(future, task: Task) -> dict:
+    from distributed.client import FutureCancelledError
+
+    try:
+        return future.result()
+    except (FutureCancelledError, Exception) as exc:  # a worker lost (KilledWorker) or a task undeliverable
+        return {"status": "failed", "seconds": 0.0,
+                "error": f"{task.input}: the Dask task failed ({type(exc).__name__}: {exc})."}
 
 
 def dask_client(cluster_or_address):
@@ -119,6 +132,59 @@ def dask_client(cluster_or_address):
         return Client(cluster_or_address, timeout="20s")
     except (OSError, TimeoutError) as exc:
         raise BadInputError(None, f"cannot reach the Dask scheduler at {cluster_or_address} ({exc})") from None
+
+
+def require_scheduler(address: str) -> None:
+    """BadInputError unless a Dask scheduler answers at `address`: nothing takes a connection there within
+    REACH_SECONDS (refused, an unknown host), or what does (an HTTP server, a Dask worker) does not answer
+    Dask's handshake and `identity` request as a scheduler within ANSWER_SECONDS."""
+    import asyncio
+
+    from distributed.comm import connect, parse_address
+    from distributed.comm.registry import get_backend
+    from distributed.core import send_recv
+    from distributed.security import Security
+
+    args = Security().get_connection_args("client")
+
+    async def reach() -> None:
+        scheme, where = parse_address(address)
+        comm = await asyncio.wait_for(get_backend(scheme).get_connector().connect(where, **args), REACH_SECONDS)
+        comm.abort()
+
+    async def identity() -> object:
+        comm = await connect(address, timeout=ANSWER_SECONDS, **args)
+        try:
+            return await send_recv(comm, op="identity")
+        finally:
+            comm.abort()
+
+    try:
+        asyncio.run(reach())
+    except TimeoutError:
+        raise BadInputError(None, f"cannot reach the Dask scheduler at {address} (no connection within "
+                                  f"{REACH_SECONDS} s)") from None
+    except Exception as exc:
+        raise BadInputError(None, f"cannot reach the Dask scheduler at {address} ({_cause(exc)})") from None
+    try:
+        answer = asyncio.run(asyncio.wait_for(identity(), ANSWER_SECONDS))
+    except TimeoutError:
+        why = f"no answer within {ANSWER_SECONDS} s"
+    except Exception:   # another protocol's bytes read as Dask's frames: MemoryError, ValueError, CommClosedError…
+        why = "its answer is not in Dask's protocol"
+    else:
+        kind = answer.get("type") if isinstance(answer, dict) else None
+        if kind == "Scheduler":
+            return
+        why = f"it answers as a Dask {kind}" if isinstance(kind, str) else "its answer is not a scheduler's"
+    raise BadInputError(None, f"{address} does not answer as a Dask scheduler ({why})")
+
+
+def _cause(exc: BaseException) -> str:
+    """The first cause of a chain of exceptions, in words (`Connection refused`)."""
+    while exc.__cause__ is not None or exc.__context__ is not None:
+        exc = exc.__cause__ or exc.__context__
+    return getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
 
 
 @contextlib.contextmanager

@@ -3,9 +3,9 @@
 A folder is walked recursively (hidden entries and the batch's own output folder left out, symbolic
 links to folders not followed). Each file becomes an `Input`: one to plan, or one skipped with the
 reason — not a scan or recording, not a regular file (a named pipe, a device), a symbolic link
-leading outside the folder, a case name already taken by another input (`a.ply` and `a.mcap`
-both become case `a`; the first in sorted order is planned), or a case inside another's (`a/left.ply`
-beside `a.ply`).
+leading outside the folder or into a loop of links, a case name already taken by another input
+(`a.ply` and `a.mcap` both become case `a`; the first in sorted order is planned), or a case inside
+another's (`a/left.ply` beside `a.ply`).
 """
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from breastplan.errors import loops
 from breastplan.ingest.files import SUPPORTED
 
 SCAN_SUFFIXES = (".mcap", *SUPPORTED)
@@ -59,6 +60,8 @@ def find_inputs(folder: Path, out: Path | None = None) -> list[Input]:
 
 def _classify(folder: Path, root: Path, path: Path) -> Input:
     if path.is_symlink():
+        if loops(path):
+            return _input(folder, path, "a symbolic link loop")
         target = path.resolve()
         if not target.is_relative_to(root):
             return _input(folder, path, f"a symbolic link leading outside the input folder (to {target})")

@@ -1,7 +1,8 @@
 """A batch: every scan and recording of a folder planned as `plan` does, one case folder each.
 
 The output folder holds one case per input (its path relative to the input folder, suffix dropped)
-and the manifest. One batch writes a folder at a time (a lock); a batch resumes what an earlier one
+and the manifest; the folders the batch makes for cases are removed again if none of their cases was
+planned. One batch writes a folder at a time (a lock); a batch resumes what an earlier one
 left: cases whose input content and options are unchanged are reused, the rest planned, and the
 hidden folders of a killed batch removed.
 """
@@ -19,7 +20,7 @@ from breastplan.case import sha256
 from breastplan.errors import Interrupted, require_folder
 from breastplan.options import BatchOptions
 
-from .executors import dask_client, run_dask, run_local
+from .executors import require_scheduler, run_dask, run_local
 from .inputs import Input, find_inputs
 from .manifest import Manifest, Row
 from .task import Task, finished, remove_leftovers
@@ -46,7 +47,7 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
     if not inputs:
         raise BadInputError(folder, "holds no file to plan (no scan or recording)")
     if options.executor == "dask" and options.scheduler is not None:
-        dask_client(options.scheduler).close()           # unreachable: said before anything is written
+        require_scheduler(options.scheduler)      # unreachable, or no scheduler: said before anything is written
     out.mkdir(parents=True, exist_ok=True)
     with _locked(out):
         removed = remove_leftovers(out)
@@ -62,17 +63,21 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
         for row in rows:
             if row.status != "pending":
                 progress(row, len(tasks))
+        made = _make_parents(tasks, out)
         results = run_local(tasks, options.jobs) if options.executor == "local" else \
             run_dask(tasks, options.jobs, options.scheduler)
         try:
-            for task, result in results:
-                row = row_of(task)
-                error = result["error"].replace(task.input, str(folder / row.input)).replace(task.case, str(out / row.case))
-                if options.wall_from is not None:
-                    error = error.replace(task.options["wall_from"], str(Path(options.wall_from) / row.case))
-                row.status, row.seconds, row.error = result["status"], result["seconds"], error   # paths as given
+            for settled in results:             # the cases finished while the manifest was last written
+                for task, result in settled:
+                    row = row_of(task)
+                    error = result["error"].replace(task.input, str(folder / row.input))
+                    error = error.replace(task.case, str(out / row.case))
+                    if options.wall_from is not None:
+                        error = error.replace(task.options["wall_from"], str(Path(options.wall_from) / row.case))
+                    row.status, row.seconds, row.error = result["status"], result["seconds"], error   # paths as given
                 manifest.write()
-                progress(row, len(tasks))
+                for task, _ in settled:
+                    progress(row_of(task), len(tasks))
         except KeyboardInterrupt:
             results.close()                       # its workers killed: the cases they were planning left unfinished
             remove_leftovers(out)
@@ -85,6 +90,10 @@ def run_batch(folder: Path, out: Path, options: BatchOptions, progress: Progress
             raise Interrupted(f"{len(tasks) - summary['pending']} of the {len(tasks)} inputs to plan were settled "
                               f"and {summary['pending']} left pending in {out / 'manifest.csv'}; the same command "
                               f"resumes the batch") from None
+        finally:
+            for parent in made[::-1]:           # deepest first
+                with contextlib.suppress(OSError):      # only if empty: none of its cases planned
+                    parent.rmdir()
     return Batch(manifest, tuple(removed))
 
 
@@ -111,6 +120,18 @@ def _rows_and_tasks(inputs: list[Input], out: Path, options: BatchOptions) -> tu
         else:
             tasks.append(Task(str(i.path.absolute()), str(case), plan, row.sha256))
     return rows, tasks
+
+
+def _make_parents(tasks: list[Task], out: Path) -> list[Path]:
+    """Make the missing folders the tasks' cases lie in, once, before the workers (which would race to make
+    and remove them); those that were missing, parents first."""
+    root = out.resolve()
+    needed = {root / p for t in tasks for p in Path(t.case).relative_to(root).parents[:-1]}
+    made = sorted((p for p in needed if not p.exists()), key=lambda p: len(p.parts))
+    for parent in made:
+        with contextlib.suppress(OSError):      # one that cannot be made fails its cases, each with its sentence
+            parent.mkdir(exist_ok=True)
+    return made
 
 
 @contextlib.contextmanager

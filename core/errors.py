@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 from pathlib import Path
 from typing import Iterator
@@ -55,6 +56,16 @@ def require_file(path: str | Path, kind: str, error: type[BadInputError] = BadIn
     except OSError as exc:
         raise error(path, f"cannot be read ({exc.strerror})") from None
     return path
+
+
+def loops(path: str | Path) -> bool:
+    """Whether `path` leads into a loop of symbolic links (`Path.resolve` raises RuntimeError for one
+    on Python < 3.13, and later versions resolve it to a path that does not exist)."""
+    try:
+        os.stat(path)
+    except OSError as exc:
+        return exc.errno == errno.ELOOP
+    return False
 
 
 def file_head(path: Path, size: int) -> bytes | None:

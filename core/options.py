@@ -5,6 +5,7 @@ JSON values (`as_dict`) for an artefact's provenance.
 """
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import asdict, dataclass
 
@@ -170,6 +171,8 @@ class PlanOptions:
 
 EXECUTORS = ("local", "dask")
 """Where a batch's cases run: local worker processes, or the workers of a Dask cluster."""
+MAX_JOBS = max(64, 2 * (os.cpu_count() or 1))
+"""Cases a batch runs at once at most: each is a process (a Dask worker, two), with its open files."""
 _SCHEDULER = re.compile(r"((tcp|tls|ws|wss|ucx)://)?(\[[0-9A-Fa-f:.]+\]|[^\s/:\[\]]+):([1-9][0-9]{0,4})")
 """A Dask scheduler's address: an optional protocol, a host (an IPv6 one in brackets) and a port."""
 
@@ -190,6 +193,9 @@ class BatchOptions:
     def __post_init__(self):
         if self.jobs < 1:
             raise OptionError("jobs", f"a batch runs at least 1 case at once, got {self.jobs}")
+        if self.jobs > MAX_JOBS:
+            raise OptionError("jobs", f"a batch runs at most {MAX_JOBS} cases at once (the larger of 64 and "
+                                      f"twice this machine's {os.cpu_count()} CPUs), got {self.jobs}")
         if self.executor not in EXECUTORS:
             raise OptionError("executor", f"'{self.executor}' is not an executor; choose {' or '.join(EXECUTORS)}")
         if self.scheduler is not None and self.executor != "dask":

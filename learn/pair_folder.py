@@ -28,7 +28,7 @@ from breastplan.atomic import atomic_open, recover
 from breastplan.deform.by_degree import slug
 from breastplan.deform.conditions import CONDITIONS, find_condition
 from breastplan.deform.names import DD
-from breastplan.errors import counted, require_file
+from breastplan.errors import counted, loops, require_file
 from breastplan.options import DEGREE_KINDS
 from breastplan.units import breast_points_problem
 
@@ -65,6 +65,8 @@ def read_pairs(folder: str | Path) -> list[PairRow]:
     for any defect of the table or of the paths it names. The breasts themselves are read by
     `breast_cloud`."""
     folder = Path(folder)
+    if loops(folder):
+        raise BadInputError(folder, "is a symbolic link loop, not a pairs folder")
     if not folder.exists():
         raise BadInputError(folder, f"no such folder (a pairs folder holds {PAIRS_CSV})")
     if not folder.is_dir():
@@ -174,12 +176,14 @@ def _member(bad: Callable[[str], BadInputError], root: Path, text: str, column: 
     if not text:
         raise bad(f"has no {column} path")
     try:
+        if loops(root / text):
+            raise bad(f"{column} path '{text}' is a symbolic link loop")
         path = (root / text).resolve()        # .., absolute paths and symbolic links all followed
         if root not in path.parents:
             raise bad(f"{column} path '{text}' lies outside the pairs folder")
         if not path.exists():
             raise bad(f"{column} path '{text}' does not exist")
-    except (OSError, ValueError) as exc:      # a name too long, a NUL byte, a loop of links
+    except (OSError, ValueError) as exc:      # a name too long, a NUL byte
         raise bad(f"{column} path '{text}' cannot be a file name here ({getattr(exc, 'strerror', None) or exc})") \
             from None
     if path.is_dir():

@@ -50,7 +50,7 @@ def sent(monkeypatch):
     def executor(given, jobs):
         for task in given:
             tasks.append(task)
-            yield task, {"status": "failed", "seconds": 0.0, "error": f"{task.input}: not planned by this test."}
+            yield [(task, {"status": "failed", "seconds": 0.0, "error": f"{task.input}: not planned by this test."})]
 
     monkeypatch.setattr(batch_run, "run_local", executor)
     return tasks
