@@ -39,17 +39,19 @@ def train_statistical(
         raise usage_error(f"the model file must end in .npz, got {out.name}", "--out")
     writable(out)
     cache = cache_folder(cache)
+    from breastplan.learn.pair_folder import read_pairs, training_pairs
+
+    with about(pairs / "pairs.csv"):               # bad pairs refused at once, before the fits' code is loaded
+        train, clouds = training_pairs(read_pairs(pairs), corresponding)
     from threadpoolctl import threadpool_limits
 
     from breastplan.learn.displacements import FitCache, PairOptions
     from breastplan.learn.field_file import save_field_model, train_from_pairs
-    from breastplan.learn.pair_folder import read_pairs
 
-    rows = read_pairs(pairs)
     options = PairOptions(lattice=lattice, corresponding=corresponding)
-    with progress("fitting before scans", sum(r.split != "test" for r in rows)) as advance, threadpool_limits(1, "blas"):
+    with progress("fitting before scans", len(train)) as advance, threadpool_limits(1, "blas"):
         with about(pairs / "pairs.csv"):
-            estimator, meta = train_from_pairs(rows, options, FitCache(cache), regressor, advance)
+            estimator, meta = train_from_pairs(train, clouds, options, FitCache(cache), regressor, advance)
     save_field_model(out, estimator, meta)
     report({"model": str(out), "kinds": meta["kinds"], "pairs": meta["training"]["pairs"],
             "befores": meta["training"]["befores"], "regressor": regressor, "hyper": meta["hyper"],

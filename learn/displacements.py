@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import os
 from dataclasses import asdict, dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -166,6 +167,16 @@ def fit_before(points: np.ndarray, n: int, cache: FitCache = MEMORY) -> Before:
     return Before(hit["vertices"], hit["faces"], hit["control_points"], float(hit["volume_cc"]))
 
 
+@lru_cache(maxsize=None)
+def _laplacian_gram(shape: tuple[int, int, int]) -> np.ndarray:
+    """LᵀL of the Laplacian of a lattice of `shape`, dense and read-only: it depends on the shape alone,
+    so a training run's thousands of pair fits compute it once."""
+    L = Lattice(np.zeros(3), np.ones(3), shape).laplacian()
+    gram = (L.T @ L).toarray()
+    gram.setflags(write=False)
+    return gram
+
+
 def fit_pair(before: Before, before_points: np.ndarray, after: np.ndarray, options: PairOptions = PairOptions(),
              cache: FitCache = MEMORY, kind: str | None = None) -> np.ndarray:
     """(K·3,) displacement field, in box units, that takes the before breast to the after cloud (mm).
@@ -184,8 +195,8 @@ def fit_pair(before: Before, before_points: np.ndarray, after: np.ndarray, optio
             if before_points.shape != after.shape:
                 raise ValueError(f"corresponding clouds must have equal shapes, got {before_points.shape} "
                                  f"and {after.shape}")
-            B, L = box.basis(before_points), box.laplacian()
-            normal = B.T @ B + smoothness * len(B) * (L.T @ L).toarray()
+            B = box.basis(before_points)
+            normal = B.T @ B + smoothness * len(B) * _laplacian_gram(box.shape)
             moved = np.linalg.solve(normal, B.T @ (after - before_points))
         else:
             moved = fit_ffd(after, before.vertices, before.faces, smoothness=CLOSEST_SMOOTHNESS, box=box,

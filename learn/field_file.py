@@ -8,13 +8,12 @@ surface and predicts the field for the type and degree: a lattice that moves her
 """
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from breastplan import ArtefactError, BadInputError, to_model_units
+from breastplan import ArtefactError, to_model_units
 from breastplan.deform.by_degree import (ByDegree, check_degree, deform_by_degree, degree_model, degree_reached,
                                          pick_condition)
 from breastplan.deform.lattice import Lattice
@@ -107,9 +106,10 @@ def field_file(model: ModelFile, path: Path) -> FieldFile:
     return FieldFile(model, path)
 
 
-def train_from_pairs(rows, options: PairOptions = PairOptions(), cache: FitCache = FitCache(None),
+def train_from_pairs(train, clouds, options: PairOptions = PairOptions(), cache: FitCache = FitCache(None),
                      regressor: str = "kernel-ridge", advance=lambda: None):
-    """A FieldModel trained on the training rows of a pairs folder (`learn.pair_folder.read_pairs`).
+    """A FieldModel trained on the checked training pairs of a pairs folder and their before breasts'
+    points (`learn.pair_folder.training_pairs`).
 
     Returns (estimator, meta): hyper-parameters are chosen by 4-fold cross-validation
     grouped by before scan when there are at least 4 of them."""
@@ -117,36 +117,13 @@ def train_from_pairs(rows, options: PairOptions = PairOptions(), cache: FitCache
     from .statistical_study import GRIDS, grid_select
     from .statistical import FieldModel
 
-    train = [r for r in rows if r.split != "test"]
-    for kind in {r.kind for r in train}:
-        degrees = {r.degree for r in train if r.kind == kind}
-        if len(degrees) < 2:
-            raise BadInputError(None, f"holds training pairs of {kind} at one degree only ({min(degrees):g}): a model "
-                                      "of degrees learns from pairs at two degrees at least")
-    clouds, befores = {}, {}
+    befores = {}
     for r in train:
         if r.before not in befores:
-            clouds[r.before] = breast_cloud(r.before)
             befores[r.before] = fit_before(clouds[r.before], options.lattice, cache)
         advance()
-    changes = {}
-
-    def after(r):
-        cloud, before = breast_cloud(r.after), clouds[r.before]
-        if options.corresponding and cloud.shape != before.shape:
-            raise BadInputError(r.after, f"holds {len(cloud):,} points where its before scan holds "
-                                         f"{len(before):,}; --corresponding pairs correspond point for point")
-        if cloud.shape == before.shape and np.array_equal(cloud, before):
-            raise BadInputError(r.after, f"holds the very breast of its before scan {r.before.name}: a pair of "
-                                         f"{r.kind} at degree {r.degree:g} shows a change")
-        same = changes.setdefault((r.before, r.kind, cloud.shape, hashlib.sha256(cloud.tobytes()).digest()), r)
-        if same.degree != r.degree:
-            raise BadInputError(r.after, f"holds the same breast as {same.after.name}, both after {r.before.name} "
-                                         f"by {r.kind}: one change cannot be of degree {same.degree:g} and "
-                                         f"{r.degree:g}")
-        return cloud
-
-    fields = np.stack([fit_pair(befores[r.before], clouds[r.before], after(r), options, cache, r.kind) for r in train])
+    fields = np.stack([fit_pair(befores[r.before], clouds[r.before], breast_cloud(r.after), options, cache, r.kind)
+                       for r in train])
     kinds = sorted({r.kind for r in train}, key=DEGREE_KINDS.index)
     X = pair_features([befores[r.before] for r in train], [r.degree for r in train], [r.kind for r in train], kinds)
     groups = np.array([str(r.before) for r in train])

@@ -9,11 +9,13 @@ Each row is one pair: the breast before and after a change of one deformation ki
 degrees (ptosis, turn, top-shape) at a degree in [1, 8]. `before` and `after` name a PLY of breast
 points (mm, breast frame, as `synth` and `deform` write) or a case folder (its ingested breast).
 `read_pairs` checks the table and the paths it names; `breast_cloud` reads one breast and checks it;
-`write_pairs` exports deformation datasets (`learn.datasets`) as such a folder.
+`training_pairs` checks the pairs a model learns from; `write_pairs` exports deformation datasets
+(`learn.datasets`) as such a folder.
 """
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import math
 import os
@@ -222,6 +224,38 @@ def breast_cloud(path: str | Path) -> np.ndarray:
     if problem is not None:
         raise BadInputError(path, problem)
     return points
+
+
+def training_pairs(rows: list[PairRow], corresponding: bool = False) -> tuple[list[PairRow], dict[Path, np.ndarray]]:
+    """The training rows of `rows` and their before breasts' points by path, every pair read and checked
+    (before any fit): BadInputError naming no file for a type with training pairs at one degree only,
+    else naming the after scan of a pair that is no change a model of degrees learns from (a point
+    count other than its before's when the clouds `corresponding`, no change, one change at two degrees)."""
+    train = [r for r in rows if r.split != "test"]
+    for kind in {r.kind for r in train}:
+        degrees = {r.degree for r in train if r.kind == kind}
+        if len(degrees) < 2:
+            raise BadInputError(None, f"holds training pairs of {kind} at one degree only ({min(degrees):g}): a model "
+                                      "of degrees learns from pairs at two degrees at least")
+    clouds: dict[Path, np.ndarray] = {}
+    for r in train:
+        if r.before not in clouds:
+            clouds[r.before] = breast_cloud(r.before)
+    changes: dict[tuple, PairRow] = {}             # the rows checked so far, by the change they show
+    for r in train:
+        cloud, before = breast_cloud(r.after), clouds[r.before]
+        if corresponding and cloud.shape != before.shape:
+            raise BadInputError(r.after, f"holds {len(cloud):,} points where its before scan holds "
+                                         f"{len(before):,}; --corresponding pairs correspond point for point")
+        if cloud.shape == before.shape and np.array_equal(cloud, before):
+            raise BadInputError(r.after, f"holds the very breast of its before scan {r.before.name}: a pair of "
+                                         f"{r.kind} at degree {r.degree:g} shows a change")
+        same = changes.setdefault((r.before, r.kind, cloud.shape, hashlib.sha256(cloud.tobytes()).digest()), r)
+        if same.degree != r.degree:
+            raise BadInputError(r.after, f"holds the same breast as {same.after.name}, both after {r.before.name} "
+                                         f"by {r.kind}: one change cannot be of degree {same.degree:g} and "
+                                         f"{r.degree:g}")
+    return train, clouds
 
 
 def write_pairs(folder: str | Path, dataset, stage: Callable[[Path], Path] = Path,

@@ -23,10 +23,11 @@ DEPLOYED = ("ptosis b0>b1", "ptosis b1>=b0", "turn c0>c1", "turn c1>c0", "top-sh
 FEATURE_SETS = ("FS4", "FS5")
 
 
-def train_condition(ds, quick: bool = False) -> tuple[Selected, str, list[str]]:
-    """The best family and feature set of one dataset: (selection, feature set, feature names)."""
+def train_condition(ds, quick: bool = False, table=None) -> tuple[Selected, str, list[str]]:
+    """The best family and feature set of one dataset: (selection, feature set, feature names);
+    `table` is `breast_table(ds.database, kind)` when the caller has it already."""
     train = ds.split == "train"
-    table = breast_table(ds.database, ds.condition.kind)
+    table = breast_table(ds.database, ds.condition.kind) if table is None else table
     best = None
     for fs in FEATURE_SETS:
         f = example_features(ds, fs, "continuous", table)
@@ -41,11 +42,12 @@ def train_all(out: Path, conditions=DEPLOYED, quick: bool = False, n_points: int
               advance=lambda: None) -> list[dict]:
     """Train and write `out/<slug>.npz` for each condition; returns one summary per file."""
     db = build_database("S", n_points=n_points)
+    tables = {kind: breast_table(db, kind) for kind in {find_condition(name).kind for name in conditions}}
     written = []
     for name in conditions:
         cond = find_condition(name)
         ds = build_dataset(db, cond, DD)
-        sel, fs, names = train_condition(ds, quick)
+        sel, fs, names = train_condition(ds, quick, tables[cond.kind])
         meta = {"condition": cond.name, "kind": cond.kind, "dd": DD, "feature_set": fs, "features": names,
                 "degree": "continuous", "target": "position t on the condition's line",
                 "family": sel.family, "hyper": {k: str(v) for k, v in sel.params.items()},

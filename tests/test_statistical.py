@@ -351,42 +351,44 @@ def test_a_model_file_whose_parts_disagree_is_refused_before_any_plan(cli, train
 
 def test_a_training_set_a_model_of_degrees_cannot_learn_from_is_refused(cli, trained, tmp_path):
     """Truths: a field that grows with the degree is not learnt from pairs of one degree; pairs said to
-    correspond point for point hold as many points after as before."""
+    correspond point for point hold as many points after as before. Each is refused before any fit
+    (nothing is cached)."""
     import shutil
 
     from breastplan import write_ply
 
     tmp, _ = trained
-    pairs = tmp_path / "pairs"
+    pairs, fits = tmp_path / "pairs", tmp_path / "fits"
     shutil.copytree(tmp / "pairs", pairs)
     header, *rows = (pairs / "pairs.csv").read_text().splitlines()
     one_degree = [r for r in rows if r.split(",")[3] == "3"]
     (pairs / "pairs.csv").write_text("\n".join([header, *one_degree]) + "\n")
     res = run(cli, "train-statistical", "--pairs", pairs, "--out", tmp_path / "m.npz", "--corresponding",
-              "--cache", tmp / "cache")
+              "--cache", fits)
     assert_bad_input(res, pairs / "pairs.csv", tmp_path)
-    assert "at one degree only (3)" in res.stderr
+    assert "at one degree only (3)" in res.stderr and not fits.exists()
     (pairs / "pairs.csv").write_text("\n".join([header, *rows]) + "\n")
     after = pairs / rows[0].split(",")[1]
     write_ply(after, read_ply(after).points[:200])
     res = run(cli, "train-statistical", "--pairs", pairs, "--out", tmp_path / "m.npz", "--corresponding",
-              "--cache", tmp / "cache")
+              "--cache", fits)
     assert_bad_input(res, after, tmp_path)
-    assert "holds 200 points where its before scan holds" in res.stderr
+    assert "holds 200 points where its before scan holds" in res.stderr and not fits.exists()
 
     before = pairs / rows[0].split(",")[0]
     write_ply(after, read_ply(before).points)                                 # no change at all
-    res = run(cli, "train-statistical", "--pairs", pairs, "--out", tmp_path / "m.npz", "--cache", tmp / "cache")
+    res = run(cli, "train-statistical", "--pairs", pairs, "--out", tmp_path / "m.npz", "--cache", fits)
     assert_bad_input(res, after, tmp_path)
-    assert f"holds the very breast of its before scan {before.name}" in res.stderr
+    assert f"holds the very breast of its before scan {before.name}" in res.stderr and not fits.exists()
 
     shutil.copy(tmp / "pairs" / rows[0].split(",")[1], after)
     first = rows[0].split(",")
     twice = ",".join([first[0], first[1], first[2], str(int(first[3]) % 8 + 1), *first[4:]])
     (pairs / "pairs.csv").write_text("\n".join([header, *rows, twice]) + "\n")   # one change at two degrees
-    res = run(cli, "train-statistical", "--pairs", pairs, "--out", tmp_path / "m.npz", "--cache", tmp / "cache")
+    res = run(cli, "train-statistical", "--pairs", pairs, "--out", tmp_path / "m.npz", "--cache", fits)
     assert_bad_input(res, after, tmp_path)
     assert f"one change cannot be of degree {first[3]} and {int(first[3]) % 8 + 1}" in res.stderr
+    assert not fits.exists()
 
 
 @pytest.mark.filterwarnings("ignore::sklearn.exceptions.SkipTestWarning")
