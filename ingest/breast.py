@@ -14,7 +14,6 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-import open3d as o3d
 from scipy.spatial import cKDTree
 
 from breastplan import BadInputError
@@ -58,12 +57,6 @@ CROP_MM = 2.0
 """Breast points lie at least this far in front of the chest wall."""
 UP_VIEW = np.array([0.0, -1.0, 0.0])
 """Superior in the viewing frame (image up)."""
-
-
-def dbscan(points: np.ndarray, eps: float, min_points: int) -> np.ndarray:
-    """Cluster labels (−1 = noise) by open3d's DBSCAN."""
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    return np.asarray(cloud.cluster_dbscan(eps, min_points))
 
 
 @dataclass(frozen=True)

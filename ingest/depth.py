@@ -1,13 +1,12 @@
 """Depth frames → one fused depth image → points (camera frame, mm).
 
 Temporal fusion is a per-pixel robust average: the median of the valid (non-zero) depths,
-then the mean of those within the noise band around it. Back-projection uses open3d with
-the recorded pinhole intrinsics.
+then the mean of those within the noise band around it. Back-projection uses the recorded
+pinhole intrinsics.
 """
 from __future__ import annotations
 
 import numpy as np
-import open3d as o3d
 
 NOISE_MM_AT_600 = 1.0
 """Depth σ (mm) of an OAK-class stereo camera at 0.6 m; it grows with the square of the depth."""
@@ -45,10 +44,8 @@ def depth_range(image: np.ndarray) -> tuple[float, float]:
 
 
 def to_points(image: np.ndarray, K: np.ndarray, near: float = 0.0, far: float = np.inf) -> np.ndarray:
-    """Back-project a depth image (mm) within [near, far] to (N, 3) camera-frame points (mm), with open3d."""
-    h, w = image.shape
-    masked = np.where((image >= near) & (image <= far), image, 0).astype(np.float32)
-    intrinsic = o3d.camera.PinholeCameraIntrinsic(w, h, K[0, 0], K[1, 1], K[0, 2], K[1, 2])
-    cloud = o3d.geometry.PointCloud.create_from_depth_image(
-        o3d.geometry.Image(masked), intrinsic, depth_scale=1.0, depth_trunc=1e9)
-    return np.asarray(cloud.points)
+    """Back-project a depth image (mm) within [near, far] to (N, 3) camera-frame points (mm), row by
+    row: x = (u − cx)·z/fx, y = (v − cy)·z/fy."""
+    v, u = np.nonzero((image > 0) & (image >= near) & (image <= far))
+    z = image[v, u].astype(float)
+    return np.column_stack([(u - K[0, 2]) * z / K[0, 0], (v - K[1, 2]) * z / K[1, 1], z])

@@ -1,6 +1,6 @@
 """The ingest pipeline: depth frames or a scan file → the breast of one side in the breast frame.
 
-The body, once for every side (`BodyScan`): fusion → depth to points (open3d) → background removal
+The body, once for every side (`BodyScan`): fusion → depth to points → background removal
 (depth range, the nearest large DBSCAN cluster of coarse voxels) → trunk (head, neck and arms cut
 off) → a wall behind her, if one stands there (`ingest.background`: the plumb the plan's up axis
 takes) → chest wall (robust height field, mounds excluded) → mounds. Then each side (`isolate_side`):
@@ -13,7 +13,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import open3d as o3d
 from breastplan import BadInputError, transform_points
 from breastplan.body import Body
 from breastplan.chest_wall import ChestWall
@@ -25,6 +24,7 @@ from breastplan.voxels import voxel_centroids
 from . import breast as B
 from .background import plumb_wall
 from .chest_wall import fit_chest_wall
+from .cloud import dbscan, normals_towards, radius_inliers
 from .depth import depth_range, fuse, to_points
 from .files import ScanCloud
 from .recording import DepthFrames
@@ -107,7 +107,7 @@ def frames_body(frames: DepthFrames, clock: Clock) -> BodyScan:
     """Depth frames (camera = viewing frame) → the body in view."""
     with clock("fuse"):
         image = fuse(frames.depth)
-    with clock("depth to points (open3d)"):
+    with clock("depth to points"):
         near, far = depth_range(image)
         points = to_points(image, frames.K, near, far)
         S = BEHIND_STRIDE                                      # beyond the slab: what stands behind her
@@ -233,7 +233,7 @@ def isolate_body(points: np.ndarray, input_to_view: np.ndarray, clock: Clock, vi
     among them, if already found; `beyond`: more points farther away, where a wall may stand; `up`:
     the input's up axis, when the viewing frame was built on it)."""
     if found is None:
-        with clock("background: voxels + DBSCAN (open3d)"):
+        with clock("background: voxels + DBSCAN"):
             body, voxels, which = body_cluster(points)
         with clock("trunk"):
             found = BodyInView(body, voxels, which, find_trunk(body))
@@ -272,19 +272,17 @@ def isolate_side(body: BodyScan, options: IngestOptions, clock: Clock) -> Ingest
         raise BadInputError(None, f"no breast mound found on the {side} side (the mound there rises only "
                                   f"{mound.rise:.2f} of its radius and bears no nipple)")
     _enough(len(crop), "cropping")
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(crop))
-    with clock("outliers (open3d)"):
-        cloud, _ = cloud.remove_radius_outlier(nb_points=4, radius=5.0)
-    with clock("voxel downsampling (open3d)"):
-        cloud = cloud.voxel_down_sample(options.voxel_mm)
-    _enough(len(cloud.points), f"{options.voxel_mm:g} mm voxel downsampling")
-    with clock("normals (open3d)"):
-        cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=max(3 * options.voxel_mm, 5.0), max_nn=16))
-        cloud.orient_normals_towards_camera_location(body.viewer)
-    with clock("to breast frame (open3d)"):
-        cloud.transform(frame.matrix)
+    with clock("outliers"):
+        crop = crop[radius_inliers(crop, 5.0, 4)]
+    with clock("voxel downsampling"):
+        points = voxel_centroids(crop, options.voxel_mm)[0] if len(crop) else crop
+    _enough(len(points), f"{options.voxel_mm:g} mm voxel downsampling")
+    with clock("normals"):
+        normals = normals_towards(points, body.viewer, max(3 * options.voxel_mm, 5.0), 16)
+    with clock("to breast frame"):
+        points, normals = transform_points(frame.matrix, points), normals @ frame.matrix[:3, :3].T
     return Ingested(
-        points=np.asarray(cloud.points), normals=np.asarray(cloud.normals),
+        points=points, normals=normals,
         input_to_breast=frame.matrix @ input_to_view,
         side=mound.side if nipple is not None or roi is not None else side,
         nipple_camera=transform_points(to_camera, nipple_view), nipple_found=nipple_found, chest_wall=wall,
@@ -310,7 +308,7 @@ def body_cluster(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     connected clusters (DBSCAN on coarse voxels) as large as a trunk's front (BODY_VOXELS, or the
     largest if none is), the nearest to the viewer (a wall behind may be larger)."""
     coarse, which = voxel_centroids(points, COARSE_MM)
-    labels = B.dbscan(coarse, 2.5 * COARSE_MM, 4)
+    labels = dbscan(coarse, 2.5 * COARSE_MM, 4)
     if (labels < 0).all():
         raise BadInputError(None, "holds no connected surface (only scattered points)")
     counts = np.bincount(labels[labels >= 0])

@@ -33,7 +33,7 @@ def ingest(input: Path | None, options: IngestOptions) -> Scan:
     """Run the pipeline on a recording, a scan file, or (input None) a live OAK device.
 
     The file readers name `input` in their errors; the pipeline's errors name no file. The pipeline
-    (open3d, scipy) is imported after the source is read, so that bad input is refused quickly.
+    (scipy) is imported after the source is read, so that bad input is refused quickly.
     """
     return ingest_sides(input, [options])[0]
 
