@@ -227,10 +227,10 @@ def breast_cloud(path: str | Path) -> np.ndarray:
 
 
 def training_pairs(rows: list[PairRow], corresponding: bool = False) -> tuple[list[PairRow], dict[Path, np.ndarray]]:
-    """The training rows of `rows` and their before breasts' points by path, every pair read and checked
-    (before any fit): BadInputError naming no file for a type with training pairs at one degree only,
-    else naming the after scan of a pair that is no change a model of degrees learns from (a point
-    count other than its before's when the clouds `corresponding`, no change, one change at two degrees)."""
+    """The training rows of `rows` and their before breasts' points (by path), every pair read and
+    checked, so that bad input is refused before any fit. BadInputError naming no file for a type whose
+    training pairs are all of one degree; naming the after scan of a pair whose point count differs from
+    its before's (when `corresponding`), that holds its before breast, or that is one change given two degrees."""
     train = [r for r in rows if r.split != "test"]
     for kind in {r.kind for r in train}:
         degrees = {r.degree for r in train if r.kind == kind}

@@ -17,6 +17,8 @@ from .views import VIEW_TO_DISPLAY
 DPI = 110
 BEFORE = {"colors": SCAN, "linestyles": "dashed", "linewidths": 1.0}
 PLANNED = {"colors": "#b5522a", "linestyles": "solid", "linewidths": 1.4}
+LAYOUT = {"width_ratios": (1, 1, 1.5), "left": 0.05, "right": 0.99, "bottom": 0.1, "top": 0.94, "wspace": 0.25, "hspace": 0.3}
+"""Where the views sit on the page (fractions of it): fixed, so that nothing is measured to place them."""
 CELL_MM = 2.0
 """Cell of the grid on which a view's outline is drawn; points about 2 mm apart close it."""
 
@@ -41,9 +43,9 @@ def summary_png(plan: Plan, path: Path) -> Path:
     from matplotlib.lines import Line2D
 
     sides, m = list(plan.sides), plan.measures
-    fig = Figure(figsize=(12, 3.6 * len(sides)), dpi=DPI)
+    fig = Figure(figsize=(13, 3.6 * len(sides)), dpi=DPI)
     FigureCanvasAgg(fig)
-    axes = fig.subplots(len(sides), 3, squeeze=False)
+    axes = fig.subplots(len(sides), 3, squeeze=False, gridspec_kw=LAYOUT)
     for row, side in zip(axes, sides):
         sp = plan.sides[side]
         show = VIEW_TO_DISPLAY @ sp.frames.input_to_view
@@ -74,7 +76,6 @@ def summary_png(plan: Plan, path: Path) -> Path:
     fig.legend(handles=[Line2D([], [], color=BEFORE["colors"], linestyle=BEFORE["linestyles"], label="before"),
                         Line2D([], [], color=PLANNED["colors"], label="planned (the combination)")],
                loc="lower center", ncol=2, fontsize=8, frameon=False)
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
     with open(path, "wb") as fh:
         fig.savefig(fh, format="png", pil_kwargs={"compress_level": 3})
     return Path(path)
