@@ -143,16 +143,22 @@ class BreastVolumes:
 
 def change_on_earlier_wall(earlier: BreastVolumes, torso_mm, earlier_from_input, side: str) -> tuple[float, float]:
     """One breast's volume then and now (cc), both on an earlier visit's chest wall and inside one
-    footprint: this scan's torso (input frame, mm) carried into the earlier scan's input frame by
-    `earlier_from_input` (a registration of the two chests, (4, 4)) and its skin measured on the earlier
-    visit's cells; the footprint is the earlier one grown over the skin that now rises FOOT_MM from the
-    wall next to it (a breast grown since), both sides' joined and mirrored as `measure_breasts` joins them."""
+    footprint (`grown_footprint`): this scan's torso (input frame, mm) carried into the earlier scan's
+    input frame by `earlier_from_input` (a registration of the two chests, (4, 4)) and its skin measured
+    on the earlier visit's cells."""
+    now, grown = grown_footprint(earlier, torso_mm, earlier_from_input)
+    return replace(earlier.cells, footprint=grown).volume_cc(side), replace(now, footprint=grown).volume_cc(side)
+
+
+def grown_footprint(earlier: BreastVolumes, torso_mm, earlier_from_input) -> tuple[SkinCells, np.ndarray]:
+    """This scan's skin on the earlier visit's cells (as `change_on_earlier_wall` carries it), and the
+    earlier footprint grown over the skin that now rises FOOT_MM from the wall next to it (a breast grown
+    since), both sides' joined and mirrored as `measure_breasts` joins them ((nx, ny) bool)."""
     then = earlier.cells
     now = then.moved(transform_points(earlier.body_from_input @ np.asarray(earlier_from_input, float),
                                       np.asarray(torso_mm, float)))
     grown = ndimage.binary_propagation(then.footprint, mask=then.footprint | (now.height_mm > FOOT_MM))
-    grown |= grown[::-1]
-    return replace(then, footprint=grown).volume_cc(side), replace(now, footprint=grown).volume_cc(side)
+    return now, grown | grown[::-1]
 
 
 def body_frame(landmarks: BodyLandmarks) -> np.ndarray:
