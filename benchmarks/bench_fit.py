@@ -9,7 +9,7 @@ Measures, with every fit run under `threadpool_limits(1, "blas")` as the command
    the ratio reads "a fit costs this many residual passes over the cloud". The external
    reference (EMS, about 1.1 s for 11 000 points) is printed as a note, not measured;
 2. the FFD stage of `fit_breast` (n = 5, 125 control points): `BreastFit.ffd.seconds`, median
-   over the breasts of database S. Target ≤ 300 ms. Baseline: one open3d closest-point query
+   over the breasts of database S. Target ≤ 300 ms. Baseline: one closest-point query
    (`fitting.ffd._closest`) of the fit's data subset on the initial model mesh — the floor of
    one FFD iteration; the median iteration count is reported too;
 3. all 60 breasts of database S through `fit_breast` with its defaults (superquadric with
@@ -205,7 +205,7 @@ def fit_example(points: np.ndarray) -> tuple[BreastFit, str | None]:
 
 
 def closest_floor(fit: BreastFit, points: np.ndarray) -> tuple[float, float]:
-    """Seconds of one open3d closest-point query on the initial model mesh (what fit_ffd starts
+    """Seconds of one closest-point query on the initial model mesh (what fit_ffd starts
     from): of the FIT_POINTS data subset fit_ffd solves with, and of all the data."""
     vertices, faces = model_mesh(fit.superquadric)
     faces32 = np.ascontiguousarray(faces, dtype=np.uint32)
@@ -229,7 +229,7 @@ def fit_pass(db, breasts) -> dict:
 
 def database_passes(db, breasts, passes: int) -> tuple[list[dict], list[float]]:
     """`passes` fit passes, each followed by a timed build_database("S") (the baseline)."""
-    fit_breast(db.points[breasts[0]], FitOptions(lattice=LATTICE))   # warm-up (imports, open3d, caches)
+    fit_breast(db.points[breasts[0]], FitOptions(lattice=LATTICE))   # warm-up (imports, caches)
     runs, builds = [], []
     for _ in range(passes):
         runs.append(fit_pass(db, breasts))
@@ -262,7 +262,7 @@ def ffd_speed(runs: list[dict]) -> dict:
 
 def print_ffd_speed(r: dict, n_points: int, console: Console) -> None:
     caption = (f"FFD seconds = BreastFit.ffd.seconds (setup + iterations + final residual over all points), "
-               f"median over passes per breast, then over breasts. Baseline: one open3d closest-point query "
+               f"median over passes per breast, then over breasts. Baseline: one closest-point query "
                f"(fitting.ffd._closest) of the {r['baseline_points']:,}-point data subset fit_ffd solves with, on "
                f"the initial model mesh {MESH_GRID} — the floor of one iteration (each iteration queries once). "
                f"The same query of all {n_points:,} points takes {fmt(r['closest_all_points_s'])}.")

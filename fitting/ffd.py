@@ -24,12 +24,12 @@ from dataclasses import dataclass
 
 import igl
 import numpy as np
-import open3d as o3d
 from scipy import sparse
 
 from breastplan.deform.lattice import Lattice
 from breastplan.point_order import canonical_order, in_caller_order
 
+from .closest import closest_points
 from .sampling import one_blas_thread, seeded_subset
 
 STOP_RESIDUAL = 0.0015
@@ -177,15 +177,8 @@ def _matched(vertices, faces, B, tri, dist, points, bary):
 
 
 def _closest(vertices, faces, data, detail: bool = False):
-    """open3d closest points: triangle ids and distances (and points, barycentric weights)."""
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(faces))
-    hit = scene.compute_closest_points(o3d.core.Tensor(data.astype(np.float32)))
-    tri = hit["primitive_ids"].numpy().astype(np.int64)
-    points = hit["points"].numpy().astype(float)
-    dist = np.linalg.norm(points - data, axis=1)
-    if not detail:
-        return tri, dist
-    uv = hit["primitive_uvs"].numpy().astype(float)
-    return tri, dist, points, np.column_stack([1 - uv.sum(1), uv[:, 0], uv[:, 1]])
-
+    """Exact closest points of data (N, 3) on the mesh (vertices (V, 3), faces (T, 3); mm, one frame):
+    triangle ids and distances, mm (and the points, mm, and the weights of each triangle's corners
+    in faces' order). Ties go to the smaller triangle index (`fitting.closest`)."""
+    hit = closest_points(vertices, faces, data)
+    return hit if detail else hit[:2]

@@ -39,7 +39,7 @@ def test_fit_of_a_stretched_breast_meets_the_thesis_stopping_rule():
     fit = fit_ffd(data, V, F, n=3, smoothness=0.0, max_iterations=200)
     assert fit.converged and fit.residual < STOP_RESIDUAL
     # the residual is the mean over the data of ‖d − m‖/‖d‖, m the closest point of the fitted mesh
-    # (docs/model.md §6), measured here with libigl, not the fit's open3d queries
+    # (docs/model.md §6), measured here with libigl, not the fit's own closest-point queries
     import igl
     d2, _, _ = igl.point_mesh_squared_distance(data, fit.vertices, F.astype(np.int64))
     assert fit.residual == pytest.approx(np.mean(np.sqrt(d2) / np.linalg.norm(data, axis=1)), rel=1e-3, abs=1e-6)
