@@ -1,5 +1,5 @@
-"""Named operations on a point cloud (N, 3), mm, any frame: clusters, radius outliers and normals
-(numpy and scipy's k-d tree). Clusters and outliers depend on the points, not on their order; a
+"""Named operations on a point cloud (N, 3), mm, any frame: clusters, voxel downsampling, radius outliers
+and normals (numpy and scipy's k-d tree). Clusters and outliers depend on the points, not on their order; a
 normal's neighbours tied at the last place are taken in the points' order, so ingest gives them in
 a canonical one (voxel centroids in grid order)."""
 from __future__ import annotations
@@ -8,6 +8,8 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
+
+from breastplan.voxels import voxel_centroids
 
 NO_NORMAL = np.array([0.0, 0.0, 1.0])
 """The normal of a point with fewer than 3 neighbours (before it is turned towards the viewer)."""
@@ -34,6 +36,13 @@ def dbscan(points: np.ndarray, eps: float, min_points: int) -> np.ndarray:
     first = np.unique(border[:, 0], return_index=True)[1]
     labels[border[first, 0]] = labels[border[first, 1]]
     return labels
+
+
+def voxel_downsample(points: np.ndarray, size: float) -> np.ndarray:
+    """(M, 3) the centroids of the occupied voxels of `size` (mm), in grid order, on a grid anchored half a
+    voxel below the points' least corner (as open3d's voxel_down_sample anchors it)."""
+    anchor = points.min(axis=0) - 0.5 * size
+    return voxel_centroids(points - anchor, size)[0] + anchor
 
 
 def radius_inliers(points: np.ndarray, radius: float, others: int) -> np.ndarray:

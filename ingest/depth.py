@@ -30,7 +30,7 @@ def fuse(depth: np.ndarray) -> np.ndarray:
     band = np.maximum(3.0 * depth_sigma(median), 2.0)
     keep = (depth > 0) & (np.abs(depth - median) <= band)
     count = keep.sum(axis=0)
-    fused = np.where(keep, depth, 0).sum(axis=0, dtype=np.float32) / np.maximum(count, 1)
+    fused = (np.where(keep, depth, 0).sum(axis=0, dtype=np.float32) / np.maximum(count, 1)).astype(np.float32)
     fused[(count == 0) | (valid < max(1, n // 3))] = 0.0
     return fused
 

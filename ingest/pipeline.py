@@ -24,7 +24,7 @@ from breastplan.voxels import voxel_centroids
 from . import breast as B
 from .background import plumb_wall
 from .chest_wall import fit_chest_wall
-from .cloud import dbscan, normals_towards, radius_inliers
+from .cloud import dbscan, normals_towards, radius_inliers, voxel_downsample
 from .depth import depth_range, fuse, to_points
 from .files import ScanCloud
 from .recording import DepthFrames
@@ -275,7 +275,7 @@ def isolate_side(body: BodyScan, options: IngestOptions, clock: Clock) -> Ingest
     with clock("outliers"):
         crop = crop[radius_inliers(crop, 5.0, 4)]
     with clock("voxel downsampling"):
-        points = voxel_centroids(crop, options.voxel_mm)[0] if len(crop) else crop
+        points = voxel_downsample(crop, options.voxel_mm) if len(crop) else crop
     _enough(len(points), f"{options.voxel_mm:g} mm voxel downsampling")
     with clock("normals"):
         normals = normals_towards(points, body.viewer, max(3 * options.voxel_mm, 5.0), 16)

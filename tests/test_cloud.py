@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from breastplan.ingest.cloud import dbscan, normals_towards, radius_inliers
+from breastplan.ingest.cloud import dbscan, normals_towards, radius_inliers, voxel_downsample
 from breastplan.ingest.depth import depth_range, fuse, to_points
 from breastplan.scenes.makehuman import BodyOptions
 from breastplan.scenes.realistic import CameraOptions, make_body_scene
@@ -86,3 +86,16 @@ def test_normals_are_open3ds_and_face_the_camera(body):
     edge_on = np.abs(facing) < 1e-6                          # seen edge-on: either way faces the camera
     assert np.quantile(np.abs(agree), 0.001) > 0.999         # the same line (open3d's solver is approximate)
     assert (agree[~edge_on] > 0.999).mean() > 0.999 and (facing > -1e-6).all()
+
+
+def test_voxel_downsampling_keeps_open3ds_voxels_in_any_order(body):
+    points = body[2]
+    ours = voxel_downsample(points, 2.0)
+    theirs = np.asarray(_cloud(points).voxel_down_sample(2.0).points)
+    assert ours.shape == theirs.shape and len(ours) > 1000
+    from scipy.spatial import cKDTree
+
+    gap, match = cKDTree(theirs).query(ours)
+    assert gap.max() < 1e-6 and len(np.unique(match)) == len(ours)      # the same centroids, one for one
+    order = np.random.default_rng(4).permutation(len(points))
+    np.testing.assert_allclose(voxel_downsample(points[order], 2.0), ours, atol=1e-9)

@@ -110,7 +110,7 @@ def test_the_same_body_in_another_frame_and_units_gives_the_same_breast_and_its_
     (n1, m1, v1), (n2, m2, v2) = found.values()
     assert np.linalg.norm(n1 - n2) <= SAME_MM
     assert m2["width_mm"] == pytest.approx(m1["width_mm"], abs=SAME_MM)
-    assert m2["volume_cc"] == pytest.approx(m1["volume_cc"], rel=0.01)
+    assert m2["volume_cc"] == pytest.approx(m1["volume_cc"], rel=0.05)   # the fitted model's: its voxels differ by frame
     assert np.linalg.norm(v1.mean(axis=0) - v2.mean(axis=0)) <= SAME_MM      # the same surface, in her frame
     # a breast is wider than it is tall on her chest: the width is not the outline's height
     ring = to_body(outline(fitted(body)), "+y")
