@@ -26,9 +26,9 @@ def dbscan(points: np.ndarray, eps: float, min_points: int) -> np.ndarray:
     linked = pairs[core[pairs[:, 0]] & core[pairs[:, 1]]]
     _, comp = connected_components(coo_matrix((np.ones(len(linked)), (linked[:, 0], linked[:, 1])), (n, n)),
                                    directed=False)
-    first = np.unique(comp[core], return_index=True)[1]              # each component's first core point
+    comps, first = np.unique(comp[core], return_index=True)         # each component's first core point
     rank = np.empty(comp.max() + 1, np.int64)
-    rank[np.unique(comp[core])[np.argsort(first)]] = np.arange(len(first))
+    rank[comps[np.argsort(first)]] = np.arange(len(first))
     labels[core] = rank[comp[core]]
     both = np.vstack([pairs, pairs[:, ::-1]])                           # (border, core neighbour)
     border = both[~core[both[:, 0]] & core[both[:, 1]]]

@@ -17,7 +17,8 @@ from .views import VIEW_TO_DISPLAY
 DPI = 110
 BEFORE = {"colors": SCAN, "linestyles": "dashed", "linewidths": 1.0}
 PLANNED = {"colors": "#b5522a", "linestyles": "solid", "linewidths": 1.4}
-LAYOUT = {"width_ratios": (1, 1, 1.5), "left": 0.05, "right": 0.99, "bottom": 0.1, "top": 0.94, "wspace": 0.25, "hspace": 0.3}
+LAYOUT = {"width_ratios": (1, 1, 1.5), "left": 0.05, "right": 0.99, "bottom": 0.1, "top": 0.94,
+          "wspace": 0.25, "hspace": 0.3}
 """Where the views sit on the page (fractions of it): fixed, so that nothing is measured to place them."""
 CELL_MM = 2.0
 """Cell of the grid on which a view's outline is drawn; points about 2 mm apart close it."""
