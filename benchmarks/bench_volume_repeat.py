@@ -71,7 +71,7 @@ from threadpoolctl import threadpool_limits
 
 from breastplan import BadInputError, transform_points
 from breastplan.fitting.breast_fit import fit_scan
-from breastplan.scenes.makehuman import Body, BodyOptions, make_body
+from breastplan.scenes.makehuman import Body, BodyOptions, blended, make_body
 from breastplan.ingest.pipeline import ingest_frames
 from breastplan.scenes.realistic import BodyScene, CameraOptions, camera_pose
 from breastplan.ingest.recording import DepthFrames
@@ -171,18 +171,10 @@ def shots() -> list[Shot]:
     return out
 
 
-def blended(left: Body, right: Body) -> Body:
-    """The left half of `left` and the right half of `right` (same mesh, same pose), blended by a smooth
-    step across the midline over ±BLEND_MM."""
-    t = np.clip((left.vertices[:, 0] + BLEND_MM) / (2 * BLEND_MM), 0.0, 1.0)
-    s = (t * t * (3 - 2 * t))[:, None]
-    return Body(s * left.vertices + (1 - s) * right.vertices, left.faces, left.joints, left.options)
-
-
 def build_body(name: str, pose: str) -> Body:
     if name in HYBRIDS:
         lo, ro = HYBRIDS[name]
-        return blended(make_body(replace(lo, pose=pose)), make_body(replace(ro, pose=pose)))
+        return blended(make_body(replace(lo, pose=pose)), make_body(replace(ro, pose=pose)), BLEND_MM)
     return make_body(replace(BODIES[name], pose=pose))
 
 

@@ -18,8 +18,9 @@ points alone (docs/volume.md):
    both breasts are measured inside one outline, mirrored, so that a left − right difference is a
    difference of tissue, not of outline.
 4. **The volume**: the height of the skin above the wall, summed over the footprint's cells.
-   Cells of the footprint the camera did not see take the mirror cell's height (estimated; zero
-   where neither side was seen).
+   Cells of the footprint the camera did not see take the mirror cell's height, scaled to how high
+   this side's skin stands against the mirror side's around it (`mirror_scale`; estimated; zero where
+   neither side was seen).
 5. **Its uncertainty** (± cc): twice the wall's standard error (its residuals' robust σ times
    √(terms / cells fitted)) over the footprint's area, plus the volume of the cells estimated rather
    than seen, plus FLOOR_PCT of the volume for what moves with the landmarks between scans.
@@ -69,6 +70,11 @@ TRIM_KEEP, TRIM_FRONT_MM, TRIM_BACK_MM, TRIM_ITERATIONS = 0.5, 3.0, 6.0, 12
 wall, the rest those within max(3σ, TRIM_FRONT_MM) in front of it and max(3σ, TRIM_BACK_MM) behind."""
 MODEL_DIFFERS_PCT = 25.0
 """A fitted model whose volume lies further than this from hers is said to (%)."""
+MIRROR_SIGMA_MM = 15.0
+"""`mirror_scale` compares the two sides' skin within about this distance of a cell (a Gaussian's σ)."""
+SAME_WITHIN = 0.9
+"""Two sides whose skin stands within this ratio of each other count as alike (`mirror_scale` is then 1):
+a side turned from the camera is seen more obliquely and reads a few percent lower."""
 FLOOR_PCT = 2.0
 """Share of the volume added to its ± for what moves between two scans of her (the landmarks, her
 outline): set so that nine re-scans in ten fall within it (benchmarks/bench_volume_repeat.py)."""
@@ -293,9 +299,23 @@ def _volume_cc(height: np.ndarray, mask: np.ndarray) -> float:
 
 
 def _filled(skin: np.ndarray, wall: np.ndarray) -> np.ndarray:
-    """Skin above the wall on every cell: seen, else the mirror cell's, else 0 (mm)."""
+    """Skin above the wall on every cell: seen, else the mirror cell's times `mirror_scale`, else 0 (mm)."""
     h = skin - wall
-    return np.nan_to_num(np.where(np.isfinite(skin), h, h[::-1]), nan=0.0)
+    return np.nan_to_num(np.where(np.isfinite(skin), h, h[::-1] * mirror_scale(h)), nan=0.0)
+
+
+def mirror_scale(height: np.ndarray) -> np.ndarray:
+    """(nx, ny) how high each side's skin stands against the mirror side's around each cell, at most 1: the
+    ratio of Gaussian-weighted (σ MIRROR_SIGMA_MM) sums of the heights above 0 over the cells seen on both
+    sides, over SAME_WITHIN; 1 where no such cell rises near. `height`: (nx, ny) skin above the wall on a
+    grid symmetric about x = 0 (NaN unseen), mm. A smaller breast's hidden side then takes its own scale of
+    the larger one's, not the larger one's."""
+    both = np.isfinite(height) & np.isfinite(height[::-1])
+    own = ndimage.gaussian_filter(np.where(both, np.clip(height, 0.0, None), 0.0), MIRROR_SIGMA_MM / CELL_MM,
+                                  mode="constant")
+    mirror = own[::-1]                                   # the grid and `both` are symmetric: the filter commutes
+    rises = mirror > 1e-6
+    return np.where(rises, np.clip(own / np.where(rises, mirror, 1.0) / SAME_WITHIN, 0.0, 1.0), 1.0)
 
 
 def _median_heights(points: np.ndarray, lo: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

@@ -146,6 +146,15 @@ def make_body(options: BodyOptions = BodyOptions()) -> Body:
     return Body(V[:asset["n_body"]], asset["faces"], joints, options)
 
 
+def blended(left: Body, right: Body, across_mm: float = 30.0) -> Body:
+    """One body of two made with the same pose: `left`'s left half (X > 0) and `right`'s right half, joined
+    by a smooth step over ±`across_mm` of the mid-sagittal plane (a woman one of whose breasts is another
+    cup, say). Its truth is its own: `half_volumes_cc` of the blended mesh."""
+    t = np.clip((left.vertices[:, 0] + across_mm) / (2 * across_mm), 0.0, 1.0)
+    s = (t * t * (3 - 2 * t))[:, None]
+    return Body(s * left.vertices + (1 - s) * right.vertices, left.faces, left.joints, left.options)
+
+
 def _turn(points: np.ndarray, pivot: np.ndarray, degrees: float) -> np.ndarray:
     """Points turned about the axis Z through `pivot` by `degrees` (counter-clockwise seen from the front)."""
     t = np.radians(degrees)
