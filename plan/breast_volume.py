@@ -11,11 +11,8 @@ points alone (docs/volume.md):
    field in (|x| − cx, y − cy) around the breasts' mean place (cx, cy), with ODD_TERMS for the frame's
    own small turns, fitted to the chest within WALL_REACH · cx of it (WALL_ABOVE as far above it) —
    both sides' skin together — by trimmed least squares, the breasts left out (first a disc round
-   each, then their footprints widened by FOOT_MARGIN cells; ROUNDS rounds). A smooth wall passes in
-   front of the skin at her inframammary fold, so it is then let down where her skin lies behind it:
-   off the footprint to her skin, on it by as much as the skin round it lies behind, interpolated
-   smoothly from both sides' rims (`_SkinGrid.let_down`).
-3. **The footprint**: the skin standing more than FOOT_MM in front of the fitted wall, connected to the
+   each, then their footprints widened by FOOT_MARGIN cells; ROUNDS rounds).
+3. **The footprint**: the skin standing more than FOOT_MM in front of the wall, connected to the
    nipple, in her half, no higher than UPPER · cx above the nipples and within REACH · cx of the
    nipple; holes filled. The two sides' outlines are joined, each with the other's mirror image:
    both breasts are measured inside one outline, mirrored, so that a left − right difference is a
@@ -35,8 +32,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import ndimage, sparse
-from scipy.sparse.linalg import spsolve
+from scipy import ndimage
 
 from breastplan import BadInputError, transform_points
 from breastplan.body import Body
@@ -190,7 +186,6 @@ def measure_breasts(body: Body, nipples: dict) -> BreastVolumes:
     grid = _SkinGrid(transform_points(T, P), {s: transform_points(T, np.asarray(n, float)[None])[0]
                                              for s, n in nipples.items()})
     (wall, se_mm), footprint = grid.wall_and_footprint(grid.seen & grid.near & ~grid.disc)
-    wall = grid.let_down(wall, footprint)
     height = grid.filled_height(wall)
     sides = {}
     for side in grid.nipples:
@@ -268,15 +263,6 @@ class _SkinGrid:
             support = self.seen & self.near & ~ndimage.binary_dilation(footprint, iterations=FOOT_MARGIN)
         return fitted, footprint
 
-    def let_down(self, wall: np.ndarray, footprint: np.ndarray) -> np.ndarray:
-        """The wall let down where her skin lies behind it, (nx, ny) mm: off the footprint, each seen cell's
-        to her skin; on it, by as much as the skin round it lies behind the wall, interpolated smoothly
-        (`harmonic_fill`) from the cells seen round it, each taken with its mirror cell (their mean)."""
-        behind = np.where(self.seen, np.maximum(wall - self.skin, 0.0), 0.0)
-        pair = self.seen.astype(float) + self.seen[::-1]
-        rim = (behind + behind[::-1]) / np.maximum(pair, 1.0)
-        return wall - np.where(footprint, harmonic_fill(rim, footprint), behind)
-
     def _footprint(self, wall: np.ndarray, side: str, nipple: np.ndarray) -> np.ndarray:
         rises = np.where(self.seen, self.skin - wall, -np.inf) > FOOT_MM
         rises &= self.half(side) & (self.Y < self.cy + UPPER * self.cx)
@@ -330,23 +316,6 @@ def mirror_scale(height: np.ndarray) -> np.ndarray:
     mirror = own[::-1]                                   # the grid and `both` are symmetric: the filter commutes
     rises = mirror > 1e-6
     return np.where(rises, np.clip(own / np.where(rises, mirror, 1.0) / SAME_WITHIN, 0.0, 1.0), 1.0)
-
-
-def harmonic_fill(values: np.ndarray, unknown: np.ndarray) -> np.ndarray:
-    """`values` (nx, ny) with its `unknown` cells replaced by the harmonic interpolation of the others: each
-    the mean of its four neighbours on the grid (fewer at its edges). Every connected part of `unknown`
-    must touch a known cell."""
-    def path(n: int) -> sparse.spmatrix:
-        a = sparse.diags([np.ones(n - 1), np.ones(n - 1)], [-1, 1])
-        return sparse.diags(np.asarray(a.sum(1)).ravel()) - a
-
-    nx, ny = values.shape
-    L = (sparse.kron(path(nx), sparse.identity(ny)) + sparse.kron(sparse.identity(nx), path(ny))).tocsr()
-    u = unknown.ravel()
-    out = np.array(values, float).ravel()
-    if u.any():
-        out[u] = spsolve(L[u][:, u].tocsc(), -(L[u][:, ~u] @ out[~u]))
-    return out.reshape(values.shape)
 
 
 def _median_heights(points: np.ndarray, lo: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

@@ -250,29 +250,3 @@ def test_a_breast_grown_past_its_earlier_footprint_is_measured_on_it_grown_and_m
         before, after = change_on_earlier_wall(earlier, _skin_points(earlier.cells, wall + now), np.eye(4), side)
         assert before == pytest.approx(then[mask].sum() * 25.0 / 1000.0, rel=1e-12), side
         assert after == pytest.approx(now[mask].sum() * 25.0 / 1000.0, rel=1e-12), side
-
-
-def test_a_hole_is_filled_harmonically_a_plane_exactly():
-    """`harmonic_fill`: a linear function of the cell's place is harmonic (each value the mean of its four
-    neighbours), so a hole cut into a plane, away from the grid's edges, is filled with the plane itself;
-    the known cells are left as they are."""
-    from breastplan.plan.breast_volume import harmonic_fill
-
-    i, j = np.meshgrid(np.arange(30), np.arange(20), indexing="ij")
-    plane = 3.0 - 0.7 * i + 1.3 * j
-    hole = ((i - 12) ** 2 / 40.0 + (j - 9) ** 2 / 20.0) < 1.0
-    hole[20:24, 3:6] = True
-    filled = harmonic_fill(np.where(hole, 99.0, plane), hole)
-    assert np.allclose(filled, plane, atol=1e-9)
-
-
-def test_the_wall_lies_behind_her_skin_round_her_breasts_and_her_fold_is_measured_down_to_it():
-    """Off the footprint the wall never lies in front of a seen cell of her skin (a smooth wall passes in
-    front of her inframammary fold, and is let down to it): no seen cell off the footprint stands below 0;
-    and on the footprint, let down by as much as the skin round it lies behind, her skin stands in front
-    of it nearly everywhere."""
-    m = measured(ASYMMETRIC)
-    c = m.cells
-    off = c.seen & ~c.footprint
-    assert c.height_mm[off].min() >= -1e-9
-    assert (c.height_mm[c.footprint & c.seen] >= 0.0).mean() > 0.99
