@@ -1,10 +1,10 @@
 """report.html: a self-contained, offline page of the plan (plotly.js embedded; no request leaves it).
 
-The page draws the torso (grey points), each original breast (dark points) and the planned breast
-(a skin-coloured mesh) superimposed, for a follow-up the breast as fitted at the earlier visit (a
-translucent blue mesh), the landmarks the measures start from (the sternal notch, the midline and
-the nipples found, red), the torso near the breasts coloured by how far the plan moves it, a degree
-slider per planned kind, the combination as planned, front/side/top views, the measures before and
+The page draws her skin (her torso as one shaded, skin-coloured surface, moved near the breasts as
+the state shown plans it), on demand each breast's scanned points and fitted model as planned (from
+the legend), for a follow-up the breast as fitted at the earlier visit (a translucent blue mesh), the
+landmarks the measures start from (the sternal notch, the midline and the nipples found, red), each
+breast's footprint (blue), a degree slider per planned kind, the combination as planned, front/side/top views, the measures before and
 after with the asymmetry between sides, the fits' quality, a follow-up's volume change since the
 earlier scan, and the inputs, options and versions. Geometry travels as base64 typed arrays
 (`views`); a small script decodes it and restyles the plot when a slider moves.
@@ -36,6 +36,10 @@ from .views import State, Views, build_views, quantise
 
 SKIN_RGB = (236, 188, 160)
 SKIN = "rgb({},{},{})".format(*SKIN_RGB)
+LIGHT = tuple(np.array([-0.35, -0.85, 0.4]) / np.linalg.norm([-0.35, -0.85, 0.4]))
+"""Her skin is lit from this direction (display frame: in front of her, above and to the viewer's left)."""
+SHADE = (0.45, 0.55)
+"""A skin colour's share lit by ambient light, and by LIGHT where the surface faces it squarely."""
 SCAN = "#2b2b2b"
 """Colour of a breast's scanned points (before the plan)."""
 LANDMARK = "#c0392b"
@@ -100,18 +104,15 @@ def page_data(plan: Plan, views: Views) -> dict:
     sliders = [{"kind": kind, "requested": degree,
                 "degrees": [st.degree for st in views.states if st.kind == kind]} for kind, degree in plan.options.changes]
     return {"sides": sides, "torso": _points(views.torso), "patch": _points(patch),
+            "skin_faces": {"faces": _b64(views.skin, "<i4"), "m": int(len(views.skin))},
             "scans": {s: _points(views.scans[s]) for s in sides},
             "meshes": {s: _mesh(*views.meshes[s]) for s in sides},
             "earlier": {s: _mesh(*views.earlier[s]) for s in views.earlier},
             "landmarks": {k: v.round(2).tolist() for k, v in views.landmarks.items()},
             "footprints": {s: v.round(2).tolist() for s, v in views.footprints.items()},
-            "states": states, "sliders": sliders, "cmax": cmax(views), "first": first_state(plan, views).key,
-            "skin": SKIN, "scan": SCAN, "landmark": LANDMARK, "footprint": FOOTPRINT}
-
-
-def cmax(views: Views) -> float:
-    """The top of the colour scale of the moved surface, mm: its largest move, at least 1."""
-    return max([1.0] + [float(np.linalg.norm(st.torso - views.patch, axis=1).max(initial=0.0)) for st in views.states])
+            "states": states, "sliders": sliders, "first": first_state(plan, views).key,
+            "skin": SKIN, "skin_rgb": list(SKIN_RGB), "light": list(LIGHT), "shade": list(SHADE),
+            "scan": SCAN, "landmark": LANDMARK, "footprint": FOOTPRINT}
 
 
 def first_state(plan: Plan, views: Views) -> State:
@@ -119,11 +120,9 @@ def first_state(plan: Plan, views: Views) -> State:
     return next(st for st in views.states if st.key == plan.shown.key)
 
 
-def poster_png(views: Views, state: State, top: float) -> bytes:
-    """PNG (POSTER_PX) of `state` seen from the front (x right, z up, equal mm scales): the torso grey,
-    the surface the plan moves coloured by how far (viridis, 0..`top` mm), each scanned breast dark
-    and each planned breast a shaded skin-coloured surface over it, the landmarks red, each breast's
-    footprint blue."""
+def poster_png(views: Views, state: State) -> bytes:
+    """PNG (POSTER_PX) of `state` seen from the front (x right, z up, equal mm scales): her skin a shaded
+    skin-coloured surface, moved as `state` plans, the landmarks red, each breast's footprint blue."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -132,13 +131,7 @@ def poster_png(views: Views, state: State, top: float) -> bytes:
     FigureCanvasAgg(fig)
     ax = fig.add_axes((0.01, 0.01, 0.98, 0.98))
     ax.set_axis_off()
-    ax.scatter(views.torso[:, 0], views.torso[:, 2], s=3.0, c="#b9b9b9", linewidths=0)
-    moved = np.linalg.norm(state.torso - views.patch, axis=1)
-    ax.scatter(state.torso[:, 0], state.torso[:, 2], s=5.0, c=moved, cmap="viridis", vmin=0.0, vmax=top,
-               linewidths=0)
-    for side, scan in views.scans.items():
-        ax.scatter(scan[:, 0], scan[:, 2], s=3.0, c=SCAN, linewidths=0)
-        ax.add_collection(_surface(state.mesh[side], views.meshes[side][1]))
+    ax.add_collection(_surface(np.concatenate([views.torso, state.torso]), views.skin))
     marks = views.landmarks
     ax.plot(marks["midline"][:, 0], marks["midline"][:, 2], "--", color=LANDMARK, linewidth=1.5)
     ax.scatter(*marks["sternal notch"][:, [0, 2]].T, s=30.0, c=LANDMARK)
@@ -153,16 +146,16 @@ def poster_png(views: Views, state: State, top: float) -> bytes:
 
 
 def _surface(vertices: np.ndarray, faces: np.ndarray):
-    """The mesh's triangles seen from the front, far ones first, lit from the viewer (−y)."""
+    """The mesh's triangles seen from the front, far ones first, skin-coloured, lit from LIGHT as the page lights them."""
     from matplotlib.collections import PolyCollection
 
     tri = vertices[faces]                                                   # (F, 3 corners, xyz) mm
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    facing = np.abs(normal[:, 1]) / np.maximum(np.linalg.norm(normal, axis=1), 1e-12)
-    light = (0.45 + 0.55 * facing)[:, None]
+    facing = np.abs(normal @ LIGHT) / np.maximum(np.linalg.norm(normal, axis=1), 1e-12)
+    light = (SHADE[0] + SHADE[1] * facing)[:, None]
     order = np.argsort(-tri[:, :, 1].mean(axis=1))
     return PolyCollection(tri[order][:, :, [0, 2]], facecolors=np.array(SKIN_RGB) / 255 * light[order],
-                          edgecolors="none", antialiased=False, alpha=0.8)
+                          edgecolors="none", antialiased=False)
 
 
 def _table(head: list[str], rows: list[list], cls: str = "") -> str:
@@ -183,7 +176,7 @@ def render(plan: Plan) -> str:
 
     views = build_views(plan)
     data = page_data(plan, views)
-    poster = poster_png(views, first_state(plan, views), data["cmax"])
+    poster = poster_png(views, first_state(plan, views))
     parts = {"TITLE": TITLE, "POSTER": base64.b64encode(poster).decode("ascii"), "TABLES": tables(plan),
              "SCRIPT": _SCRIPT, "PLOTLY": get_plotlyjs(),
              "DATA": json.dumps(data, separators=(",", ":")).replace("</", "<\\/")}
@@ -321,7 +314,7 @@ td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4p
 <div id="sliders"></div>
 <div><b>Show</b><br><button id="original">Original</button><button id="combined">Combined, as planned</button></div>
 <p id="state"></p>
-<p>Dark points: the scan of the breast. Skin-coloured surface: the planned breast. Coloured points: how far the plan moves the patient's surface (mm). Red: the sternal notch, the midline and the nipples the measures start from. Blue: each breast's footprint, the outline her volume is measured inside.</p>
+<p>Her skin as scanned, moved as the plan shown would move it. Red: the sternal notch, the midline and the nipples the measures start from. Blue: each breast's footprint, the outline her volume is measured inside. The legend shows each breast's scanned points and its fitted model on demand.</p>
 </div></main>
 <div id="tables">%TABLES%</div>
 <script>%SCRIPT%</script>
@@ -335,8 +328,8 @@ _SCRIPT = r"""
 function b64(s, T){const b=atob(s);const u=new Uint8Array(b.length);for(let i=0;i<b.length;i++)u[i]=b.charCodeAt(i);return new T(u.buffer);}
 function split(f,n,T){T=T||Float32Array;const x=new T(n),y=new T(n),z=new T(n);for(let i=0;i<n;i++){x[i]=f[3*i];y[i]=f[3*i+1];z[i]=f[3*i+2];}return [x,y,z];}
 function pts(p){return split(b64(p.xyz,Float32Array),p.n);}
-function moved(base,n,d){const q=b64(d.d,Int8Array);const f=new Float32Array(3*n);let m=new Float32Array(n);
- for(let i=0;i<n;i++){let s=0;for(let k=0;k<3;k++){const v=q[3*i+k]*d.scale;f[3*i+k]=base[3*i+k]+v;s+=v*v;}m[i]=Math.sqrt(s);}return [split(f,n),m];}
+function moved(base,n,d){const q=b64(d.d,Int8Array);const f=new Float32Array(3*n);   // base + the int8 displacement
+ for(let i=0;i<3*n;i++)f[i]=base[i]+q[i]*d.scale;return split(f,n);}
 const painted=()=>new Promise(r=>requestAnimationFrame(()=>setTimeout(r,0)));   // after the next frame is painted
 const shown=document.querySelector('#poster img').decode().catch(()=>{}).then(painted)
  .then(()=>{window.breastplanShown=true;performance.mark('breastplan-shown');});   // poster and tables painted
@@ -348,21 +341,34 @@ Promise.all([shown,loaded]).then(()=>{
 });
 function draw(P){
 const traces=[], idx={};
-const torso=pts(P.torso);
-traces.push({type:'scatter3d',mode:'markers',name:'torso',x:torso[0],y:torso[1],z:torso[2],marker:{size:1.4,color:'#b9b9b9'},hoverinfo:'skip'});
+const still=pts(P.torso), nT=P.torso.n, nP=P.patch.n;
 const patchBase=b64(P.patch.xyz,Float32Array);
-idx.patch=traces.length;
-traces.push({type:'scatter3d',mode:'markers',name:'moved surface',
- marker:{size:1.8,colorscale:'Viridis',cmin:0,cmax:P.cmax,colorbar:{title:{text:'mm'},len:0.5,x:0.98}},hovertemplate:'%{marker.color:.1f} mm<extra></extra>'});
+const sf=split(b64(P.skin_faces.faces,Int32Array),P.skin_faces.m,Int32Array);
+idx.skin=traces.length;
+traces.push({type:'mesh3d',name:'her skin',i:sf[0],j:sf[1],k:sf[2],showlegend:true,
+ lighting:{ambient:1,diffuse:0,specular:0,fresnel:0},hoverinfo:'skip'});   // lit here (shade), the same in every renderer
+const LIGHT=P.light;
+function shade(x,y,z){   // vertex colours: her skin lit from LIGHT (either side of the surface), as the poster is
+ const n=x.length,N=new Float32Array(3*n);
+ for(let f=0;f<sf[0].length;f++){const a=sf[0][f],b=sf[1][f],c=sf[2][f];
+  const ux=x[b]-x[a],uy=y[b]-y[a],uz=z[b]-z[a],vx=x[c]-x[a],vy=y[c]-y[a],vz=z[c]-z[a];
+  const nx=uy*vz-uz*vy,ny=uz*vx-ux*vz,nz=ux*vy-uy*vx;
+  for(const v of [a,b,c]){N[3*v]+=nx;N[3*v+1]+=ny;N[3*v+2]+=nz;}}
+ const out=new Array(n);
+ for(let v=0;v<n;v++){const l=Math.hypot(N[3*v],N[3*v+1],N[3*v+2])||1;
+  const k=P.shade[0]+P.shade[1]*Math.abs(N[3*v]*LIGHT[0]+N[3*v+1]*LIGHT[1]+N[3*v+2]*LIGHT[2])/l;
+  out[v]='rgb('+P.skin_rgb.map(c=>Math.round(c*k)).join(',')+')';}
+ return out;}
 const meshBase={};
 for(const s of P.sides){
  const sc=pts(P.scans[s]);
- traces.push({type:'scatter3d',mode:'markers',name:s+' breast (scan)',x:sc[0],y:sc[1],z:sc[2],marker:{size:1.6,color:P.scan},hoverinfo:'skip'});
+ traces.push({type:'scatter3d',mode:'markers',name:s+' breast (scan)',x:sc[0],y:sc[1],z:sc[2],visible:'legendonly',
+  marker:{size:1.6,color:P.scan},hoverinfo:'skip'});
  const m=P.meshes[s]; meshBase[s]=b64(m.xyz,Float32Array);
  const f=split(b64(m.faces,Int32Array),m.m,Int32Array);
  idx[s]=traces.length;
- traces.push({type:'mesh3d',name:s+' breast (planned)',i:f[0],j:f[1],k:f[2],color:P.skin,opacity:0.8,showlegend:true,
-  flatshading:false,lighting:{ambient:0.55,diffuse:0.7,specular:0.15},hoverinfo:'skip'});
+ traces.push({type:'mesh3d',name:s+' breast (model)',i:f[0],j:f[1],k:f[2],color:'#8fa8c8',opacity:0.6,showlegend:true,
+  visible:'legendonly',flatshading:false,lighting:{ambient:0.55,diffuse:0.7,specular:0.15},hoverinfo:'skip'});
 }
 for(const s of Object.keys(P.earlier)){   // a follow-up: the breast as fitted at the earlier visit
  const m=P.earlier[s];const v=pts(m);const f=split(b64(m.faces,Int32Array),m.m,Int32Array);
@@ -387,21 +393,21 @@ const views={front:{eye:{x:0,y:-1.9,z:0.15},up:{x:0,y:0,z:1}},side:{eye:{x:1.9,y
 const layout={margin:{l:0,r:0,t:0,b:0},showlegend:true,legend:{x:0,y:1},hovermode:false,   // the legend beside the body, not over it
  scene:{domain:{x:[0.26,1],y:[0,1]},aspectmode:'data',xaxis:{visible:false},yaxis:{visible:false},zaxis:{visible:false},camera:views.front}};
 const gd=document.getElementById('plot');
-function arrays(state){   // the moving traces' coordinates (and the surface's colours) in `state`; null: the original
- const upd={x:[],y:[],z:[],'marker.color':[]};
- const [pos,col]=state?moved(patchBase,P.patch.n,state.torso):[split(patchBase,P.patch.n),new Float32Array(P.patch.n)];
- upd.x.push(pos[0]);upd.y.push(pos[1]);upd.z.push(pos[2]);upd['marker.color'].push(col);
- for(const s of P.sides){const v=state?moved(meshBase[s],P.meshes[s].n,state.mesh[s])[0]:split(meshBase[s],P.meshes[s].n);
-  upd.x.push(v[0]);upd.y.push(v[1]);upd.z.push(v[2]);upd['marker.color'].push(undefined);}
+function arrays(state){   // the moving traces' coordinates in `state`; null: the original
+ const upd={x:[],y:[],z:[]};
+ const pos=state?moved(patchBase,nP,state.torso):split(patchBase,nP);
+ for(let a=0;a<3;a++){const o=new Float32Array(nT+nP);o.set(still[a]);o.set(pos[a],nT);upd['xyz'[a]].push(o);}
+ for(const s of P.sides){const v=state?moved(meshBase[s],P.meshes[s].n,state.mesh[s]):split(meshBase[s],P.meshes[s].n);
+  upd.x.push(v[0]);upd.y.push(v[1]);upd.z.push(v[2]);}
  return upd;
 }
-const ids=[idx.patch].concat(P.sides.map(s=>idx[s]));
+const ids=[idx.skin].concat(P.sides.map(s=>idx[s]));
 function label(state){
  window.breastplanState=state?state.key:'original';
  document.getElementById('state').textContent='Showing: '+(state?(state.kind?state.kind+', degree '+state.degree:'all planned changes combined'):'the original breasts');
 }
-function put(upd){ids.forEach((t,n)=>{traces[t]=Object.assign({},traces[t],{x:upd.x[n],y:upd.y[n],z:upd.z[n]});
- if(upd['marker.color'][n])traces[t].marker=Object.assign({},traces[t].marker,{color:upd['marker.color'][n]});});}
+function put(upd){ids.forEach((t,n)=>{traces[t]=Object.assign({},traces[t],{x:upd.x[n],y:upd.y[n],z:upd.z[n]});});
+ traces[idx.skin].vertexcolor=shade(upd.x[0],upd.y[0],upd.z[0]);}
 function show(state){label(state);put(arrays(state));const key=window.breastplanState;
  return Plotly.react(gd,traces,gd.layout).then(()=>{window.breastplanDrawn=key;});}
 const byKey={};for(const st of P.states)byKey[st.key]=st;

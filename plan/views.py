@@ -2,25 +2,32 @@
 breast), and every planned state.
 
 All in the display frame (x to the image's right, y away from the viewer, z up; mm), from the
-scan's viewing frame (x right, y down, z away). A state is one of the plan's states
-(`plan.result.PlanState`: the degrees 1..8 of every requested kind and the requested degrees, or the
-combination as planned), drawn: the planned breast meshes and the moved torso points near the breasts, each stored as a
-displacement from the original, quantised to int8 with its own scale (at most 1/254 of the
-largest displacement: well under a millimetre), so a report of some thirty states stays small.
+scan's viewing frame (x right, y down, z away). Her torso is drawn as one triangle surface
+(`skin_triangles`) through the centroids of its points in TORSO_MM cubes; its points near the breasts
+(the patch) move with the plan. A state is one of the plan's states (`plan.result.PlanState`: the
+degrees 1..8 of every requested kind and the requested degrees, or the combination as planned),
+drawn: the planned breast meshes and the moved patch, each stored as a displacement from the
+original, quantised to int8 with its own scale (at most 1/254 of the largest displacement: well
+under a millimetre), so a report of some thirty states stays small.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import Delaunay
 
 from breastplan import transform_points
+from breastplan.ingest.cloud import voxel_downsample
 
 from .measures import midline_profile
 from .result import Plan, PlanState
 
-TORSO_POINTS = 12_000
-"""At most this many torso points are drawn (a seeded subsample)."""
+TORSO_MM = 5.0
+"""Her torso is drawn through the centroids of its points in cubes of this side (mm)."""
+GAP_MM = 20.0
+"""A triangle of her drawn skin with an edge longer than this would span a gap the camera did not see
+across (an occluding edge, the side of her body): it is left out."""
 VIEW_TO_DISPLAY = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])
 """Viewing frame (y down, z away) → display frame (y away, z up)."""
 MIDLINE_MM = (60.0, -350.0)
@@ -47,6 +54,7 @@ FOOTPRINT_LIFT_MM = 4.0
 class Views:
     torso: np.ndarray                   # (T, 3) torso points drawn still
     patch: np.ndarray                   # (P, 3) torso points near the breasts (they move)
+    skin: np.ndarray                    # (F, 3) her skin's triangles over the torso points then the patch's
     scans: dict[str, np.ndarray]        # side → (N, 3) scan points
     meshes: dict[str, tuple[np.ndarray, np.ndarray]]   # side → fitted (V, 3), (F, 3)
     states: list[State]
@@ -59,16 +67,16 @@ class Views:
 def build_views(plan: Plan) -> Views:
     """Every state of the plan in the display frame."""
     to_display = VIEW_TO_DISPLAY @ plan.body.input_to_view                  # input frame → display frame
-    torso_in = plan.body.torso_input
-    keep = np.random.default_rng(0).permutation(len(torso_in))[:TORSO_POINTS]
-    torso_in = torso_in[np.sort(keep)]
+    torso_in = voxel_downsample(np.asarray(plan.body.torso_input, float), TORSO_MM)
     near = np.zeros(len(torso_in), bool)
     for planned in plan.changes[0].planned.values():
         near |= planned.weights(torso_in) > 0
     patch_in = torso_in[near]
     show = lambda p: transform_points(to_display, p)  # noqa: E731
     meshes = {s: (show(sp.surface_input), sp.fit.faces) for s, sp in plan.sides.items()}
+    drawn = np.concatenate([torso_in[~near], patch_in])
     return Views(torso=show(torso_in[~near]), patch=show(patch_in),
+                 skin=skin_triangles(transform_points(plan.body.input_to_view, drawn)),
                  scans={s: show(transform_points(sp.frames.breast_to_input, sp.scan.points))
                         for s, sp in plan.sides.items()},
                  meshes=meshes, states=[_state(plan, st, patch_in, show) for st in plan.states],
@@ -77,6 +85,20 @@ def build_views(plan: Plan) -> Views:
                  landmarks=_landmarks(plan, show),
                  footprints={s: show(v.footprint_input_mm + FOOTPRINT_LIFT_MM * plan.volumes.landmarks.anterior_axis)
                              for s, v in plan.volumes.sides.items()})
+
+
+def skin_triangles(points_view: np.ndarray) -> np.ndarray:
+    """(F, 3) vertex indices of a triangle surface over points one camera saw (its viewing frame: z away
+    from it, mm): the Delaunay triangulation of their directions from the camera (x/z, y/z), each
+    triangle wound so that its normal (right-handed) faces the camera, without those with an edge over GAP_MM."""
+    uv = points_view[:, :2] / points_view[:, 2:]
+    faces = Delaunay(uv).simplices
+    a, b, c = (uv[faces[:, k]] for k in range(3))
+    away = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]) > 0
+    faces[away] = faces[away][:, ::-1]
+    tri = points_view[faces]
+    longest = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
+    return faces[longest <= GAP_MM].astype(np.int64)
 
 
 def _landmarks(plan: Plan, show) -> dict[str, np.ndarray]:
