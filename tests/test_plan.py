@@ -505,7 +505,6 @@ def test_the_report_opens_on_a_picture_of_the_plan_and_its_measures_without_any_
             box = b.rect("#poster img")
             assert (box[2] - box[0], box[3] - box[1]) == (760, 640) and box[3] <= b.height
             poster = _plot_pixels(b.screenshot(tmp_path / "poster.png"), box)
-            r, g, bl = poster[..., 0], poster[..., 1], poster[..., 2]
             assert len(np.unique(poster.reshape(-1, 3), axis=0)) > 200        # a picture, not a blank image
             assert _skin_share(poster) > 0.9                                   # her skin, shaded: no grey, no dots
             assert b.js("document.querySelector('h1').innerText") == "breastplan — surgical plan"
