@@ -4,8 +4,8 @@ The page draws her skin (her torso as one shaded, skin-coloured surface, moved n
 the state shown plans it), on demand each breast's scanned points and fitted model as planned (from
 the legend), for a follow-up the breast as fitted at the earlier visit (a translucent blue mesh), the
 landmarks the measures start from (the sternal notch, the midline and the nipples found, red), each
-breast's footprint (blue), a degree slider per planned kind, the combination as planned, front/side/top views, the measures before and
-after with the asymmetry between sides, the fits' quality, a follow-up's volume change since the
+breast's footprint (blue), a degree slider per planned kind, the combination as planned,
+front/side/top views, the measures before and after with the asymmetry between sides, the fits' quality, a follow-up's volume change since the
 earlier scan, and the inputs, options and versions. Geometry travels as base64 typed arrays
 (`views`); a small script decodes it and restyles the plot when a slider moves.
 
@@ -35,13 +35,14 @@ from .result import Plan
 from .views import State, Views, build_views, quantise
 
 SKIN_RGB = (236, 188, 160)
-SKIN = "rgb({},{},{})".format(*SKIN_RGB)
 LIGHT = tuple(np.array([-0.35, -0.85, 0.4]) / np.linalg.norm([-0.35, -0.85, 0.4]))
 """Her skin is lit from this direction (display frame: in front of her, above and to the viewer's left)."""
 SHADE = (0.45, 0.55)
 """A skin colour's share lit by ambient light, and by LIGHT where the surface faces it squarely."""
 SCAN = "#2b2b2b"
 """Colour of a breast's scanned points (before the plan)."""
+MODEL = "#8fa8c8"
+"""Colour of a breast's fitted model as planned (shown on demand, translucent, over her skin)."""
 LANDMARK = "#c0392b"
 """The colour of the landmarks the measures start from: sternal notch, midline, the nipples found."""
 FOOTPRINT = "#1f5fbf"
@@ -111,8 +112,8 @@ def page_data(plan: Plan, views: Views) -> dict:
             "landmarks": {k: v.round(2).tolist() for k, v in views.landmarks.items()},
             "footprints": {s: v.round(2).tolist() for s, v in views.footprints.items()},
             "states": states, "sliders": sliders, "first": first_state(plan, views).key,
-            "skin": SKIN, "skin_rgb": list(SKIN_RGB), "light": list(LIGHT), "shade": list(SHADE),
-            "scan": SCAN, "landmark": LANDMARK, "footprint": FOOTPRINT}
+            "skin_rgb": list(SKIN_RGB), "light": list(LIGHT), "shade": list(SHADE),
+            "scan": SCAN, "model": MODEL, "landmark": LANDMARK, "footprint": FOOTPRINT}
 
 
 def first_state(plan: Plan, views: Views) -> State:
@@ -146,7 +147,8 @@ def poster_png(views: Views, state: State) -> bytes:
 
 
 def _surface(vertices: np.ndarray, faces: np.ndarray):
-    """The mesh's triangles seen from the front, far ones first, skin-coloured, lit from LIGHT as the page lights them."""
+    """The mesh's triangles seen from the front, far ones first, skin-coloured, lit from LIGHT as the
+    page lights them."""
     from matplotlib.collections import PolyCollection
 
     tri = vertices[faces]                                                   # (F, 3 corners, xyz) mm
@@ -367,7 +369,7 @@ for(const s of P.sides){
  const m=P.meshes[s]; meshBase[s]=b64(m.xyz,Float32Array);
  const f=split(b64(m.faces,Int32Array),m.m,Int32Array);
  idx[s]=traces.length;
- traces.push({type:'mesh3d',name:s+' breast (model)',i:f[0],j:f[1],k:f[2],color:'#8fa8c8',opacity:0.6,showlegend:true,
+ traces.push({type:'mesh3d',name:s+' breast (model)',i:f[0],j:f[1],k:f[2],color:P.model,opacity:0.6,showlegend:true,
   visible:'legendonly',flatshading:false,lighting:{ambient:0.55,diffuse:0.7,specular:0.15},hoverinfo:'skip'});
 }
 for(const s of Object.keys(P.earlier)){   // a follow-up: the breast as fitted at the earlier visit

@@ -90,7 +90,8 @@ def build_views(plan: Plan) -> Views:
 def skin_triangles(points_view: np.ndarray) -> np.ndarray:
     """(F, 3) vertex indices of a triangle surface over points one camera saw (its viewing frame: z away
     from it, mm): the Delaunay triangulation of their directions from the camera (x/z, y/z), each
-    triangle wound so that its normal (right-handed) faces the camera, without those with an edge over GAP_MM."""
+    triangle wound so that its normal (right-handed) faces the camera, without those with an edge over
+    GAP_MM."""
     uv = points_view[:, :2] / points_view[:, 2:]
     faces = Delaunay(uv).simplices
     a, b, c = (uv[faces[:, k]] for k in range(3))
