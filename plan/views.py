@@ -71,11 +71,11 @@ def build_views(plan: Plan) -> Views:
     near = np.zeros(len(torso_in), bool)
     for planned in plan.changes[0].planned.values():
         near |= planned.weights(torso_in) > 0
-    patch_in = torso_in[near]
+    still_in, patch_in = torso_in[~near], torso_in[near]
     show = lambda p: transform_points(to_display, p)  # noqa: E731
     meshes = {s: (show(sp.surface_input), sp.fit.faces) for s, sp in plan.sides.items()}
-    drawn = np.concatenate([torso_in[~near], patch_in])
-    return Views(torso=show(torso_in[~near]), patch=show(patch_in),
+    drawn = np.concatenate([still_in, patch_in])
+    return Views(torso=show(still_in), patch=show(patch_in),
                  skin=skin_triangles(transform_points(plan.body.input_to_view, drawn)),
                  scans={s: show(transform_points(sp.frames.breast_to_input, sp.scan.points))
                         for s, sp in plan.sides.items()},

@@ -34,12 +34,12 @@ NIPPLE_MM = 2.0
 SAME_MM = 1.0
 """How far the same body's breast may move between two frames of its scan (voxels fall differently)."""
 WIDTH_MM = 1.0
+"""How far `width_mm` may lie from the outline's extent computed here (the breast frame's normal is the
+chest wall's at the breast, this test's the outline's plane's: they differ by a degree or two)."""
 MODEL_REL, MODEL_MM = 0.05, 3.0
 """How far the fitted model's width and volume, and its surface's centre, may move between two frames of one
 scan: its fit is not continuous in her points (points moved by 1e-5 mm move the width by up to 8 mm, 4 %,
 and the surface's centre by 2.3 mm); the nipple, found on her points, stays within SAME_MM."""
-"""How far `width_mm` may lie from the outline's extent computed here (the breast frame's normal is the
-chest wall's at the breast, this test's the outline's plane's: they differ by a degree or two)."""
 FRAMES = {"mm +y": ("mm", "+y"), "m +x": ("m", "+x")}
 
 
