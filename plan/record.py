@@ -29,6 +29,7 @@ def write_plan(plan: Plan, folder: Path) -> dict:
     plan.json record."""
     from .report import render
     from .summary import summary_png
+    from .views import build_views
 
     with atomic_set() as stage:             # the changes, the torso, the report and plan.json: all or nothing
         sides = {}
@@ -51,8 +52,9 @@ def write_plan(plan: Plan, folder: Path) -> dict:
             write_ply(stage(folder / name), moved, comments=[
                 f"breastplan plan: {state.key}, the torso with the planned change, input frame, mm"])
             torso_files[state.key] = name
-        Path(stage(folder / Case.REPORT)).write_bytes(utf8(render(plan)))
-        summary_png(plan, stage(folder / SUMMARY))
+        views = build_views(plan)
+        Path(stage(folder / Case.REPORT)).write_bytes(utf8(render(plan, views)))
+        summary_png(plan, views, stage(folder / SUMMARY))
         Path(stage(folder / Case.PLAN_JSON)).write_text(to_json(record, indent=1), encoding="utf-8")
     _remove_earlier_plans(folder, record)
     return record

@@ -31,22 +31,14 @@ from breastplan.fitting.ffd import STOP_RESIDUAL
 from .breast_volume import model_differs_much
 from .changes import short_of
 from .measures import measure_label
+from .pictures import FOOTPRINT, LANDMARK, LIGHT, SHADE, SKIN_RGB, VIEWS, camera, picture
 from .result import Plan
-from .views import State, Views, build_views, quantise
+from .views import State, Views, quantise
 
-SKIN_RGB = (236, 188, 160)
-LIGHT = tuple(np.array([-0.35, -0.85, 0.4]) / np.linalg.norm([-0.35, -0.85, 0.4]))
-"""Her skin is lit from this direction (display frame: in front of her, above and to the viewer's left)."""
-SHADE = (0.45, 0.55)
-"""A skin colour's share lit by ambient light, and by LIGHT where the surface faces it squarely."""
 SCAN = "#2b2b2b"
 """Colour of a breast's scanned points (before the plan)."""
 MODEL = "#8fa8c8"
 """Colour of a breast's fitted model as planned (shown on demand, translucent, over her skin)."""
-LANDMARK = "#c0392b"
-"""The colour of the landmarks the measures start from: sternal notch, midline, the nipples found."""
-FOOTPRINT = "#1f5fbf"
-"""The colour of each breast's footprint, the outline her volume is measured inside."""
 UP_FROM_TEXT = {
     "wall": "Up (which divides the poles and gives the drop below the notch) is the vertical of the wall "
             "seen behind her.",
@@ -122,42 +114,12 @@ def first_state(plan: Plan, views: Views) -> State:
 
 
 def poster_png(views: Views, state: State) -> bytes:
-    """PNG (POSTER_PX) of `state` seen from the front (x right, z up, equal mm scales): her skin a shaded
-    skin-coloured surface, moved as `state` plans, the landmarks red, each breast's footprint blue."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    width, height = POSTER_PX
-    fig = Figure(figsize=(width / 100, height / 100), dpi=100, facecolor="white")
-    FigureCanvasAgg(fig)
-    ax = fig.add_axes((0.01, 0.01, 0.98, 0.98))
-    ax.set_axis_off()
-    ax.add_collection(_surface(np.concatenate([views.torso, state.torso]), views.skin))
-    marks = views.landmarks
-    ax.plot(marks["midline"][:, 0], marks["midline"][:, 2], "--", color=LANDMARK, linewidth=1.5)
-    ax.scatter(*marks["sternal notch"][:, [0, 2]].T, s=30.0, c=LANDMARK)
-    ax.scatter(*marks["nipples"][:, [0, 2]].T, s=24.0, c=LANDMARK, marker="D")
-    for outline in views.footprints.values():
-        ax.plot(outline[:, 0], outline[:, 2], color=FOOTPRINT, linewidth=1.5)
-    ax.set_aspect("equal")
-    ax.autoscale_view()
+    """PNG (POSTER_PX) of `state` seen from the front: her skin moved as `state` plans, the landmarks red,
+    each breast's footprint blue, her sides named (`plan.pictures`)."""
+    image = picture(views, state, camera(views, [state], VIEWS["front"], POSTER_PX))
     out = io.BytesIO()
-    fig.savefig(out, format="png", pil_kwargs={"compress_level": 3})
+    image.save(out, format="PNG", compress_level=3)
     return out.getvalue()
-
-
-def _surface(vertices: np.ndarray, faces: np.ndarray):
-    """The mesh's triangles seen from the front, far ones first, skin-coloured, lit from LIGHT as the
-    page lights them."""
-    from matplotlib.collections import PolyCollection
-
-    tri = vertices[faces]                                                   # (F, 3 corners, xyz) mm
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    facing = np.abs(normal @ LIGHT) / np.maximum(np.linalg.norm(normal, axis=1), 1e-12)
-    light = (SHADE[0] + SHADE[1] * facing)[:, None]
-    order = np.argsort(-tri[:, :, 1].mean(axis=1))
-    return PolyCollection(tri[order][:, :, [0, 2]], facecolors=np.array(SKIN_RGB) / 255 * light[order],
-                          edgecolors="none", antialiased=False)
 
 
 def _table(head: list[str], rows: list[list], cls: str = "") -> str:
@@ -172,11 +134,10 @@ def _fmt(v) -> str:
     return "—" if v is None else str(v)
 
 
-def render(plan: Plan) -> str:
-    """The page's HTML for a plan."""
+def render(plan: Plan, views: Views) -> str:
+    """The page's HTML for a plan drawn as `views` (`plan.views.build_views`)."""
     from plotly.offline import get_plotlyjs
 
-    views = build_views(plan)
     data = page_data(plan, views)
     poster = poster_png(views, first_state(plan, views))
     parts = {"TITLE": TITLE, "POSTER": base64.b64encode(poster).decode("ascii"), "TABLES": tables(plan),

@@ -11,9 +11,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from hypothesis import given, settings
+from hypothesis import strategies as st
 from matplotlib.path import Path as MplPath
 from scipy.spatial import cKDTree
-from hypothesis import strategies as st
 
 import reference_model as ref
 from browser import chromium, requires_chromium
@@ -617,25 +617,6 @@ def test_a_plan_removes_the_build_folders_of_killed_plans_and_no_other(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == [".case.plan-89abcdef", ".cases.plan-00000000", "case"]
 
 
-@settings(max_examples=30, deadline=None)
-@given(radius=st.floats(15.0, 80.0), hole=st.floats(0.0, 0.6), centre=st.tuples(st.floats(-500, 500), st.floats(-500, 500)))
-def test_summary_outline_covers_a_sampled_disc_and_fills_its_hole(radius, hole, centre):
-    """summary.png's outline of points 1 mm apart over a disc (with a hole in it, as a view of a breast
-    can leave) covers the disc: its area is πr² within a cell's width around the rim."""
-    from breastplan.plan.summary import CELL_MM, outline
-
-    g = np.arange(-radius, radius + 1.0, 1.0)
-    xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
-    r = np.linalg.norm(xy, axis=1)
-    xy = xy[(r <= radius) & (r >= hole * radius)] + centre
-    x, y, occupied = outline(xy)
-    assert occupied.shape == (len(y), len(x)) and set(np.unique(occupied)) <= {0.0, 1.0}
-    area = occupied.sum() * CELL_MM**2
-    assert abs(area - np.pi * radius**2) <= 2 * np.pi * radius * CELL_MM
-    inside = occupied[np.searchsorted(y, centre[1]), np.searchsorted(x, centre[0])]
-    assert inside == 1.0                                                    # the hole is filled
-
-
 def test_a_case_whose_sides_are_two_womens_is_refused(planned, cli, tmp_path):
     """Her left breast from the sample, a right breast ingested from another woman's scan file beside it:
     the case is refused before anything is fitted or written, naming it."""
@@ -648,3 +629,35 @@ def test_a_case_whose_sides_are_two_womens_is_refused(planned, cli, tmp_path):
     assert_bad_input(res, case, tmp_path)
     assert "different recordings" in res.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["case", "other.ply"]
+
+
+def test_summary_shows_her_torso_before_and_as_planned_with_her_left_on_the_pictures_right(planned, tmp_path):
+    """summary.png of a plan of her left breast alone: from her right oblique, the front and her left oblique,
+    her skin before (top row) and as planned (bottom row), framed alike; each picture as planned differs from
+    the one above it visibly, and only right of her midline: her left, on the picture's right from the
+    front and either oblique (not the viewer's left)."""
+    from PIL import Image
+
+    from breastplan.options import PlanOptions
+    from breastplan.plan.job import run_plan
+    from breastplan.plan.pictures import camera
+    from breastplan.plan.summary import HEAD_PX, LABEL_PX, PICTURE_PX, VIEWS
+    from breastplan.plan.views import build_views
+
+    copy = tmp_path / "case"
+    shutil.copytree(planned[0], copy)
+    plan = run_plan(copy, copy, PlanOptions.parse(list(CHANGES), side="both"))
+    left_only = run_plan(copy, tmp_path / "left", PlanOptions.parse(list(CHANGES), side="left"))
+    views = build_views(plan)
+    page = np.asarray(Image.open(tmp_path / "left" / "summary.png").convert("RGB")).astype(int)
+    w, h = PICTURE_PX
+    assert page.shape[1] == LABEL_PX + len(VIEWS) * w and page.shape[0] > HEAD_PX + 2 * h
+    for i, azimuth in enumerate(VIEWS.values()):
+        x = LABEL_PX + i * w
+        before, after = page[HEAD_PX:HEAD_PX + h, x:x + w], page[HEAD_PX + h:HEAD_PX + 2 * h, x:x + w]
+        assert _skin_share(before) > 0.9 and _skin_share(after) > 0.9
+        changed = np.abs(before - after).sum(axis=2) > 24
+        midline = camera(views, [views.states[-1]], azimuth, PICTURE_PX).project(views.landmarks["midline"])[0][:, 0]
+        assert changed.sum() > 300, azimuth
+        assert np.nonzero(changed)[1].min() > np.median(midline), azimuth
+    assert left_only.sides.keys() == {"left"}

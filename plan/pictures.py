@@ -1,0 +1,97 @@
+"""Pictures of her (PIL images, drawn off-screen by `plan.raster`): her skin in one plan state from one of
+the standard views, with the landmarks, each breast's footprint and her sides marked on it.
+
+Frames: the display frame of `plan.views` (x to her left, y away from a viewer in front of her, z up; mm).
+"""
+from __future__ import annotations
+
+import importlib.util
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw, ImageFont
+
+from . import raster
+from .views import State, Views
+
+SKIN_RGB = (236, 188, 160)
+LIGHT = tuple(np.array([-0.35, -0.85, 0.4]) / np.linalg.norm([-0.35, -0.85, 0.4]))
+"""Her skin is lit from this direction (display frame, seen from the front: in front of her, above and to
+the viewer's left); a picture from another view turns the light with its camera."""
+SHADE = (0.45, 0.55)
+"""A skin colour's share lit by ambient light, and by LIGHT where the surface faces it squarely."""
+LANDMARK = "#c0392b"
+"""The colour of the landmarks the measures start from: sternal notch, midline, the nipples found."""
+FOOTPRINT = "#1f5fbf"
+"""The colour of each breast's footprint, the outline her volume is measured inside."""
+VIEWS = {"front": 0.0, "her left oblique": 45.0, "her left side": 90.0, "her right oblique": -45.0,
+         "her right side": -90.0}
+"""The standard views a surgeon photographs, and the azimuth of each about her vertical axis (degrees; +: the
+camera towards her left)."""
+STEP_MM = 1.0
+"""Outlines are tested for being hidden every this many mm along them."""
+
+
+@cache
+def font(size: int) -> ImageFont.FreeTypeFont:
+    """DejaVu Sans (shipped with matplotlib, found without importing it: it has the arrows and dashes the
+    pages write) at `size` px; Pillow's own font where it is missing."""
+    spec = importlib.util.find_spec("matplotlib")
+    path = Path(spec.origin).parent / "mpl-data" / "fonts" / "ttf" / "DejaVuSans.ttf" if spec and spec.origin else None
+    return ImageFont.truetype(str(path), size) if path and path.is_file() else ImageFont.load_default(size=size)
+
+
+def camera(views: Views, states: list[State], azimuth_deg: float, size: tuple[int, int]) -> raster.Camera:
+    """The camera from `azimuth_deg` that holds her whole torso in every one of `states` (so that pictures of
+    them line up), `size` = (width, height) px."""
+    return raster.framing([views.torso, *(st.torso for st in states)], azimuth_deg, *size)
+
+
+def picture(views: Views, state: State, cam: raster.Camera, marks: bool = True) -> Image.Image:
+    """Her skin moved as `state` plans, seen by `cam`, lit from LIGHT turned with it; with `marks`, the
+    landmarks (red), the footprints (blue) where not hidden behind her, and her sides named."""
+    vertices = np.concatenate([views.torso, state.torso])
+    colours = raster.lit(vertices, views.skin, np.array(SKIN_RGB), cam.light(LIGHT), SHADE)
+    drawn = raster.draw(vertices, views.skin, colours, cam)
+    image = Image.fromarray(drawn.rgb)
+    if marks:
+        pen = ImageDraw.Draw(image)
+        px = max(2, round(cam.width / 380))
+        for outline in views.footprints.values():
+            _line(pen, drawn, np.vstack([outline, outline[:1]]), FOOTPRINT, px)
+        _line(pen, drawn, views.landmarks["midline"], LANDMARK, px, dash_px=8 * px)
+        for name, radius in (("sternal notch", 2.5 * px), ("nipples", 2 * px)):
+            points = views.landmarks[name]
+            for (x, y) in cam.project(points)[0][drawn.visible(points)]:
+                pen.ellipse((x - radius, y - radius, x + radius, y + radius), fill=LANDMARK)
+        _sides(pen, cam)
+    return image
+
+
+def _line(pen: ImageDraw.ImageDraw, drawn: raster.Picture, polyline: np.ndarray, colour: str, width: int,
+          dash_px: float = 0.0) -> None:
+    """The polyline (K, 3) drawn where it is not hidden behind the surface; dashed every `dash_px` px if given."""
+    steps = np.maximum(np.ceil(np.linalg.norm(np.diff(polyline, axis=0), axis=1) / STEP_MM), 1).astype(int)
+    t = np.concatenate([np.arange(n) / n + i for i, n in enumerate(steps)] + [[len(steps)]])
+    i = np.minimum(t.astype(int), len(polyline) - 2)
+    dense = polyline[i] + (t - i)[:, None] * (polyline[i + 1] - polyline[i])
+    xy = drawn.camera.project(dense)[0]
+    on = drawn.visible(dense)
+    if dash_px:
+        along = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))]
+        on &= (along // dash_px) % 2 == 0
+    cuts = np.flatnonzero(np.diff(on.astype(int))) + 1
+    for run, shown in zip(np.split(xy, cuts), np.split(on, cuts)):
+        if shown[0] and len(run) > 1:
+            pen.line(run.ravel().tolist(), fill=colour, width=width, joint="curve")
+
+
+def _sides(pen: ImageDraw.ImageDraw, cam: raster.Camera) -> None:
+    """Her right and her left named at the picture's foot, each on its own side (her left is the picture's
+    right from the front and the obliques); a side view, which shows one side only, is left unnamed."""
+    if abs(cam.azimuth_deg) >= 90:
+        return
+    size = font(max(12, cam.width // 40))
+    pen.text((8, cam.height - 8), "her right", fill="#555555", font=size, anchor="lb")
+    pen.text((cam.width - 8, cam.height - 8), "her left", fill="#555555", font=size, anchor="rb")

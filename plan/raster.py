@@ -1,0 +1,192 @@
+"""Her skin drawn off-screen: an orthographic, z-buffered, smoothly shaded picture of a triangle surface
+(numpy only: no display, no GPU, the same pixels on every machine).
+
+Frames: the display frame (x to her left — the image's right seen from the front —, y away from a
+viewer in front of her, z up; mm). A `Camera` looks at her from `azimuth_deg` about her vertical
+axis: 0 from the front, +45 her left oblique, +90 her left lateral, negative her right. Pictures are
+(H, W, 3) uint8, row 0 at the top.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+SUPERSAMPLE = 2
+"""Each pixel is the mean of SUPERSAMPLE² samples, so that her outline is smooth, not stepped."""
+CHUNK = 4_000_000
+"""At most this many candidate samples are held at once (memory bound, not a result)."""
+BACKGROUND = (255, 255, 255)
+
+
+@dataclass(frozen=True)
+class Camera:
+    """An orthographic view: from `azimuth_deg` about the display frame's z axis, `mm_per_px` mm per
+    pixel, the picture (`width`, `height` px) centred on `centre` (display frame, mm)."""
+
+    azimuth_deg: float
+    centre: np.ndarray
+    mm_per_px: float
+    width: int
+    height: int
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """(3, 3) display frame → camera frame (x to the picture's right, y away from the camera, z up)."""
+        a = np.radians(self.azimuth_deg)
+        c, s = np.cos(a), np.sin(a)
+        return np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """((N, 2) pixel coordinates (column, row; pixel centres at .5), (N,) depth mm away from the camera)."""
+        p = (np.asarray(points, float) - self.centre) @ self.rotation.T
+        col = self.width / 2 + p[:, 0] / self.mm_per_px
+        row = self.height / 2 - p[:, 2] / self.mm_per_px
+        return np.stack([col, row], axis=1), p[:, 1]
+
+    def light(self, light_camera: np.ndarray) -> np.ndarray:
+        """A light given in the camera frame, in the display frame: the light turns with the camera."""
+        return self.rotation.T @ np.asarray(light_camera, float)
+
+
+def framing(points: list[np.ndarray], azimuth_deg: float, width: int, height: int, margin: float = 0.04) -> Camera:
+    """The camera from `azimuth_deg` that holds all of `points` (display frame, mm) in a `width` × `height`
+    picture with `margin` of it left free on every side, at equal scales."""
+    probe = Camera(azimuth_deg, np.zeros(3), 1.0, 0, 0)
+    p = np.concatenate(points) @ probe.rotation.T
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    scale = max((hi[0] - lo[0]) / (width * (1 - 2 * margin)), (hi[2] - lo[2]) / (height * (1 - 2 * margin)), 1e-9)
+    return Camera(azimuth_deg, probe.rotation.T @ ((lo + hi) / 2), float(scale), width, height)
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V, 3) unit normals: each vertex's sum of its triangles' area-weighted normals (zero where it has none)."""
+    tri = vertices[faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    out = np.zeros_like(vertices, dtype=float)
+    for k in range(3):
+        np.add.at(out, faces[:, k], n)
+    length = np.linalg.norm(out, axis=1, keepdims=True)
+    return np.divide(out, length, out=np.zeros_like(out), where=length > 0)
+
+
+def lit(vertices: np.ndarray, faces: np.ndarray, rgb: np.ndarray, light: np.ndarray,
+        shade: tuple[float, float]) -> np.ndarray:
+    """(V, 3) vertex colours 0..1: `rgb` (3,) or (V, 3), 0..255, × (ambient + diffuse · |normal · light|)
+    (`shade` = (ambient, diffuse); either side of the surface is lit)."""
+    facing = np.abs(vertex_normals(vertices, faces) @ (light / np.linalg.norm(light)))
+    return np.clip(np.asarray(rgb, float) / 255 * (shade[0] + shade[1] * facing)[:, None], 0, 1)
+
+
+@dataclass(frozen=True)
+class Picture:
+    """A drawn surface: `rgb` (H, W, 3) uint8 and `depth` (H, W) mm from the camera (inf where nothing is)."""
+
+    rgb: np.ndarray
+    depth: np.ndarray
+    camera: Camera
+
+    def visible(self, points: np.ndarray, tolerance_mm: float = 3.0) -> np.ndarray:
+        """(N,) whether each point (display frame) lies over the surface drawn (in the picture, on a pixel
+        the surface covers) and no further than `tolerance_mm` behind it."""
+        px, depth = self.camera.project(points)
+        col, row = np.floor(px[:, 0]).astype(int), np.floor(px[:, 1]).astype(int)
+        inside = (col >= 0) & (col < self.camera.width) & (row >= 0) & (row < self.camera.height)
+        out = np.zeros(len(points), bool)
+        surface = self.depth[row[inside], col[inside]]
+        out[inside] = np.isfinite(surface) & (depth[inside] <= surface + tolerance_mm)
+        return out
+
+
+def draw(vertices: np.ndarray, faces: np.ndarray, colours: np.ndarray, camera: Camera) -> Picture:
+    """The surface (display frame, mm; `colours` (V, 3) 0..1 per vertex, interpolated across each triangle)
+    seen by `camera`: the nearest triangle at each sample, SUPERSAMPLE² samples per pixel averaged."""
+    fine = Camera(camera.azimuth_deg, camera.centre, camera.mm_per_px / SUPERSAMPLE,
+                  camera.width * SUPERSAMPLE, camera.height * SUPERSAMPLE)
+    xy, depth = fine.project(vertices)
+    zbuf = np.full(fine.height * fine.width, np.inf)
+    rgb = np.tile(np.array(BACKGROUND, float) / 255, (fine.height * fine.width, 1))
+    coef = _planes(xy[faces], depth[faces])
+    zbuf = np.full(fine.height * fine.width, np.inf)
+    rgb = np.tile(np.array(BACKGROUND, float) / 255, (fine.height * fine.width, 1))
+    spans = _row_spans(xy[faces], coef, colours[faces], fine.width, fine.height)
+    start = np.cumsum(spans.count) - spans.count
+    for part in np.split(np.arange(len(spans.count)), np.flatnonzero(np.diff(start // CHUNK)) + 1):
+        _draw_spans(spans.take(part), fine.width, zbuf, rgb)
+    rgb = rgb.reshape(camera.height, SUPERSAMPLE, camera.width, SUPERSAMPLE, 3)
+    zbuf = zbuf.reshape(camera.height, SUPERSAMPLE, camera.width, SUPERSAMPLE)
+    coarse, near = rgb[:, 0, :, 0], zbuf[:, 0, :, 0]
+    for i, j in np.ndindex(SUPERSAMPLE, SUPERSAMPLE):         # the samples of each pixel, summed (faster than sum())
+        if i or j:
+            coarse, near = coarse + rgb[:, i, :, j], np.minimum(near, zbuf[:, i, :, j])
+    coarse = coarse / SUPERSAMPLE**2
+    return Picture(np.round(coarse * 255).astype(np.uint8), near, camera)
+
+
+def _planes(tri: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """(F, 4, 3) per triangle (corners in pixels, (F, 3, 2); their depths (F, 3)): the coefficients
+    (a, b, c) of its three barycentric weights and of its depth, each a · x + b · y + c at a point (x, y)
+    of the picture; a degenerate triangle's are NaN (it covers nothing)."""
+    (x0, y0), (x1, y1), (x2, y2) = (tri[:, k].T for k in range(3))
+    area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(area != 0, 1.0 / area, np.nan)
+    w0 = np.stack([(y1 - y2) * inv, (x2 - x1) * inv, (x1 * y2 - x2 * y1) * inv], axis=1)
+    w1 = np.stack([(y2 - y0) * inv, (x0 - x2) * inv, (x2 * y0 - x0 * y2) * inv], axis=1)
+    w2 = -w0 - w1
+    w2[:, 2] += 1.0
+    z = w0 * depth[:, :1] + w1 * depth[:, 1:2] + w2 * depth[:, 2:]
+    return np.stack([w0, w1, w2, z], axis=1)
+
+
+@dataclass(frozen=True)
+class _Spans:
+    """Row spans of sample centres inside triangles: each span's row, first column and number of columns,
+    and along it the depth and colour (r, g, b), each slope · column centre + offset."""
+
+    row: np.ndarray       # (S,)
+    first: np.ndarray     # (S,)
+    count: np.ndarray     # (S,)
+    slope: np.ndarray     # (S, 4): depth, r, g, b
+    offset: np.ndarray    # (S, 4)
+
+    def take(self, i: np.ndarray) -> _Spans:
+        return _Spans(self.row[i], self.first[i], self.count[i], self.slope[i], self.offset[i])
+
+
+def _row_spans(tri: np.ndarray, coef: np.ndarray, colours: np.ndarray, width: int, height: int) -> _Spans:
+    """Each triangle's sample centres (column + .5, row + .5) inside it (all three weights ≥ 0), row by row;
+    `colours` (F, 3 corners, rgb)."""
+    first = np.ceil(tri[:, :, 1].min(axis=1) - 0.5).clip(0, height).astype(np.int64)
+    last = np.floor(tri[:, :, 1].max(axis=1) - 0.5).clip(-1, height - 1).astype(np.int64)
+    rows = np.maximum(last - first + 1, 0)
+    face = np.repeat(np.arange(len(tri)), rows)
+    row = first[face] + np.arange(rows.sum()) - np.repeat(np.cumsum(rows) - rows, rows)
+    k = coef[face]                                                         # (S, 3 weights + depth, abc)
+    slope, offset = k[:, :, 0], k[:, :, 1] * (row[:, None] + 0.5) + k[:, :, 2]
+    a, rhs = slope[:, :3], -offset[:, :3]                                  # weight ≥ 0  ⇔  a · x ≥ rhs
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bound = rhs / a
+    lo = np.where(a > 0, bound, -np.inf).max(axis=1)
+    hi = np.where(a < 0, bound, np.inf).min(axis=1)
+    empty = ((a == 0) & (rhs > 0)).any(axis=1) | np.isnan(a).any(axis=1)
+    c0 = np.ceil(np.maximum(lo, 0.0) - 0.5).astype(np.int64)
+    c1 = np.floor(np.minimum(hi, width) - 0.5).astype(np.int64)
+    count = np.where(empty, 0, np.maximum(c1 - c0 + 1, 0))
+    keep = count > 0
+    rgb = colours[face[keep]]                                              # (S, 3 corners, rgb)
+    along = np.concatenate([slope[keep, 3:], np.einsum("sk,skc->sc", slope[keep, :3], rgb)], axis=1)
+    at = np.concatenate([offset[keep, 3:], np.einsum("sk,skc->sc", offset[keep, :3], rgb)], axis=1)
+    return _Spans(row[keep], c0[keep], count[keep], along, at)
+
+
+def _draw_spans(spans: _Spans, width, zbuf, rgb) -> None:
+    """Write the spans' samples into the z-buffer `zbuf` and `rgb` (flat, fine samples) where nearer."""
+    n = spans.count
+    seg = np.repeat(np.arange(len(n)), n)
+    col = spans.first[seg] + np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
+    value = spans.slope[seg] * (col + 0.5)[:, None] + spans.offset[seg]   # (N, 4): depth, r, g, b
+    pix = spans.row[seg] * width + col
+    np.minimum.at(zbuf, pix, value[:, 0])
+    win = value[:, 0] <= zbuf[pix]
+    rgb[pix[win]] = value[win, 1:]
