@@ -38,15 +38,23 @@ def plan(
                                              "reported (a follow-up scan)."),
     force: bool = typer.Option(False, "--force", help="Replace a case folder that holds another recording's "
                                "case: it is planned afresh and nothing of the old case is kept."),
+    patient: Optional[str] = typer.Option(None, "--patient", help="Her name, for the report's and the handout's "
+                                          "header (default: anonymous)."),
+    patient_id: Optional[str] = typer.Option(None, "--patient-id", help="Her ID in the clinic's records, for the "
+                                             "header."),
+    surgeon: Optional[str] = typer.Option(None, "--surgeon", help="The surgeon's name, for the header."),
+    date: Optional[str] = typer.Option(None, "--date", help="The date the header gives, YYYY-MM-DD (default: "
+                                       "today)."),
     as_json: bool = JSON,
 ):
-    """Plan changes on a patient's scan: ingest, fit, each change and their combination, measures and
-    an interactive report (report.html)."""
+    """Plan changes on a patient's scan: ingest, fit, each change and their combination, measures, an
+    interactive report (report.html) and a handout for her (report.pdf)."""
     clock = Clock()
     try:
         options = PlanOptions.parse(deform, side, method, units, up, None if wall_from is None else str(wall_from))
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
+    who = _patient(patient, patient_id, surgeon, date)
     resolved = check_method(method)
     if input is not None and not input.is_dir():
         require_file(input, "recording or scan file")
@@ -69,7 +77,7 @@ def plan(
     from breastplan.plan.job import run_plan
 
     with _progress() as step:
-        planned = run_plan(input, out, options, step, resolved, force)
+        planned = run_plan(input, out, options, step, resolved, force, who)
     if as_json:
         report(_json(planned, out, clock.seconds), True, "")
     else:
@@ -90,6 +98,33 @@ def plan(
                              "so.", markup=False, soft_wrap=True)
 
 
+NAME_CHARS = 120
+"""The longest name, ID or surgeon the header takes."""
+
+
+def _patient(name: str | None, patient_id: str | None, surgeon: str | None, date: str | None):
+    """The plan's `Patient` from the header's options; a usage error for a name that is empty, too long or
+    holds a control character, or a date that is not a real YYYY-MM-DD."""
+    import datetime
+    import re
+
+    from breastplan.plan.result import Patient
+
+    given = {"--patient": name, "--patient-id": patient_id, "--surgeon": surgeon}
+    for flag, text in given.items():
+        if text is not None and (not text.strip() or len(text) > NAME_CHARS or not text.isprintable()):
+            raise usage_error(f"{flag} takes a name of 1 to {NAME_CHARS} printable characters, got {text!r}", flag)
+    if date is not None:
+        try:
+            if not re.fullmatch(r"\d{4}-\d{2}-\d{2}", date):
+                raise ValueError
+            datetime.date.fromisoformat(date)
+        except ValueError:
+            raise usage_error(f"--date takes a date as YYYY-MM-DD, got {date!r}", "--date") from None
+    return Patient(*(None if t is None else t.strip() for t in given.values()),
+                   **({} if date is None else {"date": date}))
+
+
 def _json(plan, out: Path, seconds: float) -> dict:
     """`plan --json`: where the case and its report are, each side's volume, fit and changes, the measures."""
     from breastplan.plan.record import follow_up_record, measures_record, skin_change_record, volume_record
@@ -103,7 +138,8 @@ def _json(plan, out: Path, seconds: float) -> dict:
         if sp.follow_up is not None:
             sides[s]["wall_from"] = {**follow_up_record(sp),
                                      **skin_change_record(plan.skin_changes.get(s))}
-    return {"case": str(out), "report": str(out / "report.html"), "plan": str(out / "plan.json"),
+    return {"case": str(out), "report": str(out / "report.html"), "handout": str(out / "report.pdf"),
+            "plan": str(out / "plan.json"),
             "input": str(plan.input), "sides": sides, "measures": measures_record(plan), "seconds": seconds}
 
 
@@ -160,6 +196,7 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
                                              for k in ("pBRA_pct", "pLBC_pct", "pUNR_pct", "overlap_pct")
                                              if _finite(sym["before"].get(k)) and _finite(sym["after"].get(k))))
     stdout.print(f"report → {report_path}  ({seconds:.1f} s)")
+    stdout.print(f"handout → {report_path.with_suffix('.pdf')}")
 
 
 def _finite(v) -> bool:

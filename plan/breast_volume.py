@@ -75,6 +75,9 @@ MIRROR_SIGMA_MM = 15.0
 SAME_WITHIN = 0.9
 """Two sides whose skin stands within this ratio of each other count as alike (`mirror_scale` is then 1):
 a side turned from the camera is seen more obliquely and reads a few percent lower."""
+OUTLINE_SIGMA = 1.0
+"""A footprint's outline is drawn through the mask blurred over this many cells (σ): smooth, enclosing the
+same area to a few percent."""
 FLOOR_PCT = 2.0
 """Share of the volume added to its ± for what moves between two scans of her (the landmarks, her
 outline): set so that nine re-scans in ten fall within it (benchmarks/bench_volume_repeat.py)."""
@@ -278,19 +281,25 @@ class _SkinGrid:
         return _filled(self.skin, wall)
 
     def outline(self, mask: np.ndarray, wall: np.ndarray) -> np.ndarray:
-        """(K, 3) the longest closed boundary of `mask`, on the skin (the wall where unseen), body frame."""
+        """(K, 3) the longest closed boundary of `mask`, body frame: the half level of the mask blurred over
+        OUTLINE_SIGMA cells (a smooth curve, not the cells' staircase), each point at the mean height of the
+        surface (her skin where seen, else the wall) over the mask's cells around it."""
         import contourpy
 
         if not mask.any():
             return np.zeros((0, 3))
-        padded = np.pad(mask, 1).astype(float).T
+        blurred = ndimage.gaussian_filter(np.pad(mask, 1).astype(float), OUTLINE_SIGMA, mode="constant").T
         xs = self.lo[0] + (np.arange(-1, mask.shape[0] + 1) + 0.5) * CELL_MM
         ys = self.lo[1] + (np.arange(-1, mask.shape[1] + 1) + 0.5) * CELL_MM
-        lines = contourpy.contour_generator(xs, ys, padded, name="serial").lines(0.5)
-        xy = max(lines, key=len)
-        surface = np.where(self.seen, self.skin, wall)
-        ij = np.clip(np.floor((xy - self.lo) / CELL_MM).astype(int), 0, np.array(mask.shape) - 1)
-        return np.column_stack([xy, surface[ij[:, 0], ij[:, 1]]])
+        xy = max(contourpy.contour_generator(xs, ys, blurred, name="serial").lines(0.5), key=len)
+        surface = np.where(mask, np.where(self.seen, self.skin, wall), np.nan)
+        around = np.floor((xy - self.lo) / CELL_MM).astype(int)[:, None, :] + np.stack(
+            np.meshgrid([-1, 0, 1], [-1, 0, 1]), -1).reshape(1, 9, 2)
+        around = np.clip(around, 0, np.array(mask.shape) - 1)
+        height = surface[around[..., 0], around[..., 1]]                   # (K, 9), NaN off the mask
+        known = np.isfinite(height)
+        z = np.where(known, height, 0.0).sum(axis=1) / np.maximum(known.sum(axis=1), 1)
+        return np.column_stack([xy, z])
 
 
 def _volume_cc(height: np.ndarray, mask: np.ndarray) -> float:

@@ -21,7 +21,7 @@ from breastplan.errors import about
 from breastplan.options import PlanOptions
 
 from .changes import Method
-from .result import Plan
+from .result import Patient, Plan
 from .stages import Progress, check_own_case, earlier_volumes, fitted_sides
 
 
@@ -31,10 +31,11 @@ def sample_recording() -> Path:
 
 
 def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Progress = lambda _: None,
-             method: Method | None = None, force: bool = False) -> Plan:
+             method: Method | None = None, force: bool = False, patient: Patient | None = None) -> Plan:
     """Plan `options` on `input` (None: the bundled sample) into the case folder `out`, by `method`
-    (`options.method` resolved; resolved here when not given). A folder `out` holding the case of
-    another input is refused, or with `force` planned afresh and put in its place whole."""
+    (`options.method` resolved; resolved here when not given), for `patient` (named in the report and
+    handout; default anonymous, today). A folder `out` holding the case of another input is refused, or
+    with `force` planned afresh and put in its place whole."""
     from threadpoolctl import threadpool_limits
 
     from .compute import compute_plan
@@ -49,7 +50,7 @@ def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Prog
         fitted = fitted_sides(source, folder, options, clock, progress)
         progress("changes and measures")
         earlier = None if options.wall_from is None else earlier_volumes(Path(options.wall_from))
-        plan = compute_plan(source, fitted, options, method, earlier, clock)
+        plan = replace(compute_plan(source, fitted, options, method, earlier, clock), patient=patient or Patient())
         with clock("report"):
             progress("report")
             write_plan(plan, folder)

@@ -25,10 +25,12 @@ LANDMARK = "#c0392b"
 """The colour of the landmarks the measures start from: sternal notch, midline, the nipples found."""
 FOOTPRINT = "#1f5fbf"
 """The colour of each breast's footprint, the outline her volume is measured inside."""
-VIEWS = {"front": 0.0, "her left oblique": 45.0, "her left side": 90.0, "her right oblique": -45.0,
-         "her right side": -90.0}
-"""The standard views a surgeon photographs, and the azimuth of each about her vertical axis (degrees; +: the
-camera towards her left)."""
+VIEWS = {"her right side": -90.0, "her right oblique": -45.0, "front": 0.0, "her left oblique": 45.0,
+         "her left side": 90.0}
+"""The standard views a surgeon photographs, in the order they are laid out, and the azimuth of each about her
+vertical axis (degrees; +: the camera towards her left)."""
+SHOT_PX = (340, 400)
+"""Width and height of each picture of the summary and the handout, px."""
 STEP_MM = 1.0
 """Outlines are tested for being hidden every this many mm along them."""
 
@@ -46,6 +48,16 @@ def camera(views: Views, states: list[State], azimuth_deg: float, size: tuple[in
     """The camera from `azimuth_deg` that holds her whole torso in every one of `states` (so that pictures of
     them line up), `size` = (width, height) px."""
     return raster.framing([views.torso, *(st.torso for st in states)], azimuth_deg, *size)
+
+
+def before_after(views: Views, state: State, names=tuple(VIEWS)) -> dict[str, tuple[Image.Image, Image.Image]]:
+    """View name → (her skin as scanned, as `state` plans it), SHOT_PX each, framed alike, unmarked."""
+    before = State("original", None, None, {s: m[0] for s, m in views.meshes.items()}, views.patch)
+    shots = {}
+    for name in names:
+        cam = camera(views, [state], VIEWS[name], SHOT_PX)
+        shots[name] = (picture(views, before, cam, marks=False), picture(views, state, cam, marks=False))
+    return shots
 
 
 def picture(views: Views, state: State, cam: raster.Camera, marks: bool = True) -> Image.Image:

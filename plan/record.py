@@ -1,5 +1,5 @@
-"""A finished plan written out: each side's planned changes, the changed torso, plan.json, report.html
-and summary.png; the files of changes an earlier plan of the folder made and this one does not, removed.
+"""A finished plan written out: each side's planned changes, the changed torso, plan.json, report.html,
+summary.png and the handout report.pdf; the files of changes an earlier plan of the folder made and this one does not, removed.
 
 Each side's changes go to its case (`Case.save_change`); the plan's own files form one set written
 all or nothing, plan.json last, so that a plan.json always describes the report beside it.
@@ -22,11 +22,14 @@ from .plan_file import PLAN_SCHEMA
 from .result import Plan, PlanState, SidePlan, SkinChange
 
 SUMMARY = "summary.png"
+HANDOUT = "report.pdf"
 
 
 def write_plan(plan: Plan, folder: Path) -> dict:
     """Write every artefact of `plan` into `folder` (its case folder, or the one being built); the
     plan.json record."""
+    from .handout import handout_pdf
+    from .pictures import before_after
     from .report import render
     from .summary import summary_png
     from .views import build_views
@@ -45,7 +48,8 @@ def write_plan(plan: Plan, folder: Path) -> dict:
         record = {"schema": PLAN_SCHEMA, "version": __version__, "input": input_record(plan),
                   "options": plan.options.as_dict(), "stopping_rule": STOP_RESIDUAL, "sides": sides,
                   "measures": measures_record(plan), "versions": plan.versions,
-                  "files": {"report": Case.REPORT, "summary": SUMMARY, "torso": torso_files},
+                  "patient": plan.patient.as_dict(),
+                  "files": {"report": Case.REPORT, "summary": SUMMARY, "handout": HANDOUT, "torso": torso_files},
                   "timings_ms": {k: round(v, 1) for k, v in plan.timings_ms.items()}}
         for state, moved in zip(plan.changes, plan.planned_torsos):
             name = f"{Case.PLAN}/{state.key}-torso.ply"
@@ -54,7 +58,9 @@ def write_plan(plan: Plan, folder: Path) -> dict:
             torso_files[state.key] = name
         views = build_views(plan)
         Path(stage(folder / Case.REPORT)).write_bytes(utf8(render(plan, views)))
-        summary_png(plan, views, stage(folder / SUMMARY))
+        shots = before_after(views, next(st for st in views.states if st.key == plan.shown.key))
+        summary_png(plan, shots, stage(folder / SUMMARY))
+        handout_pdf(plan, shots, stage(folder / HANDOUT))
         Path(stage(folder / Case.PLAN_JSON)).write_text(to_json(record, indent=1), encoding="utf-8")
     _remove_earlier_plans(folder, record)
     return record

@@ -30,6 +30,7 @@ from breastplan.fitting.ffd import STOP_RESIDUAL
 
 from .breast_volume import model_differs_much
 from .changes import short_of
+from .handout import DISCLAIMER, measure_rows
 from .measures import measure_label
 from .pictures import FOOTPRINT, LANDMARK, LIGHT, SHADE, SKIN_RGB, VIEWS, camera, picture
 from .result import Plan
@@ -102,6 +103,7 @@ def page_data(plan: Plan, views: Views) -> dict:
             "meshes": {s: _mesh(*views.meshes[s]) for s in sides},
             "earlier": {s: _mesh(*views.earlier[s]) for s in views.earlier},
             "landmarks": {k: v.round(2).tolist() for k, v in views.landmarks.items()},
+            "side_labels": {s: v.round(1).tolist() for s, v in views.side_labels.items()},
             "footprints": {s: v.round(2).tolist() for s, v in views.footprints.items()},
             "states": states, "sliders": sliders, "first": first_state(plan, views).key,
             "skin_rgb": list(SKIN_RGB), "light": list(LIGHT), "shade": list(SHADE),
@@ -140,7 +142,7 @@ def render(plan: Plan, views: Views) -> str:
 
     data = page_data(plan, views)
     poster = poster_png(views, first_state(plan, views))
-    parts = {"TITLE": TITLE, "POSTER": base64.b64encode(poster).decode("ascii"), "TABLES": tables(plan),
+    parts = {"TITLE": TITLE, "WHO": html.escape(plan.patient.header), "POSTER": base64.b64encode(poster).decode("ascii"), "TABLES": tables(plan),
              "SCRIPT": _SCRIPT, "PLOTLY": get_plotlyjs(),
              "DATA": json.dumps(data, separators=(",", ":")).replace("</", "<\\/")}
     return re.sub(r"%([A-Z]+)%", lambda m: parts[m[1]], _TEMPLATE)
@@ -159,9 +161,11 @@ def _reached(detail: dict, method: str) -> str:
 
 
 def tables(plan: Plan) -> str:
-    """The measures, volume, symmetry, fit quality, follow-up, changes and provenance tables of a plan."""
+    """The report's text: for her (the main measures in plain words, the disclaimer, her handout), then the
+    measures, volume, symmetry and follow-up tables, and for the surgeon, collapsed, the fit quality,
+    the changes' parameters, the inputs, options and versions."""
     sides = list(plan.sides)
-    parts = [_measures_table(plan)]
+    parts = [for_her(plan), _measures_table(plan)]
     volumes = {s: plan.volumes.sides[s] for s in sides}
     differs = {s: v.model_differs_pct(plan.sides[s].fit.volume_cc) for s, v in volumes.items()}
     rows = [[s, f"{v.volume_cc:.1f} ± {v.uncertainty_cc:.1f}", v.area_cm2, v.unseen_pct, plan.sides[s].fit.volume_cc,
@@ -171,10 +175,11 @@ def tables(plan: Plan) -> str:
          "the model differs by %"], rows, "volume") + VOLUME_TEXT
         + "".join(DIFFERS_TEXT.format(side=s, pct=pct) for s, pct in differs.items() if model_differs_much(pct)))
     parts.append(_symmetry_tables(plan))
+    surgeon = []
     rows = [[s, sp.fit.volume_cc, sp.fit.volume_cc_below_base, sp.fit.residuals_mm["rms"], sp.fit.normalised_residual,
              "met" if sp.fit.stopping_rule_met else "not met", sp.fit.points, NIPPLE_FOUND[sp.scan.nipple_found],
              ", ".join(sp.at_bounds) or "none"] for s, sp in plan.sides.items()]
-    parts.append("<h2>Fit quality</h2>" + _table(
+    surgeon.append("<h2>Fit quality</h2>" + _table(
         ["side", "model volume cc down to the chest wall", "of it below the base cc", "rms mm", "normalised residual",
          f"stopping rule {STOP_RESIDUAL}", "points", "nipple found", "at an end of its plausible range"],
         rows, "fit") + AT_BOUNDS_TEXT * any(sp.at_bounds for sp in plan.sides.values()))
@@ -195,12 +200,22 @@ def tables(plan: Plan) -> str:
     rows = [[s, st.key, ", ".join(f"{d['kind']} {d['degree']:g} ({_how(d)})" for d in st.changes[s].details),
              ", ".join(_reached(d, method) for d in st.changes[s].details)]
             for s in sides for st in plan.changes]
-    parts.append("<h2>Planned changes</h2>" + _table(["side", "change", "how (parameters in model units)",
+    surgeon.append("<h2>Planned changes</h2>" + _table(["side", "change", "how (parameters in model units)",
                                                        "degree reached"], rows))
     rows = [["input", str(plan.input)], ["input kind", plan.input_kind], ["input sha256", plan.input_sha256 or "—"],
             ["options", json.dumps(plan.options.as_dict())]] + [[k, v] for k, v in plan.versions.items()]
-    parts.append("<h2>Inputs, options and versions</h2>" + _table(["", ""], rows, "about"))
+    surgeon.append("<h2>Inputs, options and versions</h2>" + _table(["", ""], rows, "about"))
+    parts.append('<details id="for-surgeon"><summary>For the surgeon: the fits\' quality, the changes\' parameters, '
+                 'inputs and versions</summary>' + "\n".join(surgeon) + "</details>")
     return "\n".join(parts)
+
+
+def for_her(plan: Plan) -> str:
+    """The main measures in plain words (`plan.handout.measure_rows`), the disclaimer and a link to her handout."""
+    head, *rows = measure_rows(plan)
+    return ('<section id="for-her"><h2>For her</h2>' + _table(list(head), [list(r) for r in rows], "for-her")
+            + f'<p id="disclaimer">{html.escape(DISCLAIMER)}</p><p>To take home: <a href="report.pdf">report.pdf</a>, '
+            'two printed pages of these pictures and measures.</p></section>')
 
 
 def _measures_table(plan: Plan) -> str:
@@ -257,7 +272,8 @@ _TEMPLATE = """<!DOCTYPE html>
 <title>%TITLE%</title>
 <style>
 body{font-family:system-ui,sans-serif;margin:0;color:#222;background:#fafafa}
-header{padding:10px 16px;background:#3b3b52;color:#fff}header h1{margin:0;font-size:20px}
+header{padding:10px 16px;background:#3b3b52;color:#fff}header h1{margin:0;font-size:20px}header p{margin:4px 0 0;font-size:14px}
+details{margin:10px 0}summary{cursor:pointer;font-weight:600}
 main{display:flex;flex-wrap:wrap;gap:12px;padding:12px}
 #plot{position:relative;width:760px;height:640px;background:#fff;border:1px solid #ddd}
 #poster{position:absolute;inset:0;z-index:10;margin:0;background:#fff}#poster img{display:block}
@@ -269,11 +285,11 @@ table{border-collapse:collapse;margin:6px 0 14px;font-size:13px}td,th{border:1px
 td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4px}
 #tables{padding:0 16px 16px}
 </style></head><body>
-<header><h1>%TITLE%</h1></header>
+<header><h1>%TITLE%</h1><p id="who">%WHO%</p></header>
 <main><div id="plot"><figure id="poster"><img src="data:image/png;base64,%POSTER%" width="760" height="640" alt="Front view of the plan">
 <figcaption>Front view as planned; the interactive 3-D view is being drawn…</figcaption></figure></div>
 <div id="controls">
-<div><b>View</b><br><button data-view="front">Front</button><button data-view="side">Side</button><button data-view="top">Top</button></div>
+<div><b>View</b><br><button data-view="right-side">Her right side</button><button data-view="right-oblique">Her right oblique</button><button data-view="front">Front</button><button data-view="left-oblique">Her left oblique</button><button data-view="left-side">Her left side</button><button data-view="top">Top</button></div>
 <div id="sliders"></div>
 <div><b>Show</b><br><button id="original">Original</button><button id="combined">Combined, as planned</button></div>
 <p id="state"></p>
@@ -343,16 +359,23 @@ const mark={color:P.landmark};
 traces.push({type:'scatter3d',mode:'lines',name:'midline',legendgroup:'landmarks',x:col('midline')[0],
  y:col('midline')[1],z:col('midline')[2],line:{...mark,width:3,dash:'dash'},hoverinfo:'skip'});
 traces.push({type:'scatter3d',mode:'markers+text',name:'sternal notch',legendgroup:'landmarks',x:col('sternal notch')[0],
- y:col('sternal notch')[1],z:col('sternal notch')[2],text:['sternal notch'],textposition:'top center',
+ y:col('sternal notch')[1],z:col('sternal notch')[2],text:['sternal notch'],textposition:'bottom right',
  textfont:{...mark,size:11},marker:{...mark,size:4},hoverinfo:'skip'});
 traces.push({type:'scatter3d',mode:'markers',name:'nipples (found)',legendgroup:'landmarks',x:col('nipples')[0],
  y:col('nipples')[1],z:col('nipples')[2],marker:{...mark,size:3.5,symbol:'diamond'},hoverinfo:'skip'});
+const sides=Object.keys(P.side_labels);   // her sides named on her body (hers, not the viewer's)
+idx.sides=traces.length;
+traces.push({type:'scatter3d',mode:'text',name:'her sides',x:sides.map(s=>P.side_labels[s][0]),
+ y:sides.map(s=>P.side_labels[s][1]),z:sides.map(s=>P.side_labels[s][2]),text:sides.map(s=>'her '+s),
+ textfont:{color:'#333',size:13},hoverinfo:'skip',showlegend:false});
 for(const s of Object.keys(P.footprints)){   // the outline each breast's volume is measured inside
  const F=P.footprints[s];
  traces.push({type:'scatter3d',mode:'lines',name:s+' footprint',legendgroup:'footprints',x:F.map(p=>p[0]),
   y:F.map(p=>p[1]),z:F.map(p=>p[2]),line:{color:P.footprint,width:6},hoverinfo:'skip'});
 }
-const views={front:{eye:{x:0,y:-1.9,z:0.15},up:{x:0,y:0,z:1}},side:{eye:{x:1.9,y:-0.3,z:0.1},up:{x:0,y:0,z:1}},top:{eye:{x:0,y:-0.2,z:1.9},up:{x:0,y:1,z:0}}};
+const around=a=>({eye:{x:1.9*Math.sin(a*Math.PI/180),y:-1.9*Math.cos(a*Math.PI/180),z:0.15},up:{x:0,y:0,z:1}});   // a: degrees towards her left
+const views={'right-side':around(-90),'right-oblique':around(-45),front:around(0),'left-oblique':around(45),
+ 'left-side':around(90),top:{eye:{x:0,y:-0.2,z:1.9},up:{x:0,y:1,z:0}}};
 const layout={margin:{l:0,r:0,t:0,b:0},showlegend:true,legend:{x:0,y:1},hovermode:false,   // the legend beside the body, not over it
  scene:{domain:{x:[0.26,1],y:[0,1]},aspectmode:'data',xaxis:{visible:false},yaxis:{visible:false},zaxis:{visible:false},camera:views.front}};
 const gd=document.getElementById('plot');
@@ -390,7 +413,10 @@ function planned(){for(const sl of P.sliders){const inp=document.getElementById(
 document.getElementById('original').onclick=()=>show(null);
 const comb=document.getElementById('combined');
 if(byKey['combined']){comb.onclick=()=>{planned();return show(byKey['combined']);};}else{comb.style.display='none';}
-for(const b of document.querySelectorAll('button[data-view]'))b.onclick=()=>Plotly.relayout(gd,{'scene.camera':views[b.dataset.view]});
+const named=v=>sides.map(s=>v.endsWith('-side')&&!v.startsWith(s)?'':'her '+s);   // a side view names its own side only
+for(const b of document.querySelectorAll('button[data-view]'))b.onclick=()=>{const v=b.dataset.view;
+ traces[idx.sides]=Object.assign({},traces[idx.sides],{text:named(v)});
+ Plotly.react(gd,traces,Object.assign({},gd.layout,{scene:Object.assign({},gd.layout.scene,{camera:views[v]})}));};
 const first=byKey[P.first];
 put(arrays(first));
 label(first);

@@ -12,6 +12,7 @@ This module imports nothing else from `plan/`: it is the vocabulary the others s
 """
 from __future__ import annotations
 
+import datetime
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
@@ -172,6 +173,28 @@ def planned_states(states, side: SidePlan) -> tuple[PlanState, ...]:
     return tuple(by_key[c.name] for c in side.changes)
 
 
+@dataclass(frozen=True)
+class Patient:
+    """Whom and when a plan is for, as its report and handout name them; nothing is computed from it.
+    `date`: ISO (YYYY-MM-DD), the day planned unless given."""
+
+    name: str | None = None
+    patient_id: str | None = None
+    surgeon: str | None = None
+    date: str = field(default_factory=lambda: datetime.date.today().isoformat())
+
+    @property
+    def header(self) -> str:
+        """One line: her name and ID (or "anonymous"), the surgeon, the date."""
+        who = " ".join(filter(None, [self.name, f"(ID {self.patient_id})" if self.patient_id else None]))
+        parts = [f"Patient: {who or 'anonymous'}", f"Surgeon: {self.surgeon}" if self.surgeon else None,
+                 f"Date: {self.date}"]
+        return " · ".join(filter(None, parts))
+
+    def as_dict(self) -> dict:
+        return {"name": self.name, "patient_id": self.patient_id, "surgeon": self.surgeon, "date": self.date}
+
+
 @dataclass(frozen=True, eq=False)
 class Plan:
     """A computed plan: its input and options, her body, each breast, her volumes measured on her skin, every
@@ -191,6 +214,7 @@ class Plan:
     input_sha256: str | None = None           # None: a case folder
     versions: dict[str, str] = field(default_factory=dict)   # package → version, as planned
     timings_ms: dict = field(default_factory=dict)
+    patient: Patient = field(default_factory=Patient)
 
     @property
     def input_kind(self) -> str:

@@ -62,6 +62,7 @@ class Views:
     landmarks: dict[str, np.ndarray]    # what the measures start from: "sternal notch" (1, 3), "midline" (K, 3)
                                         # her skin on the mid-sagittal plane, "nipples" (sides, 3) as found
     footprints: dict[str, np.ndarray]   # side → (K, 3) the closed outline her volume is measured inside
+    side_labels: dict[str, np.ndarray]  # side → (3,) where her side is named: SIDE_LABEL_MM outside its nipple
 
 
 def build_views(plan: Plan) -> Views:
@@ -84,7 +85,8 @@ def build_views(plan: Plan) -> Views:
                           for s, sp in plan.sides.items() if sp.follow_up is not None},
                  landmarks=_landmarks(plan, show),
                  footprints={s: show(v.footprint_input_mm + FOOTPRINT_LIFT_MM * plan.volumes.landmarks.anterior_axis)
-                             for s, v in plan.volumes.sides.items()})
+                             for s, v in plan.volumes.sides.items()},
+                 side_labels=_side_labels(plan, show))
 
 
 def skin_triangles(points_view: np.ndarray) -> np.ndarray:
@@ -100,6 +102,20 @@ def skin_triangles(points_view: np.ndarray) -> np.ndarray:
     tri = points_view[faces]
     longest = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
     return faces[longest <= GAP_MM].astype(np.int64)
+
+
+SIDE_LABEL_MM = (90.0, 40.0)
+"""Her sides are named this far outside each nipple (along her left–right axis) and this far in front of it, mm."""
+
+
+def _side_labels(plan: Plan, show) -> dict[str, np.ndarray]:
+    marks = plan.volumes.landmarks
+    out = {}
+    for s, sp in plan.sides.items():
+        outward = marks.left_axis if s == "left" else -marks.left_axis
+        out[s] = show((sp.scan.nipple_camera_mm + SIDE_LABEL_MM[0] * outward
+                       + SIDE_LABEL_MM[1] * marks.anterior_axis)[None])[0]
+    return out
 
 
 def _landmarks(plan: Plan, show) -> dict[str, np.ndarray]:

@@ -508,9 +508,12 @@ def test_the_report_opens_on_a_picture_of_the_plan_and_its_measures_without_any_
             assert len(np.unique(poster.reshape(-1, 3), axis=0)) > 200        # a picture, not a blank image
             assert _skin_share(poster) > 0.9                                   # her skin, shaded: no grey, no dots
             assert b.js("document.querySelector('h1').innerText") == "breastplan — surgical plan"
-            table = b.rect("table.measures")
+            table = b.rect("table.for-her")
             assert table[3] > table[1] and table[1] < b.height                 # in the first screen
-            assert "volume" in b.js("document.querySelector('table.measures').innerText")
+            assert "breast volume" in b.js("document.querySelector('table.for-her').innerText")
+            assert b.js("document.getElementById('who').innerText").startswith("Patient: anonymous · Date: ")
+            assert b.js("document.getElementById('for-surgeon').open") is False      # collapsed
+            assert b.js("document.querySelector('table.fit').checkVisibility()") is False   # shown when opened
         b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
         clock = b.timings()
         assert 0 < clock["breastplan-shown"] < clock["breastplan-ready"]
@@ -543,7 +546,7 @@ def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(pl
         assert "ptosis: degree 8" in b.js("document.getElementById('slider-ptosis').previousSibling.textContent")
         sagged = _plot_pixels(b.screenshot(tmp_path / "ptosis-8.png"), box)
         assert (np.abs(sagged - first).sum(axis=2) > 30).mean() > 0.005     # the breasts were redrawn
-        b.driver.find_element("css selector", "button[data-view='side']").click()
+        b.driver.find_element("css selector", "button[data-view='left-side']").click()
         time.sleep(0.5)
         side = _plot_pixels(b.screenshot(tmp_path / "side.png"), box)
         assert (np.abs(side - sagged).sum(axis=2) > 30).mean() > 0.02       # another view of her
@@ -640,8 +643,9 @@ def test_summary_shows_her_torso_before_and_as_planned_with_her_left_on_the_pict
 
     from breastplan.options import PlanOptions
     from breastplan.plan.job import run_plan
-    from breastplan.plan.pictures import camera
-    from breastplan.plan.summary import HEAD_PX, LABEL_PX, PICTURE_PX, VIEWS
+    from breastplan.plan.pictures import SHOT_PX, VIEWS, camera
+    from breastplan.plan.summary import HEAD_PX, LABEL_PX
+    from breastplan.plan.summary import VIEWS as COLUMNS
     from breastplan.plan.views import build_views
 
     copy = tmp_path / "case"
@@ -650,14 +654,61 @@ def test_summary_shows_her_torso_before_and_as_planned_with_her_left_on_the_pict
     left_only = run_plan(copy, tmp_path / "left", PlanOptions.parse(list(CHANGES), side="left"))
     views = build_views(plan)
     page = np.asarray(Image.open(tmp_path / "left" / "summary.png").convert("RGB")).astype(int)
-    w, h = PICTURE_PX
-    assert page.shape[1] == LABEL_PX + len(VIEWS) * w and page.shape[0] > HEAD_PX + 2 * h
-    for i, azimuth in enumerate(VIEWS.values()):
+    w, h = SHOT_PX
+    assert page.shape[1] == LABEL_PX + len(COLUMNS) * w and page.shape[0] > HEAD_PX + 2 * h
+    for i, azimuth in enumerate(VIEWS[name] for name in COLUMNS):
         x = LABEL_PX + i * w
         before, after = page[HEAD_PX:HEAD_PX + h, x:x + w], page[HEAD_PX + h:HEAD_PX + 2 * h, x:x + w]
         assert _skin_share(before) > 0.9 and _skin_share(after) > 0.9
         changed = np.abs(before - after).sum(axis=2) > 24
-        midline = camera(views, [views.states[-1]], azimuth, PICTURE_PX).project(views.landmarks["midline"])[0][:, 0]
+        midline = camera(views, [views.states[-1]], azimuth, SHOT_PX).project(views.landmarks["midline"])[0][:, 0]
         assert changed.sum() > 300, azimuth
         assert np.nonzero(changed)[1].min() > np.median(midline), azimuth
     assert left_only.sides.keys() == {"left"}
+
+
+def _pdf_pages(pdf: bytes) -> list:
+    """The page images of a PDF whose pages are each one JPEG (DCTDecode) image, decoded by Pillow."""
+    import io
+
+    from PIL import Image
+
+    return [Image.open(io.BytesIO(m[1])).convert("RGB")
+            for m in re.finditer(rb"/Filter\s*/DCTDecode.*?stream\r?\n(.*?)\r?\nendstream", pdf, re.S)]
+
+
+def test_the_handout_is_two_a4_pages_of_her_pictures_and_measures_named_as_given(planned, cli, tmp_path):
+    """`plan --patient --patient-id --surgeon --date`: plan.json, the report's header and the handout name
+    them. report.pdf: two A4 landscape pages, at most 2 MB; page 1 her skin before and as planned from five
+    views (ten pictures of skin colour), page 2 text alone."""
+    case = tmp_path / "case"
+    shutil.copytree(planned[0], case)
+    res = run(cli, "plan", case, "--patient", "Anna Beispiel", "--patient-id", "12-345", "--surgeon",
+              "Dr. K. Weber", "--date", "2026-11-28", *[a for c in CHANGES for a in ("--deform", c)])
+    assert res.returncode == 0, res.stderr[-2000:]
+    record = json.loads((case / "plan.json").read_text())
+    assert record["patient"] == {"name": "Anna Beispiel", "patient_id": "12-345", "surgeon": "Dr. K. Weber",
+                                 "date": "2026-11-28"}
+    assert record["files"]["handout"] == "report.pdf"
+    header = "Patient: Anna Beispiel (ID 12-345) · Surgeon: Dr. K. Weber · Date: 2026-11-28"
+    assert f'<p id="who">{header}</p>' in (case / "report.html").read_text()
+    pdf = (case / "report.pdf").read_bytes()
+    assert pdf.startswith(b"%PDF-") and len(pdf) <= 2 * 2**20
+    boxes = re.findall(rb"/MediaBox\s*\[\s*0 0 ([\d.]+) ([\d.]+)\s*\]", pdf)
+    assert len(boxes) == 2 and all(abs(float(w) - 841.89) < 0.5 and abs(float(h) - 595.28) < 0.5 for w, h in boxes)
+    first, second = (np.asarray(p).astype(int) for p in _pdf_pages(pdf))
+    assert _skin_share(first) > 0.75 and _skin_share(second) < 0.01
+    r, g, b = first[..., 0], first[..., 1], first[..., 2]
+    skin = (r > 90) & (r - g > 20) & (g - b > 10) & (r + g + b < 3 * 235)
+    columns = np.flatnonzero(skin.any(axis=0))
+    assert (np.diff(columns) > 20).sum() + 1 == 5                            # five views side by side
+    rows = np.flatnonzero(skin.any(axis=1))
+    assert (np.diff(rows) > 5).sum() + 1 == 2                                # before over as planned
+
+
+@pytest.mark.parametrize("flag, value", [("--date", "2026-02-30"), ("--date", "28.11.2026"), ("--patient", ""),
+                                         ("--surgeon", "Dr.\x07"), ("--patient-id", "x" * 121)])
+def test_a_header_that_cannot_be_printed_is_a_usage_error(cli, tmp_path, flag, value):
+    res = run(cli, "plan", "--out", tmp_path / "case", flag, value)
+    assert res.returncode == 2 and flag in res.stderr
+    assert not (tmp_path / "case").exists()

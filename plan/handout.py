@@ -1,0 +1,113 @@
+"""report.pdf: the handout she takes home — two A4 pages (landscape) made on this machine, no service: her
+torso before and as planned from the five standard views (`plan.pictures`), then the main measures in plain
+words, each page with her name, the surgeon, the date and the reminder that it is a simulation."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from .pictures import SHOT_PX, VIEWS, font
+from .result import Plan
+
+PAGE_PX = (1754, 1240)
+"""An A4 page, landscape, at DPI."""
+DPI = 150
+MARGIN_PX = 60
+DISCLAIMER = "A simulation of a planned change on her scanned body: a guide for discussion, not a promise of the result."
+PLAIN = {"volume_cc": ("breast volume", "cc"),
+         "notch_to_nipple_mm": ("nipple to the notch at the base of the neck", "mm"),
+         "nipple_to_midline_mm": ("nipple to the middle of the chest", "mm"),
+         "nipple_to_fold_mm": ("nipple to the fold beneath the breast", "mm"),
+         "pole_ratio": ("fullness above the nipple to fullness below it", "")}
+"""The measures the summary and the handout give, in plain words, and their units."""
+
+
+def shown_words(plan: Plan) -> str:
+    """What the pictures as planned show, in words."""
+    if plan.shown.kind is None:
+        return "all planned changes combined (" + ", ".join(f"{k} {d:g}" for k, d in plan.options.changes) + ")"
+    return f"{plan.shown.kind}, degree {plan.shown.degree:g}"
+
+
+def measure_rows(plan: Plan) -> list[tuple[str, ...]]:
+    """Rows of text: a head, then each measure of PLAIN and (a follow-up) the change since the earlier visit;
+    columns: the measure, then her right and her left breast (those planned), before → as planned."""
+    m, sides = plan.measures, [s for s in ("right", "left") if s in plan.sides]
+    rows = [("measure", *(f"her {s} breast: before → as planned" for s in sides))]
+    for name, (words, unit) in PLAIN.items():
+        cells = []
+        for s in sides:
+            text = f"{_value(m.before[s].get(name))} → {_value(m.after[s].get(name))} {unit}".rstrip()
+            if name == "volume_cc":
+                text += f"  (± {plan.volumes.sides[s].uncertainty_cc:.0f})"
+            cells.append(text)
+        rows.append((words, *cells))
+    if plan.skin_changes:
+        rows.append(("since the earlier visit", *(
+            f"{c.on_wall_cc:+.0f} cc ({c.on_wall_pct:+.1f} %)" if (c := plan.skin_changes.get(s)) else "—"
+            for s in sides)))
+    return rows
+
+
+def _value(v) -> str:
+    if v is None or not np.isfinite(v):
+        return "—"
+    return f"{v:.0f}" if abs(v) >= 10 else f"{v:.2f}"
+
+
+def vertical_text(page: Image.Image, text: str, centre: tuple[int, int], size) -> None:
+    """`text` turned a quarter to read upwards, its middle at `centre`'s height, from `centre`'s x."""
+    box = size.getbbox(text)
+    label = Image.new("RGB", (box[2] + 4, box[3] + 4), "white")
+    ImageDraw.Draw(label).text((2, 2), text, fill="#333333", font=size)
+    label = label.rotate(90, expand=True)
+    page.paste(label, (centre[0], centre[1] - label.height // 2))
+
+
+def handout_pdf(plan: Plan, shots: dict, path: Path) -> Path:
+    """Write report.pdf from `shots` (`plan.pictures.before_after` of every view): page 1 the pictures, page 2
+    the measures."""
+    pages = [_pictures_page(plan, shots), _measures_page(plan)]
+    pages[0].save(path, format="PDF", save_all=True, append_images=pages[1:], resolution=DPI, quality=88,
+                  title="breastplan — a planned change, for her", producer="breastplan")
+    return Path(path)
+
+
+def _page(plan: Plan, title: str) -> tuple[Image.Image, ImageDraw.ImageDraw]:
+    page = Image.new("RGB", PAGE_PX, "white")
+    pen = ImageDraw.Draw(page)
+    pen.text((MARGIN_PX, MARGIN_PX), title, fill="black", font=font(40))
+    pen.text((MARGIN_PX, MARGIN_PX + 58), plan.patient.header, fill="#333333", font=font(24))
+    pen.text((MARGIN_PX, PAGE_PX[1] - MARGIN_PX), DISCLAIMER, fill="#555555", font=font(22), anchor="lb")
+    return page, pen
+
+
+def _pictures_page(plan: Plan, shots: dict) -> Image.Image:
+    page, pen = _page(plan, "Before, and as planned")
+    w, h = SHOT_PX
+    left, top = (PAGE_PX[0] - w * len(VIEWS)) // 2 + 20, MARGIN_PX + 150
+    for col, name in enumerate(VIEWS):
+        x = left + col * w
+        pen.text((x + w // 2, top - 10), name, fill="#333333", font=font(22), anchor="mb")
+        for row, shot in enumerate(shots[name]):
+            page.paste(shot, (x, top + row * h))
+    for row, label in enumerate(("before", "as planned")):
+        vertical_text(page, label, (left - 40, top + row * h + h // 2), font(24))
+    pen.text((MARGIN_PX, top + 2 * h + 20), f"As planned: {shown_words(plan)}.", fill="#333333", font=font(22))
+    return page
+
+
+def _measures_page(plan: Plan) -> Image.Image:
+    page, pen = _page(plan, "The measures, before and as planned")
+    top, columns = MARGIN_PX + 160, (MARGIN_PX, MARGIN_PX + 620, MARGIN_PX + 1100)
+    for i, row in enumerate(measure_rows(plan)):
+        for x, text in zip(columns, row):
+            pen.text((x, top + 48 * i), text, fill="#555555" if i == 0 else "black", font=font(26))
+    notes = ("Volumes are measured on the scan of her skin, down to the chest wall beneath each breast; the ± is how "
+             "far a new scan may read.", "Lengths are measured over her skin in millimetres.",
+             "Her right breast is on the left of a picture from the front, as in a mirror seen by someone facing her.")
+    for i, note in enumerate(notes):
+        pen.text((MARGIN_PX, top + 48 * (len(measure_rows(plan)) + 1) + 36 * i), note, fill="#333333", font=font(22))
+    return page
