@@ -127,6 +127,11 @@ def test_the_footprint_is_a_closed_curve_on_her_skin_round_her_nipple_and_mirror
         assert np.median(skin.query(curve)[0]) < 3.0
         body = transform_points(T, curve)
         assert Polygon(body[:, :2]).contains_point(transform_points(T, nipples[side][None])[0, :2])
+        step = np.diff(body[:, :2], axis=0)
+        turn = np.degrees(np.abs(np.angle(np.exp(1j * np.diff(np.arctan2(step[:, 1], step[:, 0]))))))
+        assert turn.mean() < 12.0                                       # a smooth curve, not the cells' staircase (45° turns)
+        bend = body[1:-1, 2] - (body[:-2, 2] + body[2:, 2]) / 2
+        assert np.percentile(np.abs(bend), 90) < 5.0                    # its heights do not zigzag (skin, wall, skin…)
         outlines[side] = body[:, :2]
     mirrored = outlines["right"] * [-1.0, 1.0]
     assert np.median(cKDTree(outlines["left"]).query(mirrored)[0]) < 3.0
