@@ -104,12 +104,12 @@ def draw(vertices: np.ndarray, faces: np.ndarray, colours: np.ndarray, camera: C
     fine = Camera(camera.azimuth_deg, camera.centre, camera.mm_per_px / SUPERSAMPLE,
                   camera.width * SUPERSAMPLE, camera.height * SUPERSAMPLE)
     xy, depth = fine.project(vertices)
+    tri = xy[faces]
+    attributes = np.concatenate([depth[faces][:, :, None], colours[faces]], axis=2)     # (F, 3 corners, 4)
     zbuf = np.full(fine.height * fine.width, np.inf)
-    rgb = np.tile(np.array(BACKGROUND, float) / 255, (fine.height * fine.width, 1))
-    coef = _planes(xy[faces], depth[faces])
-    zbuf = np.full(fine.height * fine.width, np.inf)
-    rgb = np.tile(np.array(BACKGROUND, float) / 255, (fine.height * fine.width, 1))
-    spans = _row_spans(xy[faces], coef, colours[faces], fine.width, fine.height)
+    rgb = np.empty((fine.height * fine.width, 3))
+    rgb[:] = np.array(BACKGROUND, float) / 255
+    spans = _row_spans(tri, _planes(tri, attributes), fine.width, fine.height)
     start = np.cumsum(spans.count) - spans.count
     for part in np.split(np.arange(len(spans.count)), np.flatnonzero(np.diff(start // CHUNK)) + 1):
         _draw_spans(spans.take(part), fine.width, zbuf, rgb)
@@ -123,10 +123,9 @@ def draw(vertices: np.ndarray, faces: np.ndarray, colours: np.ndarray, camera: C
     return Picture(np.round(coarse * 255).astype(np.uint8), near, camera)
 
 
-def _planes(tri: np.ndarray, depth: np.ndarray) -> np.ndarray:
-    """(F, 4, 3) per triangle (corners in pixels, (F, 3, 2); their depths (F, 3)): the coefficients
-    (a, b, c) of its three barycentric weights and of its depth, each a · x + b · y + c at a point (x, y)
-    of the picture; a degenerate triangle's are NaN (it covers nothing)."""
+def _planes(tri: np.ndarray, attributes: np.ndarray) -> np.ndarray:
+    """(F, A, 3): each triangle's attributes (F, 3 corners, A) as planes over the picture, value = a · x + b · y
+    + c at a point (x, y) (pixels; corners `tri` (F, 3, 2)); a degenerate triangle's are NaN."""
     (x0, y0), (x1, y1), (x2, y2) = (tri[:, k].T for k in range(3))
     area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -135,49 +134,48 @@ def _planes(tri: np.ndarray, depth: np.ndarray) -> np.ndarray:
     w1 = np.stack([(y2 - y0) * inv, (x0 - x2) * inv, (x2 * y0 - x0 * y2) * inv], axis=1)
     w2 = -w0 - w1
     w2[:, 2] += 1.0
-    z = w0 * depth[:, :1] + w1 * depth[:, 1:2] + w2 * depth[:, 2:]
-    return np.stack([w0, w1, w2, z], axis=1)
+    return np.einsum("fkj,fka->faj", np.stack([w0, w1, w2], axis=1), attributes)
 
 
 @dataclass(frozen=True)
 class _Spans:
     """Row spans of sample centres inside triangles: each span's row, first column and number of columns,
-    and along it the depth and colour (r, g, b), each slope · column centre + offset."""
+    and along it the attributes (depth, r, g, b), each slope · column centre + offset."""
 
     row: np.ndarray       # (S,)
     first: np.ndarray     # (S,)
     count: np.ndarray     # (S,)
-    slope: np.ndarray     # (S, 4): depth, r, g, b
+    slope: np.ndarray     # (S, 4)
     offset: np.ndarray    # (S, 4)
 
     def take(self, i: np.ndarray) -> _Spans:
         return _Spans(self.row[i], self.first[i], self.count[i], self.slope[i], self.offset[i])
 
 
-def _row_spans(tri: np.ndarray, coef: np.ndarray, colours: np.ndarray, width: int, height: int) -> _Spans:
-    """Each triangle's sample centres (column + .5, row + .5) inside it (all three weights ≥ 0), row by row;
-    `colours` (F, 3 corners, rgb)."""
-    first = np.ceil(tri[:, :, 1].min(axis=1) - 0.5).clip(0, height).astype(np.int64)
-    last = np.floor(tri[:, :, 1].max(axis=1) - 0.5).clip(-1, height - 1).astype(np.int64)
-    rows = np.maximum(last - first + 1, 0)
-    face = np.repeat(np.arange(len(tri)), rows)
-    row = first[face] + np.arange(rows.sum()) - np.repeat(np.cumsum(rows) - rows, rows)
-    k = coef[face]                                                         # (S, 3 weights + depth, abc)
-    slope, offset = k[:, :, 0], k[:, :, 1] * (row[:, None] + 0.5) + k[:, :, 2]
-    a, rhs = slope[:, :3], -offset[:, :3]                                  # weight ≥ 0  ⇔  a · x ≥ rhs
+def _row_spans(tri: np.ndarray, planes: np.ndarray, width: int, height: int) -> _Spans:
+    """Each triangle's sample centres (column + .5, row + .5) inside it, row by row: between its long edge (top
+    corner to bottom corner) and its upper or lower short edge. An edge's crossing of a row is computed from
+    its corners in one order whichever triangle it bounds, so neighbours neither gap nor overlap."""
+    order = np.argsort(tri[:, :, 1], axis=1, kind="stable")
+    (x0, y0), (x1, y1), (x2, y2) = (np.take_along_axis(tri, order[:, k, None, None], axis=1)[:, 0].T for k in range(3))
+    first = np.ceil(y0 - 0.5).clip(0, height).astype(np.int64)
+    last = np.floor(y2 - 0.5).clip(-1, height - 1).astype(np.int64)
+    rows = np.where(np.isfinite(planes[:, 0, 0]), np.maximum(last - first + 1, 0), 0)
+    f = np.repeat(np.arange(len(tri)), rows)
+    row = first[f] + np.arange(rows.sum()) - np.repeat(np.cumsum(rows) - rows, rows)
+    y = row + 0.5
     with np.errstate(divide="ignore", invalid="ignore"):
-        bound = rhs / a
-    lo = np.where(a > 0, bound, -np.inf).max(axis=1)
-    hi = np.where(a < 0, bound, np.inf).min(axis=1)
-    empty = ((a == 0) & (rhs > 0)).any(axis=1) | np.isnan(a).any(axis=1)
-    c0 = np.ceil(np.maximum(lo, 0.0) - 0.5).astype(np.int64)
-    c1 = np.floor(np.minimum(hi, width) - 0.5).astype(np.int64)
-    count = np.where(empty, 0, np.maximum(c1 - c0 + 1, 0))
+        x_long = x0[f] + (y - y0[f]) * ((x2 - x0) / (y2 - y0))[f]
+        upper = y < y1[f]
+        x_short = np.where(upper, x0[f] + (y - y0[f]) * ((x1 - x0) / (y1 - y0))[f],
+                           x1[f] + (y - y1[f]) * ((x2 - x1) / (y2 - y1))[f])
+    c0 = np.ceil(np.maximum(np.minimum(x_long, x_short), 0.0) - 0.5)
+    c1 = np.floor(np.minimum(np.maximum(x_long, x_short), width) - 0.5)
+    count = np.where(np.isfinite(c0) & np.isfinite(c1), np.maximum(c1 - c0 + 1, 0), 0).astype(np.int64)
     keep = count > 0
-    rgb = colours[face[keep]]                                              # (S, 3 corners, rgb)
-    along = np.concatenate([slope[keep, 3:], np.einsum("sk,skc->sc", slope[keep, :3], rgb)], axis=1)
-    at = np.concatenate([offset[keep, 3:], np.einsum("sk,skc->sc", offset[keep, :3], rgb)], axis=1)
-    return _Spans(row[keep], c0[keep], count[keep], along, at)
+    f, y = f[keep], y[keep]
+    p = planes[f]                                                          # (S, 4, abc)
+    return _Spans(row[keep], c0[keep].astype(np.int64), count[keep], p[:, :, 0], p[:, :, 1] * y[:, None] + p[:, :, 2])
 
 
 def _draw_spans(spans: _Spans, width, zbuf, rgb) -> None:
