@@ -13,7 +13,8 @@ The page opens on a poster, a front view of the first state drawn here (a PNG), 
 plain HTML, painted before any heavy script runs. plotly.js and the data wait in inert blocks
 (`<script type="text/plain">`, `application/json`) until the poster is painted
 (`window.breastplanShown`, performance mark `breastplan-shown`); then plotly.js runs, builds the 3-D
-scene under the poster and removes it once drawn (`window.breastplanReady`, mark `breastplan-ready`).
+scene under the poster and hides it once drawn (`window.breastplanReady`, mark `breastplan-ready`); printed, the
+page shows the poster and the text for her, not the controls, the 3-D view or the surgeon's part.
 `window.breastplanState` names the state shown, `window.breastplanDrawn` the state last drawn.
 """
 from __future__ import annotations
@@ -275,10 +276,15 @@ body{font-family:system-ui,sans-serif;margin:0;color:#222;background:#fafafa}
 header{padding:10px 16px;background:#3b3b52;color:#fff}header h1{margin:0;font-size:20px}header p{margin:4px 0 0;font-size:14px}
 details{margin:10px 0}summary{cursor:pointer;font-weight:600}
 main{display:flex;flex-wrap:wrap;gap:12px;padding:12px}
-#plot{position:relative;width:760px;height:640px;background:#fff;border:1px solid #ddd}
-#poster{position:absolute;inset:0;z-index:10;margin:0;background:#fff}#poster img{display:block}
+#plot{position:relative;width:min(760px,calc(100vw - 360px));height:640px;background:#fff;border:1px solid #ddd}
+@media (max-width:900px){#plot{width:calc(100vw - 26px)}}
+#poster{position:absolute;inset:0;z-index:10;margin:0;background:#fff}#poster[hidden]{display:none}
+#poster img{display:block;max-width:100%;height:auto}
+@media print{header{background:none;color:#000}#controls,#for-surgeon,#plot>div{display:none!important}
+ #plot{border:none;width:auto;height:auto}#poster,#poster[hidden]{display:block;position:static}#poster figcaption{display:none}
+ main{display:block;padding:0}table{break-inside:avoid}}
 #poster figcaption{position:absolute;left:8px;bottom:6px;font-size:13px;color:#555}
-#controls{min-width:300px;max-width:420px}
+#controls{flex:1 1 300px;min-width:300px;max-width:420px}
 .slider{margin:8px 0}.slider label{display:block;font-weight:600}.slider input{width:260px}
 button{margin:2px;padding:4px 10px}button.on{background:#3b3b52;color:#fff}
 table{border-collapse:collapse;margin:6px 0 14px;font-size:13px}td,th{border:1px solid #ccc;padding:3px 6px;text-align:right}
@@ -420,7 +426,7 @@ for(const b of document.querySelectorAll('button[data-view]'))b.onclick=()=>{con
 const first=byKey[P.first];
 put(arrays(first));
 label(first);
-Plotly.newPlot(gd,traces,layout,{displaylogo:false,responsive:true}).then(()=>{document.getElementById('poster').remove();
+Plotly.newPlot(gd,traces,layout,{displaylogo:false,responsive:true}).then(()=>{document.getElementById('poster').hidden=true;   // kept for print
  window.breastplanDrawn=window.breastplanState;return painted();})
  .then(()=>{window.breastplanReady=true;performance.mark('breastplan-ready');});   // the 3-D scene painted
 }

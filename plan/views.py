@@ -62,7 +62,7 @@ class Views:
     landmarks: dict[str, np.ndarray]    # what the measures start from: "sternal notch" (1, 3), "midline" (K, 3)
                                         # her skin on the mid-sagittal plane, "nipples" (sides, 3) as found
     footprints: dict[str, np.ndarray]   # side → (K, 3) the closed outline her volume is measured inside
-    side_labels: dict[str, np.ndarray]  # side → (3,) where her side is named: SIDE_LABEL_MM outside its nipple
+    side_labels: dict[str, np.ndarray]  # side → (3,) where her side is named: SIDE_LABEL_MM from its nipple
 
 
 def build_views(plan: Plan) -> Views:
@@ -104,8 +104,9 @@ def skin_triangles(points_view: np.ndarray) -> np.ndarray:
     return faces[longest <= GAP_MM].astype(np.int64)
 
 
-SIDE_LABEL_MM = (90.0, 40.0)
-"""Her sides are named this far outside each nipple (along her left–right axis) and this far in front of it, mm."""
+SIDE_LABEL_MM = (30.0, 120.0, 30.0)
+"""Her sides are named this far outside each nipple (along her left–right axis), below it (along her up axis)
+and in front of it, mm: on her skin under the breast, inside any view of her."""
 
 
 def _side_labels(plan: Plan, show) -> dict[str, np.ndarray]:
@@ -113,8 +114,8 @@ def _side_labels(plan: Plan, show) -> dict[str, np.ndarray]:
     out = {}
     for s, sp in plan.sides.items():
         outward = marks.left_axis if s == "left" else -marks.left_axis
-        out[s] = show((sp.scan.nipple_camera_mm + SIDE_LABEL_MM[0] * outward
-                       + SIDE_LABEL_MM[1] * marks.anterior_axis)[None])[0]
+        out[s] = show((sp.scan.nipple_camera_mm + SIDE_LABEL_MM[0] * outward - SIDE_LABEL_MM[1] * marks.up_axis
+                       + SIDE_LABEL_MM[2] * marks.anterior_axis)[None])[0]
     return out
 
 

@@ -517,7 +517,7 @@ def test_the_report_opens_on_a_picture_of_the_plan_and_its_measures_without_any_
         b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
         clock = b.timings()
         assert 0 < clock["breastplan-shown"] < clock["breastplan-ready"]
-        assert b.js("document.getElementById('poster')") is None              # the 3-D took its place
+        assert b.js("document.getElementById('poster').checkVisibility()") is False   # the 3-D took its place
         assert b.requests() == [] and b.console_errors() == []
 
 
@@ -530,7 +530,7 @@ def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(pl
     with chromium(1280, 900) as b:
         b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
         assert b.js("window.breastplanDrawn") == "combined"
-        assert b.js("document.getElementById('poster')") is None              # the 3-D, not the poster
+        assert b.js("document.getElementById('poster').checkVisibility()") is False   # the 3-D, not the poster
         box = b.rect("#plot")
         assert b.rect("#plot g.legend")[2] <= b.rect("#plot #scene")[0]       # the legend beside her, not over her
         first = _plot_pixels(b.screenshot(tmp_path / "combined.png"), box)
@@ -712,3 +712,34 @@ def test_a_header_that_cannot_be_printed_is_a_usage_error(cli, tmp_path, flag, v
     res = run(cli, "plan", "--out", tmp_path / "case", flag, value)
     assert res.returncode == 2 and flag in res.stderr
     assert not (tmp_path / "case").exists()
+
+
+@requires_chromium
+def test_the_report_fits_1024_and_1920_px_names_her_sides_and_prints_her_picture_and_measures(planned, tmp_path):
+    """At 1024 and 1920 px wide the controls sit beside her picture, not under it. The view buttons turn the
+    camera: from her left side her left alone is named. Printed, the page shows the poster and the text for
+    her — no controls, no 3-D canvas, no surgeon's part — on at most three pages."""
+    import base64
+
+    case, _, _ = planned
+    for width in (1024, 1920):
+        with chromium(width, 900) as b:
+            b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
+            plot, controls = b.rect("#plot"), b.rect("#controls")
+            assert controls[0] >= plot[2] and controls[1] < plot[3] and controls[2] <= width, width
+    with chromium(1280, 900) as b:
+        b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
+        named = "Array.from(document.getElementById('plot').data.find(t => t.name === 'her sides').text)"
+        assert sorted(b.js(named)) == ["her left", "her right"]
+        b.driver.find_element("css selector", "button[data-view='left-side']").click()
+        time.sleep(0.3)
+        assert [t for t in b.js(named) if t] == ["her left"]
+        pdf = base64.b64decode(b.driver.print_page())
+        assert 1 <= len(re.findall(rb"/Type\s*/Page\b(?!s)", pdf)) <= 3
+        b.driver.execute_cdp_cmd("Emulation.setEmulatedMedia", {"media": "print"})
+        visible = "document.querySelector('{}').checkVisibility()"
+        assert b.js(visible.format("#poster img")) is True and b.js(visible.format("table.for-her")) is True
+        for hidden in ("#controls", "#for-surgeon", "#plot .plot-container"):
+            assert b.js(visible.format(hidden)) is False, hidden
+        poster = _plot_pixels(b.screenshot(tmp_path / "printed.png"), b.rect("#poster img"))
+        assert _skin_share(poster) > 0.9
