@@ -1,13 +1,18 @@
 """report.html: a self-contained, offline page of the plan (plotly.js embedded; no request leaves it).
 
-The page draws her skin (her torso as one shaded, skin-coloured surface, moved near the breasts as
-the state shown plans it), on demand each breast's scanned points and fitted model as planned (from
-the legend), for a follow-up the breast as fitted at the earlier visit (a translucent blue mesh), the
-landmarks the measures start from (the sternal notch, the midline and the nipples found, red), each
-breast's footprint (blue), a degree slider per planned kind, the combination as planned,
-front/side/top views, the measures before and after with the asymmetry between sides, the fits' quality, a follow-up's volume change since the
-earlier scan, and the inputs, options and versions. Geometry travels as base64 typed arrays
-(`views`); a small script decodes it and restyles the plot when a slider moves.
+The page is headed with whom and when it is for (`Plan.patient`). It draws her skin (her torso as one
+shaded, skin-coloured surface, moved near the breasts as the state shown plans it, or coloured by the
+millimetres each point moves, the value under the pointer), on demand each breast's scanned points and
+fitted model as planned (from the legend), for a follow-up the breast as fitted at the earlier visit (a
+translucent blue mesh), the landmarks the measures start from (the sternal notch, the midline and the
+nipples found, red), each breast's footprint (blue) and her sides named on her. A degree slider per planned
+kind, the combination as planned, her skin before beside the state shown (one camera for both), the five
+standard views (her right side, her right oblique, front, her left oblique, her left side) and a top view.
+Below: the main measures in plain words for her, with the disclaimer and a link to her handout; the measures
+before and after with the asymmetry between sides, her volume, symmetry and a follow-up's change; and,
+folded away for the surgeon, the fits' quality, the changes' parameters, the inputs, options and versions.
+Geometry travels as base64 typed arrays (`views`); a small script decodes it and redraws the plot when a
+control changes.
 
 The page opens on a poster, a front view of the first state drawn here (a PNG), above its tables:
 plain HTML, painted before any heavy script runs. plotly.js and the data wait in inert blocks
@@ -105,10 +110,21 @@ def page_data(plan: Plan, views: Views) -> dict:
             "earlier": {s: _mesh(*views.earlier[s]) for s in views.earlier},
             "landmarks": {k: v.round(2).tolist() for k, v in views.landmarks.items()},
             "side_labels": {s: v.round(1).tolist() for s, v in views.side_labels.items()},
+            "bounds": _bounds(views),
             "footprints": {s: v.round(2).tolist() for s, v in views.footprints.items()},
             "states": states, "sliders": sliders, "first": first_state(plan, views).key,
             "skin_rgb": list(SKIN_RGB), "light": list(LIGHT), "shade": list(SHADE),
             "scan": SCAN, "model": MODEL, "landmark": LANDMARK, "footprint": FOOTPRINT}
+
+
+def _bounds(views: Views) -> list[list[float]]:
+    """[[lo, hi]] of x, y, z (display frame, mm) holding her skin in every state and the landmarks: one box for
+    every scene, so that before and as planned side by side share a scale."""
+    every = np.concatenate([views.torso, views.patch, *(st.torso for st in views.states),
+                            *views.landmarks.values(), *views.footprints.values()])
+    lo, hi = every.min(axis=0), every.max(axis=0)
+    pad = 0.03 * (hi - lo).max()
+    return [[round(float(a - pad), 1), round(float(b + pad), 1)] for a, b in zip(lo, hi)]
 
 
 def first_state(plan: Plan, views: Views) -> State:
@@ -298,8 +314,10 @@ td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4p
 <div><b>View</b><br><button data-view="right-side">Her right side</button><button data-view="right-oblique">Her right oblique</button><button data-view="front">Front</button><button data-view="left-oblique">Her left oblique</button><button data-view="left-side">Her left side</button><button data-view="top">Top</button></div>
 <div id="sliders"></div>
 <div><b>Show</b><br><button id="original">Original</button><button id="combined">Combined, as planned</button></div>
+<div><b>Colour</b><br><button id="colour-skin" class="on">Her skin</button><button id="colour-moved">Millimetres moved</button></div>
+<div><b>Compare</b><br><button id="beside">Before and as planned, side by side</button></div>
 <p id="state"></p>
-<p>Her skin as scanned, moved as the plan shown would move it. Red: the sternal notch, the midline and the nipples the measures start from. Blue: each breast's footprint, the outline her volume is measured inside. The legend shows each breast's scanned points and its fitted model on demand.</p>
+<p>Her skin as scanned, moved as the plan shown would move it (or coloured by how far each point moves). Red: the sternal notch, the midline and the nipples the measures start from. Blue: each breast's footprint, the outline her volume is measured inside. The legend shows each breast's scanned points and its fitted model on demand.</p>
 </div></main>
 <div id="tables">%TABLES%</div>
 <script>%SCRIPT%</script>
@@ -379,9 +397,9 @@ for(const s of Object.keys(P.footprints)){   // the outline each breast's volume
  traces.push({type:'scatter3d',mode:'lines',name:s+' footprint',legendgroup:'footprints',x:F.map(p=>p[0]),
   y:F.map(p=>p[1]),z:F.map(p=>p[2]),line:{color:P.footprint,width:6},hoverinfo:'skip'});
 }
-const around=a=>({eye:{x:1.9*Math.sin(a*Math.PI/180),y:-1.9*Math.cos(a*Math.PI/180),z:0.15},up:{x:0,y:0,z:1}});   // a: degrees towards her left
+const around=a=>({eye:{x:1.45*Math.sin(a*Math.PI/180),y:-1.45*Math.cos(a*Math.PI/180),z:0.12},up:{x:0,y:0,z:1}});   // a: degrees towards her left
 const views={'right-side':around(-90),'right-oblique':around(-45),front:around(0),'left-oblique':around(45),
- 'left-side':around(90),top:{eye:{x:0,y:-0.2,z:1.9},up:{x:0,y:1,z:0}}};
+ 'left-side':around(90),top:{eye:{x:0,y:-0.15,z:1.45},up:{x:0,y:1,z:0}}};
 const layout={margin:{l:0,r:0,t:0,b:0},showlegend:true,legend:{x:0,y:1},hovermode:false,   // the legend beside the body, not over it
  scene:{domain:{x:[0.26,1],y:[0,1]},aspectmode:'data',xaxis:{visible:false},yaxis:{visible:false},zaxis:{visible:false},camera:views.front}};
 const gd=document.getElementById('plot');
@@ -398,10 +416,48 @@ function label(state){
  window.breastplanState=state?state.key:'original';
  document.getElementById('state').textContent='Showing: '+(state?(state.kind?state.kind+', degree '+state.degree:'all planned changes combined'):'the original breasts');
 }
+let colourBy='skin';   // her skin shaded, or each point's distance moved by the state shown (mm)
+function movedMM(upd){const mm=new Float32Array(nT+nP);let top=0;
+ for(let v=0;v<nP;v++){const d=Math.hypot(upd.x[0][nT+v]-patchBase[3*v],upd.y[0][nT+v]-patchBase[3*v+1],upd.z[0][nT+v]-patchBase[3*v+2]);
+  mm[nT+v]=d;if(d>top)top=d;}
+ return [mm,top];}
 function put(upd){ids.forEach((t,n)=>{traces[t]=Object.assign({},traces[t],{x:upd.x[n],y:upd.y[n],z:upd.z[n]});});
- traces[idx.skin].vertexcolor=shade(upd.x[0],upd.y[0],upd.z[0]);}
-function show(state){label(state);put(arrays(state));const key=window.breastplanState;
- return Plotly.react(gd,traces,gd.layout).then(()=>{window.breastplanDrawn=key;});}
+ const skin=Object.assign({},traces[idx.skin]);
+ if(colourBy==='moved'){const [mm,top]=movedMM(upd);delete skin.vertexcolor;
+  Object.assign(skin,{intensity:mm,cmin:0,cmax:Math.max(1,Math.ceil(top)),colorscale:[[0,'#f3ece6'],[0.5,'#f4a582'],[1,'#b2182b']],
+   showscale:true,colorbar:{title:{text:'mm moved'},len:0.6,x:1.0,xanchor:'right'},hovertemplate:'moved %{intensity:.1f} mm<extra></extra>',hoverinfo:undefined});}
+ else{delete skin.intensity;Object.assign(skin,{vertexcolor:shade(upd.x[0],upd.y[0],upd.z[0]),showscale:false,hoverinfo:'skip',hovertemplate:undefined});}
+ traces[idx.skin]=skin;}
+let current=null;   // the state shown (null: the original)
+let beside=false;   // her skin before (left) beside the state shown (right), one camera for both
+const still0=arrays(null);
+idx.before=traces.length;
+traces.push({type:'mesh3d',name:'before',scene:'scene2',x:still0.x[0],y:still0.y[0],z:still0.z[0],i:sf[0],j:sf[1],k:sf[2],
+ vertexcolor:shade(still0.x[0],still0.y[0],still0.z[0]),lighting:{ambient:1,diffuse:0,specular:0,fresnel:0},
+ hoverinfo:'skip',showlegend:false});
+function scenes(layout){   // the layout's scenes for one view or two side by side, the camera kept
+ const cam=(gd.layout&&gd.layout.scene&&gd.layout.scene.camera)||views.front;
+ const one={domain:{x:[0.26,1],y:[0,1]}},two={domain:{x:[0.5,1],y:[0,1]}},left={domain:{x:[0,0.5],y:[0,1]}};
+ const B=P.bounds,size=B.map(r=>r[1]-r[0]),most=Math.max(...size);   // one box and scale for every scene
+ const axes={aspectmode:'manual',aspectratio:{x:size[0]/most,y:size[1]/most,z:size[2]/most},camera:cam,
+  xaxis:{visible:false,range:B[0]},yaxis:{visible:false,range:B[1]},zaxis:{visible:false,range:B[2]}};
+ const out=Object.assign({},layout,{scene:Object.assign({},axes,beside?two:one),showlegend:!beside,   // beside: no legend
+  annotations:beside?[{text:'before',x:0.25,y:0.01,xref:'paper',yref:'paper',showarrow:false,yanchor:'bottom'},
+   {text:'as shown',x:0.75,y:0.01,xref:'paper',yref:'paper',showarrow:false,yanchor:'bottom'}]:[]});
+ if(beside)out.scene2=Object.assign({},axes,left);else delete out.scene2;
+ return out;}
+const drawn=()=>beside?traces:traces.filter((_,i)=>i!==idx.before);   // the traces drawn: the scene before only beside
+function show(state){current=state;label(state);put(arrays(state));const key=window.breastplanState;
+ return Plotly.react(gd,drawn(),scenes(Object.assign({},gd.layout,{hovermode:colourBy==='moved'?'closest':false})))
+  .then(()=>{window.breastplanDrawn=key;});}
+document.getElementById('beside').onclick=()=>{beside=!beside;document.getElementById('beside').classList.toggle('on',beside);
+ window.breastplanBeside=beside;return show(current);};
+let syncing=false;   // one camera for both scenes: a turn of either turns the other
+function linked(ev){const cam=ev['scene.camera']||ev['scene2.camera'];if(!cam||syncing||!beside)return;
+ syncing=true;Plotly.relayout(gd,{'scene.camera':cam,'scene2.camera':cam}).then(()=>{syncing=false;});}
+for(const [id,by] of [['colour-skin','skin'],['colour-moved','moved']])document.getElementById(id).onclick=()=>{
+ colourBy=by;document.getElementById('colour-skin').classList.toggle('on',by==='skin');
+ document.getElementById('colour-moved').classList.toggle('on',by==='moved');window.breastplanColour=by;return show(current);};
 const byKey={};for(const st of P.states)byKey[st.key]=st;
 const box=document.getElementById('sliders');
 for(const sl of P.sliders){
@@ -422,11 +478,14 @@ if(byKey['combined']){comb.onclick=()=>{planned();return show(byKey['combined'])
 const named=v=>sides.map(s=>v.endsWith('-side')&&!v.startsWith(s)?'':'her '+s);   // a side view names its own side only
 for(const b of document.querySelectorAll('button[data-view]'))b.onclick=()=>{const v=b.dataset.view;
  traces[idx.sides]=Object.assign({},traces[idx.sides],{text:named(v)});
- Plotly.react(gd,traces,Object.assign({},gd.layout,{scene:Object.assign({},gd.layout.scene,{camera:views[v]})}));};
+ const layout=scenes(gd.layout);layout.scene.camera=views[v];if(beside)layout.scene2.camera=views[v];
+ return Plotly.react(gd,drawn(),layout);};
 const first=byKey[P.first];
+current=first;
 put(arrays(first));
 label(first);
-Plotly.newPlot(gd,traces,layout,{displaylogo:false,responsive:true}).then(()=>{document.getElementById('poster').hidden=true;   // kept for print
+Plotly.newPlot(gd,drawn(),scenes(layout),{displaylogo:false,responsive:true}).then(()=>{gd.on('plotly_relayout',linked);
+ document.getElementById('poster').hidden=true;   // kept for print
  window.breastplanDrawn=window.breastplanState;return painted();})
  .then(()=>{window.breastplanReady=true;performance.mark('breastplan-ready');});   // the 3-D scene painted
 }

@@ -743,3 +743,44 @@ def test_the_report_fits_1024_and_1920_px_names_her_sides_and_prints_her_picture
             assert b.js(visible.format(hidden)) is False, hidden
         poster = _plot_pixels(b.screenshot(tmp_path / "printed.png"), b.rect("#poster img"))
         assert _skin_share(poster) > 0.9
+
+
+@requires_chromium
+def test_the_report_colours_her_skin_by_millimetres_moved_and_shows_before_beside_the_plan(planned, tmp_path):
+    """"Millimetres moved" colours her skin by how far the state shown moves each point: its scale tops at
+    the planned torso's largest move (plan/combined-torso.ply against camera.ply, read here) and hover
+    gives the value. Side by side, her skin before (as scanned) is drawn in a second scene at the
+    same scale, and turning either camera turns the other."""
+    case, _, _ = planned
+    before, after = read_ply(case / "left" / "camera.ply").points, read_ply(case / "plan" / "combined-torso.ply").points
+    largest = float(np.linalg.norm(after - before, axis=1).max())
+    plot = "document.getElementById('plot')"
+    with chromium(1280, 900) as b:
+        b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
+        b.driver.find_element("css selector", "#colour-moved").click()
+        for _ in range(200):
+            if b.js(f"{plot}.data[0].intensity !== undefined"):
+                break
+            time.sleep(0.05)
+        moved = np.array(b.js(f"Array.from({plot}.data[0].intensity)"))
+        assert moved.max() == pytest.approx(largest, rel=0.2) and moved.min() == 0.0
+        assert b.js(f"{plot}.data[0].cmax") == int(np.ceil(moved.max()))
+        assert "mm" in b.js(f"{plot}.data[0].hovertemplate")
+        b.driver.find_element("css selector", "#beside").click()
+        for _ in range(200):
+            if b.js(f"{plot}.layout.scene2 !== undefined"):
+                break
+            time.sleep(0.05)
+        shown = b.js(f"{plot}.data.find(t => t.name === 'before')")
+        assert shown["scene"] == "scene2"
+        xyz = np.column_stack([shown["x"], shown["y"], shown["z"]])
+        skin = np.column_stack([b.js(f"Array.from({plot}.data[0].{a})") for a in "xyz"])
+        assert len(xyz) == len(skin) and np.abs(xyz - skin).max() > 5.0          # before is not as planned
+        assert b.js(f"{plot}.layout.scene.xaxis.range") == b.js(f"{plot}.layout.scene2.xaxis.range")
+        b.js(f"Plotly.relayout({plot}, {{'scene2.camera': {{eye: {{x: 0.5, y: -1.5, z: 0.8}}, up: {{x: 0, y: 0, z: 1}}}}}})")
+        for _ in range(200):
+            if b.js(f"{plot}.layout.scene.camera.eye.x") == 0.5:
+                break
+            time.sleep(0.05)
+        assert b.js(f"{plot}.layout.scene.camera.eye") == {"x": 0.5, "y": -1.5, "z": 0.8}
+        assert b.console_errors() == []
