@@ -46,8 +46,11 @@ def compute_plan(source: Path, fitted: dict[str, SidePlan], options: PlanOptions
         torsos = tuple(planned_torso(body, sides, st) for st in requested)
         measures = plan_measures(sides, volumes, requested[-1], torsos[-1])
         skin = {} if earlier is None else skin_changes(body, sides, volumes, earlier)
+        sliders = slider_states(sides, states, options)
+        shown = {st.key: state_measures(sides, volumes, st) for st in {st.key: st for st in sliders}.values()}
     return Plan(source, options, body, sides, volumes, states, torsos, measures, earlier, skin,
-                None if source.is_dir() else sha256(source), versions(), clock.ms)
+                None if source.is_dir() else sha256(source), versions(), clock.ms, slider_states=sliders,
+                shown_measures=shown)
 
 
 def versions() -> dict[str, str]:
@@ -80,6 +83,39 @@ def _states(sides: dict[str, SidePlan], options: PlanOptions, method: Method):
             yield _state(sides, name, kind, degree, changes)
     if len(options.changes) > 1:
         yield _state(sides, COMBINED, None, None, {s: sp.changes[-1] for s, sp in sides.items()})
+
+
+def slider_states(sides: dict[str, SidePlan], states: tuple[PlanState, ...], options: PlanOptions) -> tuple[PlanState, ...]:
+    """What each kind's slider shows at each of its degrees, in the order of `states`: with one requested
+    change, that change at the degree; with several, their combination with this kind at the degree and every
+    other at its requested degree (the combination as planned at the requested degree)."""
+    if len(options.changes) == 1:
+        return states
+    requested, by_key = dict(options.changes), {st.key: st for st in states}
+    out = []
+    for st in (st for st in states if st.kind is not None):
+        if st.degree == requested[st.kind]:
+            out.append(by_key[COMBINED])
+            continue
+        parts = {k: by_key[change_name(k, d)] for k, d in requested.items()} | {st.kind: st}
+        changes = {s: replace(combine([parts[k].changes[s] for k in requested]), name=f"{COMBINED}-{st.key}")
+                   for s in sides}
+        out.append(_state(sides, f"{COMBINED}-{st.key}", st.kind, st.degree, changes))
+    return tuple(out)
+
+
+def state_measures(sides: dict[str, SidePlan], volumes: BreastVolumes, state: PlanState) -> dict:
+    """Side → her breast's measures in `state` (`breast_measures` of the planned breast; her volume on her skin
+    changed by as much as the fitted model's)."""
+    out = {}
+    for side, sp in sides.items():
+        planned = state.planned[side]
+        before = breast_measures(volumes.landmarks, sp.scan.nipple_camera_mm, sp.surface_input, sp.fit.faces)
+        after = breast_measures(volumes.landmarks, planned.model(sp.scan.nipple_camera_mm[None])[0],
+                                planned.model(sp.surface_input), sp.fit.faces)
+        after["volume_cc"] = volumes.sides[side].volume_cc + after["volume_cc"] - before["volume_cc"]
+        out[side] = after
+    return out
 
 
 def _state(sides: dict[str, SidePlan], key: str, kind, degree, changes: dict[str, Change]) -> PlanState:

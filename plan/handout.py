@@ -39,7 +39,7 @@ def measure_rows(plan: Plan) -> list[tuple[str, ...]]:
     for name, (words, unit) in PLAIN.items():
         cells = []
         for s in sides:
-            text = f"{_value(m.before[s].get(name))} → {_value(m.after[s].get(name))} {unit}".rstrip()
+            text = f"{plain_value(m.before[s].get(name))} → {plain_value(m.after[s].get(name))} {unit}".rstrip()
             if name == "volume_cc":
                 text += f"  (± {plan.volumes.sides[s].uncertainty_cc:.0f})"
             cells.append(text)
@@ -51,7 +51,8 @@ def measure_rows(plan: Plan) -> list[tuple[str, ...]]:
     return rows
 
 
-def _value(v) -> str:
+def plain_value(v) -> str:
+    """A measure as the plain-words tables write it: whole above 10, two decimals below; — if not finite."""
     if v is None or not np.isfinite(v):
         return "—"
     return f"{v:.0f}" if abs(v) >= 10 else f"{v:.2f}"

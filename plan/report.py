@@ -36,7 +36,7 @@ from breastplan.fitting.ffd import STOP_RESIDUAL
 
 from .breast_volume import model_differs_much
 from .changes import short_of
-from .handout import DISCLAIMER, measure_rows
+from .handout import DISCLAIMER, PLAIN, plain_value
 from .measures import measure_label
 from .pictures import FOOTPRINT, LANDMARK, LIGHT, SHADE, SKIN_RGB, VIEWS, camera, picture
 from .result import Plan
@@ -88,21 +88,34 @@ def _mesh(vertices: np.ndarray, faces: np.ndarray) -> dict:
     return {**_points(vertices), "faces": _b64(faces, "<i4"), "m": int(len(faces))}
 
 
+def _state_words(plan: Plan, st: State) -> str:
+    """What a drawn state shows, in words."""
+    if st.kind is None:
+        return "all planned changes combined"
+    if len(plan.options.changes) == 1:
+        return f"{st.kind}, degree {st.degree:g}"
+    return f"{st.kind} at degree {st.degree:g}, the other changes as planned"
+
+
 def page_data(plan: Plan, views: Views) -> dict:
     """The JSON the page's script reads: geometry, states, sliders and the state it opens on."""
     sides = list(plan.sides)
     patch = views.patch
     states = []
     for st in views.states:
-        entry = {"key": st.key, "kind": st.kind, "degree": st.degree, "mesh": {}}
+        entry = {"key": st.key, "words": _state_words(plan, st), "mesh": {},
+                 "measures": {side: {k: round(float(v), 3) for k, v in m.items()}
+                              for side, m in plan.shown_measures[st.key].items()}}
         for s in sides:
             values, scale = quantise(st.mesh[s] - views.meshes[s][0])
             entry["mesh"][s] = {"d": _b64(values, "i1"), "scale": scale}
         values, scale = quantise(st.torso - patch)
         entry["torso"] = {"d": _b64(values, "i1"), "scale": scale}
         states.append(entry)
-    sliders = [{"kind": kind, "requested": degree,
-                "degrees": [st.degree for st in views.states if st.kind == kind]} for kind, degree in plan.options.changes]
+    stops = [(st.kind, st.degree, shown.key) for st, shown in zip((st for st in plan.states if st.kind is not None),
+                                                                   plan.slider_states)]
+    sliders = [{"kind": kind, "requested": degree, "degrees": [d for k, d, _ in stops if k == kind],
+                "keys": [key for k, _, key in stops if k == kind]} for kind, degree in plan.options.changes]
     return {"sides": sides, "torso": _points(views.torso), "patch": _points(patch),
             "skin_faces": {"faces": _b64(views.skin, "<i4"), "m": int(len(views.skin))},
             "scans": {s: _points(views.scans[s]) for s in sides},
@@ -110,6 +123,7 @@ def page_data(plan: Plan, views: Views) -> dict:
             "earlier": {s: _mesh(*views.earlier[s]) for s in views.earlier},
             "landmarks": {k: v.round(2).tolist() for k, v in views.landmarks.items()},
             "side_labels": {s: v.round(1).tolist() for s, v in views.side_labels.items()},
+            "before": {s: {k: round(float(v), 3) for k, v in plan.measures.before[s].items()} for s in sides},
             "bounds": _bounds(views),
             "footprints": {s: v.round(2).tolist() for s, v in views.footprints.items()},
             "states": states, "sliders": sliders, "first": first_state(plan, views).key,
@@ -228,29 +242,47 @@ def tables(plan: Plan) -> str:
 
 
 def for_her(plan: Plan) -> str:
-    """The main measures in plain words (`plan.handout.measure_rows`), the disclaimer and a link to her handout."""
-    head, *rows = measure_rows(plan)
-    return ('<section id="for-her"><h2>For her</h2>' + _table(list(head), [list(r) for r in rows], "for-her")
-            + f'<p id="disclaimer">{html.escape(DISCLAIMER)}</p><p>To take home: <a href="report.pdf">report.pdf</a>, '
-            'two printed pages of these pictures and measures.</p></section>')
+    """The main measures in plain words (`plan.handout.PLAIN`), before → as shown (the cells the page's script
+    updates as the state shown changes), the disclaimer and a link to her handout."""
+    m, sides = plan.measures, [s for s in ("right", "left") if s in plan.sides]
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in ["measure", *(f"her {s} breast: before → as shown" for s in sides)])
+    body = ""
+    for name, (words, unit) in PLAIN.items():
+        cells = ""
+        for s in sides:
+            extra = f"  (± {plan.volumes.sides[s].uncertainty_cc:.0f})" if name == "volume_cc" else ""
+            cells += (f"<td>{plain_value(m.before[s].get(name))} → <span data-after=\"{s} {name}\" data-for-her>"
+                      f"{plain_value(m.after[s].get(name))}</span> {unit}{extra}</td>")
+        body += f"<tr><td>{html.escape(words)}</td>{cells}</tr>"
+    return ('<section id="for-her"><h2>For her</h2><table class="for-her"><thead><tr>' + head + "</tr></thead><tbody>"
+            + body + f'</tbody></table><p id="disclaimer">{html.escape(DISCLAIMER)}</p><p>To take home: '
+            '<a href="report.pdf">report.pdf</a>, two printed pages of these pictures and measures.</p></section>')
 
 
 def _measures_table(plan: Plan) -> str:
-    """Each side's measures before and as planned, and their asymmetry, with where up came from."""
+    """Each side's measures before and as shown, and their asymmetry, with where up came from; the page's
+    script updates the "as shown" cells as the state shown changes."""
     sides, m = list(plan.sides), plan.measures
-    head = ["measure"] + [f"{s} {w}" for s in sides for w in ("before", "after")]
+    head = ["measure"] + [f"{s} {w}" for s in sides for w in ("before", "as shown")]
     if m.asymmetry:
-        head += ["asymmetry before", "asymmetry after"]
-    rows = []
+        head += ["asymmetry before", "asymmetry as shown"]
+    rows = ""
     for name in m.before[sides[0]]:
-        row = [measure_label(name)]
+        cells = f"<td>{html.escape(measure_label(name))}</td>"
         for s in sides:
-            row += [m.before[s][name], m.after[s][name]]
+            cells += f'<td>{_fmt(m.before[s][name])}</td><td data-after="{s} {name}">{_fmt(m.after[s][name])}</td>'
         if m.asymmetry:
-            row += [m.asymmetry["before"][name], m.asymmetry["after"][name]]
-        rows.append(row)
-    return ("<h2>Measures (after: the combination as planned)</h2>" + _table(head, rows, "measures")
-            + f'<p id="up-from">{UP_FROM_TEXT[plan.volumes.landmarks.up_from]}</p>')
+            cells += (f'<td>{_fmt(m.asymmetry["before"][name])}</td>'
+                      f'<td data-asymmetry="{name}">{_fmt(m.asymmetry["after"][name])}</td>')
+        rows += f"<tr>{cells}</tr>"
+    th = "".join(f"<th>{html.escape(h)}</th>" for h in head)
+    return (f'<h2>Measures (as shown: the state the view shows; as the page opens, the {_opening(plan)})</h2>'
+            f'<table class="measures"><thead><tr>{th}</tr></thead><tbody>{rows}</tbody></table>'
+            f'<p id="up-from">{UP_FROM_TEXT[plan.volumes.landmarks.up_from]}</p>')
+
+
+def _opening(plan: Plan) -> str:
+    return "combination as planned" if plan.shown.kind is None else "planned change"
 
 
 SYMMETRY_LABELS = {"pBRA_pct": "pBRA: nipples from the notch, one against the other's mirror image %",
@@ -301,7 +333,7 @@ main{display:flex;flex-wrap:wrap;gap:12px;padding:12px}
  main{display:block;padding:0}table{break-inside:avoid}}
 #poster figcaption{position:absolute;left:8px;bottom:6px;font-size:13px;color:#555}
 #controls{flex:1 1 300px;min-width:300px;max-width:420px}
-.slider{margin:8px 0}.slider label{display:block;font-weight:600}.slider input{width:260px}
+.slider{margin:8px 0}.slider label{display:block;font-weight:600}.slider label.off{color:#888}.slider input{width:260px}
 button{margin:2px;padding:4px 10px}button.on{background:#3b3b52;color:#fff}
 table{border-collapse:collapse;margin:6px 0 14px;font-size:13px}td,th{border:1px solid #ccc;padding:3px 6px;text-align:right}
 td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4px}
@@ -412,9 +444,20 @@ function arrays(state){   // the moving traces' coordinates in `state`; null: th
  return upd;
 }
 const ids=[idx.skin].concat(P.sides.map(s=>idx[s]));
-function label(state){
+const fmt=(v,forHer)=>!isFinite(v)?'—':forHer?(Math.abs(v)>=10?v.toFixed(0):v.toFixed(2)):(Math.abs(v)>=10?v.toFixed(1):String(Number(v.toPrecision(3))));
+function label(state){   // what is shown, in words; the sliders and the measures' "as planned" cells follow it
  window.breastplanState=state?state.key:'original';
- document.getElementById('state').textContent='Showing: '+(state?(state.kind?state.kind+', degree '+state.degree:'all planned changes combined'):'the original breasts');
+ document.getElementById('state').textContent='Showing: '+(state?state.words:'the original breasts');
+ for(const sl of P.sliders){const inp=document.getElementById('slider-'+sl.kind);if(!inp)continue;
+  const at=state?sl.keys.indexOf(state.key):-1;
+  if(state&&at<0)inp.value=sl.degrees.indexOf(sl.requested);else if(at>=0)inp.value=at;
+  const d=sl.degrees[+inp.value];
+  inp.previousSibling.textContent=sl.kind+': degree '+d+(d===sl.requested?' (planned)':'')+(state?'':' (not shown)');
+  inp.previousSibling.classList.toggle('off',!state);}
+ for(const c of document.querySelectorAll('[data-after]')){const [side,name]=c.dataset.after.split(' ');
+  const v=state?state.measures[side][name]:P.before[side][name];c.textContent=fmt(v,c.dataset.forHer!==undefined);}
+ for(const c of document.querySelectorAll('[data-asymmetry]')){const name=c.dataset.asymmetry;
+  const m=state?state.measures:P.before;c.textContent=fmt(m.left[name]-m.right[name],false);}
 }
 let colourBy='skin';   // her skin shaded, or each point's distance moved by the state shown (mm)
 function movedMM(upd){const mm=new Float32Array(nT+nP);let top=0;
@@ -464,17 +507,12 @@ for(const sl of P.sliders){
  const div=document.createElement('div');div.className='slider';
  const lab=document.createElement('label');const inp=document.createElement('input');
  inp.type='range';inp.min=0;inp.max=sl.degrees.length-1;inp.step=1;inp.value=sl.degrees.indexOf(sl.requested);inp.id='slider-'+sl.kind;
- const name=()=>sl.kind+': degree '+sl.degrees[+inp.value]+(sl.degrees[+inp.value]===sl.requested?' (planned)':'');
- lab.textContent=name();
- inp.addEventListener('input',()=>{lab.textContent=name();const d=sl.degrees[+inp.value];
-  show(P.states.find(st=>st.kind===sl.kind&&st.degree===d));});
+ inp.addEventListener('input',()=>show(byKey[sl.keys[+inp.value]]));
  div.appendChild(lab);div.appendChild(inp);box.appendChild(div);
 }
-function planned(){for(const sl of P.sliders){const inp=document.getElementById('slider-'+sl.kind);
- inp.value=sl.degrees.indexOf(sl.requested);inp.previousSibling.textContent=sl.kind+': degree '+sl.requested+' (planned)';}}
 document.getElementById('original').onclick=()=>show(null);
 const comb=document.getElementById('combined');
-if(byKey['combined']){comb.onclick=()=>{planned();return show(byKey['combined']);};}else{comb.style.display='none';}
+if(byKey['combined']){comb.onclick=()=>show(byKey['combined']);}else{comb.style.display='none';}
 const named=v=>sides.map(s=>v.endsWith('-side')&&!v.startsWith(s)?'':'her '+s);   // a side view names its own side only
 for(const b of document.querySelectorAll('button[data-view]'))b.onclick=()=>{const v=b.dataset.view;
  traces[idx.sides]=Object.assign({},traces[idx.sides],{text:named(v)});

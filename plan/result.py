@@ -215,6 +215,9 @@ class Plan:
     versions: dict[str, str] = field(default_factory=dict)   # package → version, as planned
     timings_ms: dict = field(default_factory=dict)
     patient: Patient = field(default_factory=Patient)
+    slider_states: tuple[PlanState, ...] = ()    # what the report's sliders show: each kind at each degree,
+                                                 # the other kinds at their requested degrees
+    shown_measures: dict = field(default_factory=dict)   # state key → side → her measures in that state
 
     @property
     def input_kind(self) -> str:

@@ -4,9 +4,8 @@ breast), and every planned state.
 All in the display frame (x to the image's right, y away from the viewer, z up; mm), from the
 scan's viewing frame (x right, y down, z away). Her torso is drawn as one triangle surface
 (`skin_triangles`) through the centroids of its points in TORSO_MM cubes; its points near the breasts
-(the patch) move with the plan. A state is one of the plan's states (`plan.result.PlanState`: the
-degrees 1..8 of every requested kind and the requested degrees, or the combination as planned),
-drawn: the planned breast meshes and the moved patch, each stored as a displacement from the
+(the patch) move with the plan. A state is one the report's sliders show (`Plan.slider_states`: each requested kind at the
+degrees 1..8 and the requested one, with the other kinds at their requested degrees), drawn: the planned breast meshes and the moved patch, each stored as a displacement from the
 original, quantised to int8 with its own scale (at most 1/254 of the largest displacement: well
 under a millimetre), so a report of some thirty states stays small.
 """
@@ -80,7 +79,8 @@ def build_views(plan: Plan) -> Views:
                  skin=skin_triangles(transform_points(plan.body.input_to_view, drawn)),
                  scans={s: show(transform_points(sp.frames.breast_to_input, sp.scan.points))
                         for s, sp in plan.sides.items()},
-                 meshes=meshes, states=[_state(plan, st, patch_in, show) for st in plan.states],
+                 meshes=meshes, states=[_state(plan, st, patch_in, show)
+                                        for st in {st.key: st for st in plan.slider_states}.values()],
                  earlier={s: (show(sp.follow_up.earlier_surface_input), sp.follow_up.earlier_faces)
                           for s, sp in plan.sides.items() if sp.follow_up is not None},
                  landmarks=_landmarks(plan, show),

@@ -196,12 +196,13 @@ def test_the_reports_drawing_of_every_state_is_the_reference_deformation(sample)
 
     plan, _, _ = sample
     views = build_views(plan)
-    assert [s.key for s in views.states] == [st.key for st in plan.states]
+    drawn_states = list({st.key: st for st in plan.slider_states}.values())
+    assert [s.key for s in views.states] == [st.key for st in drawn_states]
     breasts = {s: Breast(sp) for s, sp in plan.sides.items()}
     to_display = VIEW_TO_DISPLAY @ np.asarray(plan.first.scan.input_to_view, float)
     patch = transform_points(np.linalg.inv(to_display), views.patch)         # her torso near the breasts, input frame
     assert len(patch) > 1000
-    for drawn, st in zip(views.states, plan.states):
+    for drawn, st in zip(views.states, drawn_states):
         assert (drawn.kind, drawn.degree) == (st.kind, st.degree)
         torso = patch.copy()
         for side, b in breasts.items():
@@ -209,6 +210,34 @@ def test_the_reports_drawing_of_every_state_is_the_reference_deformation(sample)
             assert np.abs(drawn.mesh[side] - want).max() < TOL_MM, (st.key, side)
             torso += b.blended_local(b.local(patch), vector_of(st.changes[side])) @ b.input_to_local[:3, :3]
         assert np.abs(drawn.torso - transform_points(to_display, torso)).max() < TOL_MM, st.key
+
+
+def test_each_slider_shows_its_kind_at_its_degree_with_the_other_changes_as_planned(sample):
+    """`Plan.slider_states`: for each kind, in order, each slider degree (1..8 and the requested one); at the
+    requested degree the combination as planned, elsewhere the reference deformation with this kind at the
+    degree and every other kind at its requested degree; and `Plan.shown_measures` of the combination is
+    the plan's measures as planned."""
+    plan, _, _ = sample
+    want = [(k, d) for k in KINDS for d in sorted({*range(1, 9), REQUESTED[k]})]
+    assert len(plan.slider_states) == len(want)
+    breasts = {s: Breast(sp) for s, sp in plan.sides.items()}
+    for (kind, degree), st in zip(want, plan.slider_states):
+        if degree == REQUESTED[kind]:
+            assert st.key == "combined"
+            continue
+        assert (st.key, st.kind, st.degree) == (f"combined-{kind}-{degree:g}", kind, degree)
+        for side, b in breasts.items():
+            details = st.changes[side].details
+            assert [(d["kind"], d["degree"]) for d in details] == [(k, degree if k == kind else REQUESTED[k])
+                                                                   for k in KINDS]
+            singles = {c.kind: c.changes[side].details[0] for c in plan.states if c.kind is not None
+                       and c.degree == (degree if c.kind == kind else REQUESTED[c.kind])}
+            assert [d["params"] for d in details] == [singles[k]["params"] for k in KINDS]   # each as solved alone
+            got = st.planned[side].model(plan.sides[side].surface_input)
+            want_mm = b.model(b.fitted_input, vector_of(st.changes[side]))
+            assert np.abs(got - want_mm).max() < TOL_MM, (st.key, side)
+    for side in plan.sides:
+        assert plan.shown_measures["combined"][side] == pytest.approx(plan.measures.after[side], abs=1e-9)
 
 
 # --- what is written ---------------------------------------------------------------------------
