@@ -638,26 +638,50 @@ def test_a_case_whose_sides_are_two_womens_is_refused(planned, cli, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["case", "other.ply"]
 
 
-def test_summary_shows_her_torso_before_and_as_planned_with_her_left_on_the_pictures_right(planned, tmp_path):
-    """summary.png of a plan of her left breast alone: from her right oblique, the front and her left oblique,
-    her skin before (top row) and as planned (bottom row), framed alike; each picture as planned differs from
-    the one above it visibly, and only right of her midline: her left, on the picture's right from the
-    front and either oblique (not the viewer's left)."""
+def _pdf_pages(pdf: bytes) -> list:
+    """The page images of a PDF whose pages are each one JPEG (DCTDecode) image, decoded by Pillow."""
+    import io
+
     from PIL import Image
 
-    from breastplan.options import PlanOptions
-    from breastplan.plan.job import run_plan
+    return [Image.open(io.BytesIO(m[1])).convert("RGB")
+            for m in re.finditer(rb"/Filter\s*/DCTDecode.*?stream\r?\n(.*?)\r?\nendstream", pdf, re.S)]
+
+
+def test_a_left_plan_for_a_named_patient_gives_her_summary_and_handout_her_left_on_the_pictures_right(
+        planned, cli, tmp_path):
+    """`plan --side left --patient --patient-id --surgeon --date` on the sample's case: plan.json, the report's
+    header and the handout name them. summary.png: from her right oblique, the front and her left oblique, her
+    skin before (top row) and as planned (bottom row), framed alike; each picture as planned differs from the
+    one above it visibly, and right of her midline: her left, on the picture's right from the front and either
+    oblique (not the viewer's left). report.pdf: two A4 landscape pages, at most 2 MB; page 1 her skin before
+    and as planned from five views (ten pictures), page 2 text alone."""
+    from PIL import Image
+
     from breastplan.plan.pictures import SHOT_PX, VIEWS, camera
     from breastplan.plan.summary import HEAD_PX, LABEL_PX
     from breastplan.plan.summary import VIEWS as COLUMNS
     from breastplan.plan.views import build_views
 
-    copy = tmp_path / "case"
-    shutil.copytree(planned[0], copy)
-    left_only = run_plan(copy, tmp_path / "left", PlanOptions.parse(list(CHANGES), side="left"))
+    out = tmp_path / "left"
+    res = run(cli, "plan", planned[0], "--side", "left", "--out", out, "--patient", "Anna Beispiel", "--patient-id",
+              "12-345", "--surgeon", "Dr. K. Weber", "--date", "2026-11-28",
+              *[a for c in CHANGES for a in ("--deform", c)])
+    assert res.returncode == 0, res.stderr[-2000:]
+    record = json.loads((out / "plan.json").read_text())
+    assert record["patient"] == {"name": "Anna Beispiel", "patient_id": "12-345", "surgeon": "Dr. K. Weber",
+                                 "date": "2026-11-28"}
+    assert record["files"]["handout"] == "report.pdf" and list(record["sides"]) == ["left"]
+    header = "Patient: Anna Beispiel (ID 12-345) · Surgeon: Dr. K. Weber · Date: 2026-11-28"
+    assert f'<p id="who">{header}</p>' in (out / "report.html").read_text()
+
+    from breastplan.options import PlanOptions
+    from breastplan.plan.job import run_plan
+
+    left_only = run_plan(out, out, PlanOptions.parse(list(CHANGES), side="left"))   # reused: the plan as a value
     views = build_views(left_only)
     shown = next(st for st in views.states if st.key == left_only.shown.key)
-    page = np.asarray(Image.open(tmp_path / "left" / "summary.png").convert("RGB")).astype(int)
+    page = np.asarray(Image.open(out / "summary.png").convert("RGB")).astype(int)
     w, h = SHOT_PX
     assert page.shape[1] == LABEL_PX + len(COLUMNS) * w and page.shape[0] > HEAD_PX + 2 * h
     for i, azimuth in enumerate(VIEWS[name] for name in COLUMNS):
@@ -669,35 +693,8 @@ def test_summary_shows_her_torso_before_and_as_planned_with_her_left_on_the_pict
         columns = np.nonzero(changed)[1]
         assert changed.sum() > 300, azimuth
         assert (columns > midline).mean() > 0.97 and np.median(columns) > midline + 20, azimuth
-    assert left_only.sides.keys() == {"left"}
 
-
-def _pdf_pages(pdf: bytes) -> list:
-    """The page images of a PDF whose pages are each one JPEG (DCTDecode) image, decoded by Pillow."""
-    import io
-
-    from PIL import Image
-
-    return [Image.open(io.BytesIO(m[1])).convert("RGB")
-            for m in re.finditer(rb"/Filter\s*/DCTDecode.*?stream\r?\n(.*?)\r?\nendstream", pdf, re.S)]
-
-
-def test_the_handout_is_two_a4_pages_of_her_pictures_and_measures_named_as_given(planned, cli, tmp_path):
-    """`plan --patient --patient-id --surgeon --date`: plan.json, the report's header and the handout name
-    them. report.pdf: two A4 landscape pages, at most 2 MB; page 1 her skin before and as planned from five
-    views (ten pictures of skin colour), page 2 text alone."""
-    case = tmp_path / "case"
-    shutil.copytree(planned[0], case)
-    res = run(cli, "plan", case, "--patient", "Anna Beispiel", "--patient-id", "12-345", "--surgeon",
-              "Dr. K. Weber", "--date", "2026-11-28", *[a for c in CHANGES for a in ("--deform", c)])
-    assert res.returncode == 0, res.stderr[-2000:]
-    record = json.loads((case / "plan.json").read_text())
-    assert record["patient"] == {"name": "Anna Beispiel", "patient_id": "12-345", "surgeon": "Dr. K. Weber",
-                                 "date": "2026-11-28"}
-    assert record["files"]["handout"] == "report.pdf"
-    header = "Patient: Anna Beispiel (ID 12-345) · Surgeon: Dr. K. Weber · Date: 2026-11-28"
-    assert f'<p id="who">{header}</p>' in (case / "report.html").read_text()
-    pdf = (case / "report.pdf").read_bytes()
+    pdf = (out / "report.pdf").read_bytes()
     assert pdf.startswith(b"%PDF-") and len(pdf) <= 2 * 2**20
     boxes = re.findall(rb"/MediaBox\s*\[\s*0 0 ([\d.]+) ([\d.]+)\s*\]", pdf)
     assert len(boxes) == 2 and all(abs(float(w) - 841.89) < 0.5 and abs(float(h) - 595.28) < 0.5 for w, h in boxes)
@@ -720,48 +717,33 @@ def test_a_header_that_cannot_be_printed_is_a_usage_error(cli, tmp_path, flag, v
 
 
 @requires_chromium
-def test_the_report_fits_1024_and_1920_px_names_her_sides_and_prints_her_picture_and_measures(planned, tmp_path):
+def test_the_report_fits_1024_and_1920_px_colours_what_moves_compares_and_prints(planned, tmp_path):
     """At 1024 and 1920 px wide the controls sit beside her picture, not under it. The view buttons turn the
-    camera: from her left side her left alone is named. Printed, the page shows the poster and the text for
-    her — no controls, no 3-D canvas, no surgeon's part — on at most three pages."""
+    camera: from her left side her left alone is named. "Millimetres moved" colours her skin by how far the
+    state shown moves each point: its scale tops at the planned torso's largest move (plan/combined-torso.ply
+    against camera.ply, read here) and hover gives the value. Side by side, her skin before (as scanned) is
+    drawn in a second scene at the same scale, and turning either camera turns the other. Printed, the page
+    shows the poster and the text for her — no controls, no 3-D canvas, no surgeon's part — on at most three
+    pages."""
     import base64
 
     case, _, _ = planned
-    for width in (1024, 1920):
-        with chromium(width, 900) as b:
-            b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
-            plot, controls = b.rect("#plot"), b.rect("#controls")
-            assert controls[0] >= plot[2] and controls[1] < plot[3] and controls[2] <= width, width
-    with chromium(1280, 900) as b:
+    before, after = read_ply(case / "left" / "camera.ply").points, read_ply(case / "plan" / "combined-torso.ply").points
+    largest = float(np.linalg.norm(after - before, axis=1).max())
+    plot = "document.getElementById('plot')"
+    with chromium(1920, 900) as b:
         b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
+        box, controls = b.rect("#plot"), b.rect("#controls")
+        assert controls[0] >= box[2] and controls[1] < box[3] and controls[2] <= 1920
+    with chromium(1024, 900) as b:
+        b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
+        box, controls = b.rect("#plot"), b.rect("#controls")
+        assert controls[0] >= box[2] and controls[1] < box[3] and controls[2] <= 1024
         named = "Array.from(document.getElementById('plot').data.find(t => t.name === 'her sides').text)"
         assert sorted(b.js(named)) == ["her left", "her right"]
         b.driver.find_element("css selector", "button[data-view='left-side']").click()
         time.sleep(0.3)
         assert [t for t in b.js(named) if t] == ["her left"]
-        pdf = base64.b64decode(b.driver.print_page())
-        assert 1 <= len(re.findall(rb"/Type\s*/Page\b(?!s)", pdf)) <= 3
-        b.driver.execute_cdp_cmd("Emulation.setEmulatedMedia", {"media": "print"})
-        visible = "document.querySelector('{}').checkVisibility()"
-        assert b.js(visible.format("#poster img")) is True and b.js(visible.format("table.for-her")) is True
-        for hidden in ("#controls", "#for-surgeon", "#plot .plot-container"):
-            assert b.js(visible.format(hidden)) is False, hidden
-        poster = _plot_pixels(b.screenshot(tmp_path / "printed.png"), b.rect("#poster img"))
-        assert _skin_share(poster) > 0.9
-
-
-@requires_chromium
-def test_the_report_colours_her_skin_by_millimetres_moved_and_shows_before_beside_the_plan(planned, tmp_path):
-    """"Millimetres moved" colours her skin by how far the state shown moves each point: its scale tops at
-    the planned torso's largest move (plan/combined-torso.ply against camera.ply, read here) and hover
-    gives the value. Side by side, her skin before (as scanned) is drawn in a second scene at the
-    same scale, and turning either camera turns the other."""
-    case, _, _ = planned
-    before, after = read_ply(case / "left" / "camera.ply").points, read_ply(case / "plan" / "combined-torso.ply").points
-    largest = float(np.linalg.norm(after - before, axis=1).max())
-    plot = "document.getElementById('plot')"
-    with chromium(1280, 900) as b:
-        b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
         b.driver.find_element("css selector", "#colour-moved").click()
         for _ in range(200):
             if b.js(f"{plot}.data[0].intensity !== undefined"):
@@ -789,3 +771,12 @@ def test_the_report_colours_her_skin_by_millimetres_moved_and_shows_before_besid
             time.sleep(0.05)
         assert b.js(f"{plot}.layout.scene.camera.eye") == {"x": 0.5, "y": -1.5, "z": 0.8}
         assert b.console_errors() == []
+        pdf = base64.b64decode(b.driver.print_page())
+        assert 1 <= len(re.findall(rb"/Type\s*/Page\b(?!s)", pdf)) <= 3
+        b.driver.execute_cdp_cmd("Emulation.setEmulatedMedia", {"media": "print"})
+        visible = "document.querySelector('{}').checkVisibility()"
+        assert b.js(visible.format("#poster img")) is True and b.js(visible.format("table.for-her")) is True
+        for hidden in ("#controls", "#for-surgeon", "#plot .plot-container"):
+            assert b.js(visible.format(hidden)) is False, hidden
+        poster = _plot_pixels(b.screenshot(tmp_path / "printed.png"), b.rect("#poster img"))
+        assert _skin_share(poster) > 0.9
