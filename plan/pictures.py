@@ -25,6 +25,8 @@ LANDMARK = "#c0392b"
 """The colour of the landmarks the measures start from: sternal notch, midline, the nipples found."""
 FOOTPRINT = "#1f5fbf"
 """The colour of each breast's footprint, the outline her volume is measured inside."""
+FOLD = "#7b3294"
+"""The colour of each breast's inframammary fold."""
 VIEWS = {"her right side": -90.0, "her right oblique": -45.0, "front": 0.0, "her left oblique": 45.0,
          "her left side": 90.0}
 """The standard views a surgeon photographs, in the order they are laid out, and the azimuth of each about her
@@ -62,7 +64,7 @@ def before_after(views: Views, state: State, names=tuple(VIEWS)) -> dict[str, tu
 
 def picture(views: Views, state: State, cam: raster.Camera, marks: bool = True) -> Image.Image:
     """Her skin moved as `state` plans, seen by `cam`, lit from LIGHT turned with it; with `marks`, the
-    landmarks (red), the footprints (blue) where not hidden behind her, and her sides named."""
+    landmarks (red), the footprints (blue) and folds (purple) where not hidden behind her, and her sides named."""
     vertices = np.concatenate([views.torso, state.torso])
     colours = raster.lit(vertices, views.skin, np.array(SKIN_RGB), cam.light(LIGHT), SHADE)
     drawn = raster.draw(vertices, views.skin, colours, cam)
@@ -73,6 +75,8 @@ def picture(views: Views, state: State, cam: raster.Camera, marks: bool = True) 
         for outline in views.footprints.values():
             _line(pen, drawn, np.vstack([outline, outline[:1]]), FOOTPRINT, px)
         _line(pen, drawn, views.landmarks["midline"], LANDMARK, px, dash_px=8 * px)
+        for fold in views.folds.values():
+            _line(pen, drawn, fold, FOLD, px, tolerance_mm=12.0)
         for name, radius in (("sternal notch", 2.5 * px), ("nipples", 2 * px)):
             points = views.landmarks[name]
             for (x, y) in cam.project(points)[0][drawn.visible(points)]:
@@ -82,14 +86,15 @@ def picture(views: Views, state: State, cam: raster.Camera, marks: bool = True) 
 
 
 def _line(pen: ImageDraw.ImageDraw, drawn: raster.Picture, polyline: np.ndarray, colour: str, width: int,
-          dash_px: float = 0.0) -> None:
-    """The polyline (K, 3) drawn where it is not hidden behind the surface; dashed every `dash_px` px if given."""
+          dash_px: float = 0.0, tolerance_mm: float = 3.0) -> None:
+    """The polyline (K, 3) drawn where it is not hidden behind the surface (by more than `tolerance_mm`);
+    dashed every `dash_px` px if given."""
     steps = np.maximum(np.ceil(np.linalg.norm(np.diff(polyline, axis=0), axis=1) / STEP_MM), 1).astype(int)
     t = np.concatenate([np.arange(n) / n + i for i, n in enumerate(steps)] + [[len(steps)]])
     i = np.minimum(t.astype(int), len(polyline) - 2)
     dense = polyline[i] + (t - i)[:, None] * (polyline[i + 1] - polyline[i])
     xy = drawn.camera.project(dense)[0]
-    on = drawn.visible(dense)
+    on = drawn.visible(dense, tolerance_mm)
     if dash_px:
         along = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))]
         on &= (along // dash_px) % 2 == 0

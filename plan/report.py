@@ -38,7 +38,7 @@ from .breast_volume import model_differs_much
 from .changes import short_of
 from .handout import DISCLAIMER, PLAIN, plain_value
 from .measures import measure_label
-from .pictures import FOOTPRINT, LANDMARK, LIGHT, SHADE, SKIN_RGB, VIEWS, camera, picture
+from .pictures import FOLD, FOOTPRINT, LANDMARK, LIGHT, SHADE, SKIN_RGB, VIEWS, camera, picture
 from .result import Plan
 from .views import State, Views, quantise
 
@@ -123,12 +123,14 @@ def page_data(plan: Plan, views: Views) -> dict:
             "earlier": {s: _mesh(*views.earlier[s]) for s in views.earlier},
             "landmarks": {k: v.round(2).tolist() for k, v in views.landmarks.items()},
             "side_labels": {s: v.round(1).tolist() for s, v in views.side_labels.items()},
+            "folds": {s: {"xyz": v.round(1).tolist(), "from": plan.measures.ptosis["before"][s]["fold_from"]}
+                      for s, v in views.folds.items()},
             "before": {s: {k: round(float(v), 3) for k, v in plan.measures.before[s].items()} for s in sides},
             "bounds": _bounds(views),
             "footprints": {s: v.round(2).tolist() for s, v in views.footprints.items()},
             "states": states, "sliders": sliders, "first": first_state(plan, views).key,
             "skin_rgb": list(SKIN_RGB), "light": list(LIGHT), "shade": list(SHADE),
-            "scan": SCAN, "model": MODEL, "landmark": LANDMARK, "footprint": FOOTPRINT}
+            "scan": SCAN, "model": MODEL, "landmark": LANDMARK, "footprint": FOOTPRINT, "fold": FOLD}
 
 
 def _bounds(views: Views) -> list[list[float]]:
@@ -349,7 +351,7 @@ td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4p
 <div><b>Colour</b><br><button id="colour-skin" class="on">Her skin</button><button id="colour-moved">Millimetres moved</button></div>
 <div><b>Compare</b><br><button id="beside">Before and as planned, side by side</button></div>
 <p id="state"></p>
-<p>Her skin as scanned, moved as the plan shown would move it (or coloured by how far each point moves). Red: the sternal notch, the midline and the nipples the measures start from. Blue: each breast's footprint, the outline her volume is measured inside. The legend shows each breast's scanned points and its fitted model on demand.</p>
+<p>Her skin as scanned, moved as the plan shown would move it (or coloured by how far each point moves). Red: the sternal notch, the midline and the nipples the measures start from. Blue: each breast's footprint, the outline her volume is measured inside. Purple: the fold beneath each breast (dotted where the breast hides it and its place is estimated). The legend shows each breast's scanned points and its fitted model on demand.</p>
 </div></main>
 <div id="tables">%TABLES%</div>
 <script>%SCRIPT%</script>
@@ -424,6 +426,12 @@ idx.sides=traces.length;
 traces.push({type:'scatter3d',mode:'text',name:'her sides',x:sides.map(s=>P.side_labels[s][0]),
  y:sides.map(s=>P.side_labels[s][1]),z:sides.map(s=>P.side_labels[s][2]),text:sides.map(s=>'her '+s),
  textfont:{color:'#333',size:13},hoverinfo:'skip',showlegend:false});
+for(const s of Object.keys(P.folds)){   // the fold under each breast, where "nipple to fold" is measured to
+ const F=P.folds[s].xyz;
+ traces.push({type:'scatter3d',mode:'lines',name:s+' fold ('+P.folds[s].from+')',legendgroup:'folds',x:F.map(p=>p[0]),
+  y:F.map(p=>p[1]),z:F.map(p=>p[2]),line:{color:P.fold,width:5,dash:P.folds[s].from==='seen'?'solid':'dot'},
+  hovertemplate:'her '+s+' inframammary fold ('+P.folds[s].from+')<extra></extra>'});
+}
 for(const s of Object.keys(P.footprints)){   // the outline each breast's volume is measured inside
  const F=P.footprints[s];
  traces.push({type:'scatter3d',mode:'lines',name:s+' footprint',legendgroup:'footprints',x:F.map(p=>p[0]),

@@ -62,6 +62,7 @@ class Views:
                                         # her skin on the mid-sagittal plane, "nipples" (sides, 3) as found
     footprints: dict[str, np.ndarray]   # side → (K, 3) the closed outline her volume is measured inside
     side_labels: dict[str, np.ndarray]  # side → (3,) where her side is named: SIDE_LABEL_MM from its nipple
+    folds: dict[str, np.ndarray]        # side → (K, 3) her inframammary fold under the breast, as measured
 
 
 def build_views(plan: Plan) -> Views:
@@ -86,7 +87,7 @@ def build_views(plan: Plan) -> Views:
                  landmarks=_landmarks(plan, show),
                  footprints={s: show(v.footprint_input_mm + FOOTPRINT_LIFT_MM * plan.volumes.landmarks.anterior_axis)
                              for s, v in plan.volumes.sides.items()},
-                 side_labels=_side_labels(plan, show))
+                 side_labels=_side_labels(plan, show), folds=_folds(plan, show))
 
 
 def skin_triangles(points_view: np.ndarray) -> np.ndarray:
@@ -102,6 +103,30 @@ def skin_triangles(points_view: np.ndarray) -> np.ndarray:
     tri = points_view[faces]
     longest = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
     return faces[longest <= GAP_MM].astype(np.int64)
+
+
+FOLD_HALF_MM = 30.0
+"""Each breast's inframammary fold is drawn this far to either side of the point under its nipple, mm."""
+
+
+def _folds(plan: Plan, show) -> dict[str, np.ndarray]:
+    """Side → (K, 3) a short line along the fold under the breast as the measures place it (body frame: at the
+    height `nipple_to_fold_mm` below the nipple, on her skin, else the wall), display frame; none where the
+    ptosis measure found no fold."""
+    v = plan.volumes
+    cells, to_input = v.cells, np.linalg.inv(v.body_from_input)
+    out = {}
+    for s, sp in plan.sides.items():
+        below = plan.measures.ptosis["before"][s].get("nipple_to_fold_mm")
+        if below is None or not np.isfinite(below):
+            continue
+        nipple = transform_points(v.body_from_input, sp.scan.nipple_camera_mm[None])[0]
+        x = nipple[0] + np.linspace(-FOLD_HALF_MM, FOLD_HALF_MM, 13)
+        i = np.clip(np.searchsorted(cells.x, x), 0, len(cells.x) - 1)
+        j = np.clip(np.searchsorted(cells.y, nipple[1] - below), 0, len(cells.y) - 1)
+        front = cells.wall_mm[i, j] + np.clip(cells.height_mm[i, j], 0.0, None)
+        out[s] = show(transform_points(to_input, np.column_stack([x, np.full_like(x, nipple[1] - below), front])))
+    return out
 
 
 SIDE_LABEL_MM = (30.0, 120.0, 30.0)

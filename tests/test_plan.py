@@ -780,3 +780,22 @@ def test_the_report_fits_1024_and_1920_px_colours_what_moves_compares_and_prints
             assert b.js(visible.format(hidden)) is False, hidden
         poster = _plot_pixels(b.screenshot(tmp_path / "printed.png"), b.rect("#poster img"))
         assert _skin_share(poster) > 0.9
+
+
+def test_the_report_draws_each_fold_where_nipple_to_fold_is_measured_to(planned):
+    """Each breast's fold drawn in the report lies `nipple_to_fold_mm` (plan.json) below its nipple along her up
+    axis, spans the nipple's side to side, and is named seen or estimated as plan.json says."""
+    case, record, _ = planned
+    page = (case / "report.html").read_text()
+    data = json.loads(re.search(r'<script type="application/json" id="plan-data">(.*?)</script>', page, re.S)[1])
+    to_display = VIEW_TO_DISPLAY @ np.load(case / "left" / "scan.npz")["view_from_camera"]
+    landmarks = record["measures"]["landmarks"]
+    up, left = np.array(landmarks["up_axis"]), np.array(landmarks["left_axis"])
+    for side in ("left", "right"):
+        ptosis = record["measures"]["ptosis"]["before"][side]
+        fold = transform_points(np.linalg.inv(to_display), np.array(data["folds"][side]["xyz"]))
+        nipple = np.array(record["sides"][side]["nipple_input_mm"])
+        assert data["folds"][side]["from"] == ptosis["fold_from"]
+        assert ((nipple - fold) @ up) == pytest.approx(np.full(len(fold), ptosis["nipple_to_fold_mm"]), abs=3.0)
+        across = (fold - nipple) @ left
+        assert across.min() < -20.0 and across.max() > 20.0
