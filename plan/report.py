@@ -5,9 +5,10 @@ shaded, skin-coloured surface, moved near the breasts as the state shown plans i
 millimetres each point moves, the value under the pointer), on demand each breast's scanned points and
 fitted model as planned (from the legend), for a follow-up the breast as fitted at the earlier visit (a
 translucent blue mesh), the landmarks the measures start from (the sternal notch, the midline and the
-nipples found, red), each breast's footprint (blue) and her sides named on her. A degree slider per planned
-kind, the combination as planned, her skin before beside the state shown (one camera for both), the five
-standard views (her right side, her right oblique, front, her left oblique, her left side) and a top view.
+nipples found, red), each breast's footprint (blue), the fold beneath each breast (purple) and her sides
+named on her. A degree slider per planned kind, the combination as planned, her skin before beside the state
+shown (one camera for both), the five standard views (her right side, her right oblique, front, her left
+oblique, her left side) and a top view.
 Below: the main measures in plain words for her, with the disclaimer and a link to her handout; the measures
 before and after with the asymmetry between sides, her volume, symmetry and a follow-up's change; and,
 folded away for the surgeon, the fits' quality, the changes' parameters, the inputs, options and versions.
@@ -417,7 +418,7 @@ const mark={color:P.landmark};
 traces.push({type:'scatter3d',mode:'lines',name:'midline',legendgroup:'landmarks',x:col('midline')[0],
  y:col('midline')[1],z:col('midline')[2],line:{...mark,width:3,dash:'dash'},hoverinfo:'skip'});
 traces.push({type:'scatter3d',mode:'markers+text',name:'sternal notch',legendgroup:'landmarks',x:col('sternal notch')[0],
- y:col('sternal notch')[1],z:col('sternal notch')[2],text:['sternal notch'],textposition:'bottom right',
+ y:col('sternal notch')[1],z:col('sternal notch')[2],text:['\u2002sternal notch'],textposition:'middle right',
  textfont:{...mark,size:11},marker:{...mark,size:4},hoverinfo:'skip'});
 traces.push({type:'scatter3d',mode:'markers',name:'nipples (found)',legendgroup:'landmarks',x:col('nipples')[0],
  y:col('nipples')[1],z:col('nipples')[2],marker:{...mark,size:3.5,symbol:'diamond'},hoverinfo:'skip'});
