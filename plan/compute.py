@@ -47,7 +47,7 @@ def compute_plan(source: Path, fitted: dict[str, SidePlan], options: PlanOptions
         measures = plan_measures(sides, volumes, requested[-1], torsos[-1])
         skin = {} if earlier is None else skin_changes(body, sides, volumes, earlier)
         sliders = slider_states(sides, states, options)
-        shown = {st.key: state_measures(sides, volumes, st) for st in {st.key: st for st in sliders}.values()}
+        shown = shown_measures(sides, volumes, {st.key: st for st in sliders}.values())
     return Plan(source, options, body, sides, volumes, states, torsos, measures, earlier, skin,
                 None if source.is_dir() else sha256(source), versions(), clock.ms, slider_states=sliders,
                 shown_measures=shown)
@@ -85,7 +85,8 @@ def _states(sides: dict[str, SidePlan], options: PlanOptions, method: Method):
         yield _state(sides, COMBINED, None, None, {s: sp.changes[-1] for s, sp in sides.items()})
 
 
-def slider_states(sides: dict[str, SidePlan], states: tuple[PlanState, ...], options: PlanOptions) -> tuple[PlanState, ...]:
+def slider_states(sides: dict[str, SidePlan], states: tuple[PlanState, ...],
+                  options: PlanOptions) -> tuple[PlanState, ...]:
     """What each kind's slider shows at each of its degrees, in the order of `states`: with one requested
     change, that change at the degree; with several, their combination with this kind at the degree and every
     other at its requested degree (the combination as planned at the requested degree)."""
@@ -104,17 +105,20 @@ def slider_states(sides: dict[str, SidePlan], states: tuple[PlanState, ...], opt
     return tuple(out)
 
 
-def state_measures(sides: dict[str, SidePlan], volumes: BreastVolumes, state: PlanState) -> dict:
-    """Side → her breast's measures in `state` (`breast_measures` of the planned breast; her volume on her skin
-    changed by as much as the fitted model's)."""
+def shown_measures(sides: dict[str, SidePlan], volumes: BreastVolumes, states) -> dict[str, dict]:
+    """State key → side → her breast's measures in that state (`breast_measures` of the planned breast; her
+    volume on her skin changed by as much as the fitted model's)."""
+    before = {s: breast_measures(volumes.landmarks, sp.scan.nipple_camera_mm, sp.surface_input, sp.fit.faces)
+              for s, sp in sides.items()}
     out = {}
-    for side, sp in sides.items():
-        planned = state.planned[side]
-        before = breast_measures(volumes.landmarks, sp.scan.nipple_camera_mm, sp.surface_input, sp.fit.faces)
-        after = breast_measures(volumes.landmarks, planned.model(sp.scan.nipple_camera_mm[None])[0],
-                                planned.model(sp.surface_input), sp.fit.faces)
-        after["volume_cc"] = volumes.sides[side].volume_cc + after["volume_cc"] - before["volume_cc"]
-        out[side] = after
+    for state in states:
+        out[state.key] = {}
+        for side, sp in sides.items():
+            planned = state.planned[side]
+            after = breast_measures(volumes.landmarks, planned.model(sp.scan.nipple_camera_mm[None])[0],
+                                    planned.model(sp.surface_input), sp.fit.faces)
+            after["volume_cc"] = volumes.sides[side].volume_cc + after["volume_cc"] - before[side]["volume_cc"]
+            out[state.key][side] = after
     return out
 
 

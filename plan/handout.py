@@ -15,7 +15,8 @@ PAGE_PX = (1754, 1240)
 """An A4 page, landscape, at DPI."""
 DPI = 150
 MARGIN_PX = 60
-DISCLAIMER = "A simulation of a planned change on her scanned body: a guide for discussion, not a promise of the result."
+DISCLAIMER = ("A simulation of a planned change on her scanned body: a guide for discussion, not a promise of "
+              "the result.")
 PLAIN = {"volume_cc": ("breast volume", "cc"),
          "notch_to_nipple_mm": ("nipple to the notch at the base of the neck", "mm"),
          "nipple_to_midline_mm": ("nipple to the middle of the chest", "mm"),
@@ -103,12 +104,13 @@ def _pictures_page(plan: Plan, shots: dict) -> Image.Image:
 def _measures_page(plan: Plan) -> Image.Image:
     page, pen = _page(plan, "The measures, before and as planned")
     top, columns = MARGIN_PX + 160, (MARGIN_PX, MARGIN_PX + 620, MARGIN_PX + 1100)
-    for i, row in enumerate(measure_rows(plan)):
+    rows = measure_rows(plan)
+    for i, row in enumerate(rows):
         for x, text in zip(columns, row):
             pen.text((x, top + 48 * i), text, fill="#555555" if i == 0 else "black", font=font(26))
-    notes = ("Volumes are measured on the scan of her skin, down to the chest wall beneath each breast; the ± is how "
-             "far a new scan may read.", "Lengths are measured over her skin in millimetres.",
+    notes = (("Volumes are measured on the scan of her skin, down to the chest wall beneath each breast; the ± is "
+              "how far a new scan may read."), "Lengths are measured over her skin in millimetres.",
              "Her right breast is on the left of a picture from the front, as in a mirror seen by someone facing her.")
     for i, note in enumerate(notes):
-        pen.text((MARGIN_PX, top + 48 * (len(measure_rows(plan)) + 1) + 36 * i), note, fill="#333333", font=font(22))
+        pen.text((MARGIN_PX, top + 48 * (len(rows) + 1) + 36 * i), note, fill="#333333", font=font(22))
     return page

@@ -53,7 +53,8 @@ def _files(record: dict) -> tuple[str, ...] | None:
     changes); None when it does not name them as a whole plan does."""
     try:
         named = record["files"]
-        files = [named["report"], named["summary"], *named["torso"].values(), *([named["handout"]] if "handout" in named else [])]
+        files = [named["report"], named["summary"], *named["torso"].values()]
+        files += [named["handout"]] if "handout" in named else []
         for side, planned in record["sides"].items():
             files += [f"{side}/{Case.SCAN_NPZ}", f"{side}/{Case.FIT_NPZ}"]
             files += [f for change in planned["changes"] for f in change["files"].values()]

@@ -1,5 +1,6 @@
 """A finished plan written out: each side's planned changes, the changed torso, plan.json, report.html,
-summary.png and the handout report.pdf; the files of changes an earlier plan of the folder made and this one does not, removed.
+summary.png and the handout report.pdf; the files of changes an earlier plan of the folder made and this
+one does not, removed.
 
 Each side's changes go to its case (`Case.save_change`); the plan's own files form one set written
 all or nothing, plan.json last, so that a plan.json always describes the report beside it.

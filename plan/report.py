@@ -38,7 +38,7 @@ from breastplan.fitting.ffd import STOP_RESIDUAL
 from .breast_volume import model_differs_much
 from .changes import short_of
 from .handout import DISCLAIMER, PLAIN, plain_value
-from .measures import measure_label
+from .measures import asymmetry, measure_label
 from .pictures import FOLD, FOOTPRINT, LANDMARK, LIGHT, SHADE, SKIN_RGB, VIEWS, camera, picture
 from .result import Plan
 from .views import State, Views, quantise
@@ -106,7 +106,9 @@ def page_data(plan: Plan, views: Views) -> dict:
     for st in views.states:
         entry = {"key": st.key, "words": _state_words(plan, st), "mesh": {},
                  "measures": {side: {k: round(float(v), 3) for k, v in m.items()}
-                              for side, m in plan.shown_measures[st.key].items()}}
+                              for side, m in plan.shown_measures[st.key].items()},
+                 "asymmetry": {k: round(v["left_minus_right"], 3)
+                               for k, v in asymmetry(plan.shown_measures[st.key]).items()}}
         for s in sides:
             values, scale = quantise(st.mesh[s] - views.meshes[s][0])
             entry["mesh"][s] = {"d": _b64(values, "i1"), "scale": scale}
@@ -127,6 +129,7 @@ def page_data(plan: Plan, views: Views) -> dict:
             "folds": {s: {"xyz": v.round(1).tolist(), "from": plan.measures.ptosis["before"][s]["fold_from"]}
                       for s, v in views.folds.items()},
             "before": {s: {k: round(float(v), 3) for k, v in plan.measures.before[s].items()} for s in sides},
+            "asymmetry_before": {k: round(float(v), 3) for k, v in plan.measures.asymmetry.get("before", {}).items()},
             "bounds": _bounds(views),
             "footprints": {s: v.round(2).tolist() for s, v in views.footprints.items()},
             "states": states, "sliders": sliders, "first": first_state(plan, views).key,
@@ -176,8 +179,8 @@ def render(plan: Plan, views: Views) -> str:
 
     data = page_data(plan, views)
     poster = poster_png(views, first_state(plan, views))
-    parts = {"TITLE": TITLE, "WHO": html.escape(plan.patient.header), "POSTER": base64.b64encode(poster).decode("ascii"), "TABLES": tables(plan),
-             "SCRIPT": _SCRIPT, "PLOTLY": get_plotlyjs(),
+    parts = {"TITLE": TITLE, "WHO": html.escape(plan.patient.header),
+             "POSTER": base64.b64encode(poster).decode("ascii"), "TABLES": tables(plan), "SCRIPT": _SCRIPT, "PLOTLY": get_plotlyjs(),
              "DATA": json.dumps(data, separators=(",", ":")).replace("</", "<\\/")}
     return re.sub(r"%([A-Z]+)%", lambda m: parts[m[1]], _TEMPLATE)
 
@@ -248,7 +251,8 @@ def for_her(plan: Plan) -> str:
     """The main measures in plain words (`plan.handout.PLAIN`), before → as shown (the cells the page's script
     updates as the state shown changes), the disclaimer and a link to her handout."""
     m, sides = plan.measures, [s for s in ("right", "left") if s in plan.sides]
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in ["measure", *(f"her {s} breast: before → as shown" for s in sides)])
+    head = "".join(f"<th>{html.escape(h)}</th>"
+                   for h in ["measure", *(f"her {s} breast: before → as shown" for s in sides)])
     body = ""
     for name, (words, unit) in PLAIN.items():
         cells = ""
@@ -466,7 +470,7 @@ function label(state){   // what is shown, in words; the sliders and the measure
  for(const c of document.querySelectorAll('[data-after]')){const [side,name]=c.dataset.after.split(' ');
   const v=state?state.measures[side][name]:P.before[side][name];c.textContent=fmt(v,c.dataset.forHer!==undefined);}
  for(const c of document.querySelectorAll('[data-asymmetry]')){const name=c.dataset.asymmetry;
-  const m=state?state.measures:P.before;c.textContent=fmt(m.left[name]-m.right[name],false);}
+  c.textContent=fmt(state?state.asymmetry[name]:P.asymmetry_before[name],false);}
 }
 let colourBy='skin';   // her skin shaded, or each point's distance moved by the state shown (mm)
 function movedMM(upd){const mm=new Float32Array(nT+nP);let top=0;

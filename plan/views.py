@@ -4,8 +4,9 @@ breast), and every planned state.
 All in the display frame (x to the image's right, y away from the viewer, z up; mm), from the
 scan's viewing frame (x right, y down, z away). Her torso is drawn as one triangle surface
 (`skin_triangles`) through the centroids of its points in TORSO_MM cubes; its points near the breasts
-(the patch) move with the plan. A state is one the report's sliders show (`Plan.slider_states`: each requested kind at the
-degrees 1..8 and the requested one, with the other kinds at their requested degrees), drawn: the planned breast meshes and the moved patch, each stored as a displacement from the
+(the patch) move with the plan. A state is one the report's sliders show (`Plan.slider_states`: each
+requested kind at the degrees 1..8 and the requested one, with the other kinds at their requested
+degrees), drawn: the planned breast meshes and the moved patch, each stored as a displacement from the
 original, quantised to int8 with its own scale (at most 1/254 of the largest displacement: well
 under a millimetre), so a report of some thirty states stays small.
 """
