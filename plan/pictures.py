@@ -46,10 +46,15 @@ def font(size: int) -> ImageFont.FreeTypeFont:
     return ImageFont.truetype(str(path), size) if path and path.is_file() else ImageFont.load_default(size=size)
 
 
+STRAY = 0.002
+"""A picture's framing may leave out this share of her drawn points at each end of each axis: a stray piece of
+the scan (a hand, a fold of cloth) then does not shrink her."""
+
+
 def camera(views: Views, states: list[State], azimuth_deg: float, size: tuple[int, int]) -> raster.Camera:
-    """The camera from `azimuth_deg` that holds her whole torso in every one of `states` (so that pictures of
-    them line up), `size` = (width, height) px."""
-    return raster.framing([views.torso, *(st.torso for st in states)], azimuth_deg, *size)
+    """The camera from `azimuth_deg` that holds her torso (but STRAY) in every one of `states` (so that pictures
+    of them line up), `size` = (width, height) px."""
+    return raster.framing([views.torso, *(st.torso for st in states)], azimuth_deg, *size, stray=STRAY)
 
 
 def before_after(views: Views, state: State, names=tuple(VIEWS)) -> dict[str, tuple[Image.Image, Image.Image]]:

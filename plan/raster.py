@@ -49,12 +49,14 @@ class Camera:
         return self.rotation.T @ np.asarray(light_camera, float)
 
 
-def framing(points: list[np.ndarray], azimuth_deg: float, width: int, height: int, margin: float = 0.04) -> Camera:
-    """The camera from `azimuth_deg` that holds all of `points` (display frame, mm) in a `width` × `height`
-    picture with `margin` of it left free on every side, at equal scales."""
+def framing(points: list[np.ndarray], azimuth_deg: float, width: int, height: int, margin: float = 0.04,
+            stray: float = 0.0) -> Camera:
+    """The camera from `azimuth_deg` that holds `points` (display frame, mm) in a `width` × `height` picture with
+    `margin` of it left free on every side, at equal scales: all of them, or all but a share `stray` at each end
+    of each axis (a few points far from the rest need not shrink the picture)."""
     probe = Camera(azimuth_deg, np.zeros(3), 1.0, 0, 0)
     p = np.concatenate(points) @ probe.rotation.T
-    lo, hi = p.min(axis=0), p.max(axis=0)
+    lo, hi = np.quantile(p, stray, axis=0), np.quantile(p, 1.0 - stray, axis=0)
     scale = max((hi[0] - lo[0]) / (width * (1 - 2 * margin)), (hi[2] - lo[2]) / (height * (1 - 2 * margin)), 1e-9)
     return Camera(azimuth_deg, probe.rotation.T @ ((lo + hi) / 2), float(scale), width, height)
 
