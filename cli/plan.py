@@ -77,7 +77,7 @@ def plan(
     from breastplan.plan.job import run_plan
 
     with _progress() as step:
-        planned = run_plan(input, out, options, step, resolved, force, who)
+        planned = run_plan(input, out, options, step, resolved, force, who, parallel=True)
     if as_json:
         report(_json(planned, out, clock.seconds), True, "")
     else:

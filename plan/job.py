@@ -31,11 +31,13 @@ def sample_recording() -> Path:
 
 
 def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Progress = lambda _: None,
-             method: Method | None = None, force: bool = False, patient: Patient | None = None) -> Plan:
+             method: Method | None = None, force: bool = False, patient: Patient | None = None,
+             parallel: bool = False) -> Plan:
     """Plan `options` on `input` (None: the bundled sample) into the case folder `out`, by `method`
     (`options.method` resolved; resolved here when not given), for `patient` (named in the report and
     handout; default anonymous, today). A folder `out` holding the case of another input is refused, or
-    with `force` planned afresh and put in its place whole."""
+    with `force` planned afresh and put in its place whole. `parallel`: fit both sides at once when two CPUs
+    allow (`plan.stages.fitted_sides`); a batch, which plans several cases at once, leaves it off."""
     from threadpoolctl import threadpool_limits
 
     from .compute import compute_plan
@@ -47,7 +49,7 @@ def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Prog
         check_own_case(source, out)
     clock = Clock()
     with threadpool_limits(1, "blas"), building(out, "plan", force) as folder:   # small dense solves: threads only add overhead
-        fitted = fitted_sides(source, folder, options, clock, progress)
+        fitted = fitted_sides(source, folder, options, clock, progress, parallel)
         progress("changes and measures")
         earlier = None if options.wall_from is None else earlier_volumes(Path(options.wall_from))
         plan = replace(compute_plan(source, fitted, options, method, earlier, clock), patient=patient or Patient())

@@ -5,7 +5,7 @@ inputs and options hash as before, else made and saved there.
 from __future__ import annotations
 
 import shutil
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
@@ -29,9 +29,10 @@ if TYPE_CHECKING:
 Progress = Callable[[str], None]
 
 
-def fitted_sides(source: Path, folder: Path, options: PlanOptions, clock: Clock, progress: Progress) -> dict[str, SidePlan]:
+def fitted_sides(source: Path, folder: Path, options: PlanOptions, clock: Clock, progress: Progress,
+                 parallel: bool = False) -> dict[str, SidePlan]:
     """Scan and fit each side (reusing what the case folder holds; down to the earlier case's wall
-    with `wall_from`); no changes solved yet."""
+    with `wall_from`); no changes solved yet. With `parallel`, two sides to fit are fitted at once (`_fitted`)."""
     earlier = {} if options.wall_from is None else _earlier_cases(Path(options.wall_from), options.sides)
     if source.is_dir():
         held = _cases_of(source, options)
@@ -42,13 +43,13 @@ def fitted_sides(source: Path, folder: Path, options: PlanOptions, clock: Clock,
     else:
         cases = {side: Case(folder / side) for side in options.sides}
         scans, reused = _ingest(source, cases, options, clock, progress)
-    sides = {}
-    for side, case in cases.items():
-        with clock(f"fit {side}"):
-            progress(f"fit {side}")
-            fit, fit_reused, follow_up = _fit(case, scans[side], earlier.get(side))
-        sides[side] = SidePlan(side, case, scans[side], fit, (), tuple(reused[side] + fit_reused), follow_up)
-    return sides
+    with clock("fit"):
+        progress("fit " + " and ".join(cases))
+        todo = {side: _to_fit(case, scans[side], earlier.get(side)) for side, case in cases.items()}
+        fits = _fitted({side: t for side, t in todo.items() if t.fit is None}, cases, parallel)
+    return {side: SidePlan(side, case, scans[side], fits.get(side) or todo[side].fit, (),
+                           tuple(reused[side] + ([] if side in fits else ["fit"])), todo[side].follow_up)
+            for side, case in cases.items()}
 
 
 def check_own_case(source: Path, out: Path) -> None:
@@ -165,9 +166,21 @@ def _ingest(source: Path, cases: dict[str, Case], options: PlanOptions, clock: C
     return scans, reused
 
 
-def _fit(case: Case, scan: Scan, earlier: Case | None) -> tuple[Fit, list[str], FollowUp | None]:
-    """The side's fit (reused when the case holds one of this scan, and of the earlier scan it is
-    measured against, with the default options), the stages reused, and the follow-up."""
+@dataclass(frozen=True)
+class _ToFit:
+    """A side's fit as the case holds it (None: to be made), the scan to fit (on an earlier case's wall for a
+    follow-up), the fit's provenance and source file, and the follow-up."""
+
+    fit: Fit | None
+    scan: Scan
+    wanted: Provenance
+    source: Path
+    follow_up: FollowUp | None
+
+
+def _to_fit(case: Case, scan: Scan, earlier: Case | None) -> _ToFit:
+    """The side's fit, reused when the case holds one of this scan (and of the earlier scan it is measured
+    against) with the default options, else what to fit; and the follow-up."""
     scan_ply = case.path(Case.SCAN_PLY)
     inputs, options, follow_up = {scan_ply.name: scan_ply}, FitOptions().as_dict(), None
     if earlier is not None:
@@ -180,12 +193,44 @@ def _fit(case: Case, scan: Scan, earlier: Case | None) -> tuple[Fit, list[str], 
         follow_up = FollowUp(earlier.folder, registration, then.volume_cc,
                              transform_points(later_from_earlier, then.vertices), then.faces)
     wanted = Provenance.of(inputs, options)
-    fit = _reused(case.load_fit, case.is_fresh(Case.FIT_NPZ, wanted))
-    if fit is not None:
-        return fit, ["fit"], follow_up
-    fit = fit_one_thread(scan, FitOptions(), scan_ply).artefact(wanted)
-    case.save_fit(fit)
-    return fit, [], follow_up
+    return _ToFit(_reused(case.load_fit, case.is_fresh(Case.FIT_NPZ, wanted)), scan, wanted, scan_ply, follow_up)
+
+
+def _fitted(todo: dict[str, _ToFit], cases: dict[str, Case], parallel: bool) -> dict[str, Fit]:
+    """Each side of `todo` fitted and saved in its case. With `parallel`, two sides and two CPUs (and not in a
+    daemonic worker, which may start no process), the second is fitted in a forked child that saves it, while
+    this process fits the first: the same computation, so the same fit. A child that fails leaves its side to
+    be fitted here, where any error is raised as usual."""
+    import multiprocessing
+    import os
+
+    sides = list(todo)
+    child = None
+    if parallel and len(sides) == 2 and len(os.sched_getaffinity(0)) >= 2 \
+            and not multiprocessing.current_process().daemon:
+        child = multiprocessing.get_context("fork").Process(target=_fit_and_save, args=(todo[sides[1]], cases[sides[1]]))
+        child.start()
+    fits = {}
+    for side in sides:
+        if child is not None and side == sides[1]:
+            child.join()
+            if child.exitcode == 0 and cases[side].is_fresh(Case.FIT_NPZ, todo[side].wanted):
+                fits[side] = cases[side].load_fit()
+                continue
+        fits[side] = fit_one_thread(todo[side].scan, FitOptions(), todo[side].source).artefact(todo[side].wanted)
+        cases[side].save_fit(fits[side])
+    return fits
+
+
+def _fit_and_save(todo: _ToFit, case: Case) -> None:
+    """A forked child's work: fit and save one side; any failure is an exit code, left to the parent to meet."""
+    import os
+
+    try:
+        case.save_fit(fit_one_thread(todo.scan, FitOptions(), todo.source).artefact(todo.wanted))
+    except BaseException:                                      # noqa: BLE001 — the parent fits this side again
+        os._exit(1)
+    os._exit(0)
 
 
 def on_earlier_wall(scan: Scan, earlier: Case, earlier_scan: Scan) -> tuple[Scan, Registration, dict, dict]:
