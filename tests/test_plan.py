@@ -799,3 +799,24 @@ def test_the_report_draws_each_fold_where_nipple_to_fold_is_measured_to(planned)
         assert ((nipple - fold) @ up) == pytest.approx(np.full(len(fold), ptosis["nipple_to_fold_mm"]), abs=3.0)
         across = (fold - nipple) @ left
         assert across.min() < -20.0 and across.max() > 20.0
+
+
+def test_a_side_whose_forked_fit_fails_is_fitted_by_the_plan_itself(planned, tmp_path, monkeypatch):
+    """`plan` fits its second side in a forked child; a child that dies leaves that side to the plan, which
+    fits it as one process would: the same fit as the command's (fit.npz, but its seconds)."""
+    import os
+
+    from breastplan.options import PlanOptions
+    from breastplan.plan import stages
+    from breastplan.plan.job import run_plan
+
+    case = tmp_path / "case"
+    shutil.copytree(planned[0], case)
+    for side in ("left", "right"):
+        (case / side / "fit.npz").unlink()
+    monkeypatch.setattr(stages, "_fit_and_save", lambda *_: os._exit(1))    # the child dies before saving
+    plan = run_plan(case, case, PlanOptions.parse(list(CHANGES)), parallel=True)
+    assert all("fit" not in sp.reused for sp in plan.sides.values())
+    for side in ("left", "right"):
+        fresh, made = np.load(case / side / "fit.npz"), np.load(planned[0] / side / "fit.npz")
+        assert [k for k in made.files if not np.array_equal(fresh[k], made[k])] == ["seconds"]
