@@ -14,8 +14,7 @@ $(STAMP): pyproject.toml
 	@$(MAKE) --no-print-directory libusb
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV) || { \
 	  echo "python3 cannot create a virtual environment: install python3-venv (apt-get install python3-venv) and run make again." >&2; exit 1; }
-	@# --no-compile: Python compiles the modules breastplan imports when it first imports them, not every module installed
-	$(BIN)/python -m pip install --quiet --no-compile --disable-pip-version-check -e '.[test]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[test]'
 	@touch $@
 
 # open3d cannot be imported without the system library libusb-1.0-0.
