@@ -108,18 +108,23 @@ def slider_states(sides: dict[str, SidePlan], states: tuple[PlanState, ...],
 def shown_measures(sides: dict[str, SidePlan], volumes: BreastVolumes, states) -> dict[str, dict]:
     """State key → side → her breast's measures in that state (`breast_measures` of the planned breast; her
     volume on her skin changed by as much as the fitted model's)."""
-    before = {s: breast_measures(volumes.landmarks, sp.scan.nipple_camera_mm, sp.surface_input, sp.fit.faces)
-              for s, sp in sides.items()}
-    out = {}
-    for state in states:
-        out[state.key] = {}
-        for side, sp in sides.items():
-            planned = state.planned[side]
-            after = breast_measures(volumes.landmarks, planned.model(sp.scan.nipple_camera_mm[None])[0],
-                                    planned.model(sp.surface_input), sp.fit.faces)
-            after["volume_cc"] = volumes.sides[side].volume_cc + after["volume_cc"] - before[side]["volume_cc"]
-            out[state.key][side] = after
-    return out
+    before = {s: _model_measures(volumes, sp) for s, sp in sides.items()}
+    return {state.key: {s: _as_planned(volumes, sp, state.planned[s], before[s]) for s, sp in sides.items()}
+            for state in states}
+
+
+def _model_measures(volumes: BreastVolumes, sp: SidePlan) -> dict[str, float]:
+    """A side's measures on its fitted breast as scanned (the volume the fitted model's)."""
+    return breast_measures(volumes.landmarks, sp.scan.nipple_camera_mm, sp.surface_input, sp.fit.faces)
+
+
+def _as_planned(volumes: BreastVolumes, sp: SidePlan, planned: PlannedChange, before: dict[str, float]) -> dict:
+    """A side's measures on its breast as `planned` moves it; the volume hers, measured on her skin, changed by
+    as much as the fitted model's (`before`: `_model_measures`)."""
+    after = breast_measures(volumes.landmarks, planned.model(sp.scan.nipple_camera_mm[None])[0],
+                            planned.model(sp.surface_input), sp.fit.faces)
+    after["volume_cc"] = volumes.sides[sp.side].volume_cc + after["volume_cc"] - before["volume_cc"]
+    return after
 
 
 def _state(sides: dict[str, SidePlan], key: str, kind, degree, changes: dict[str, Change]) -> PlanState:
@@ -146,16 +151,13 @@ def plan_measures(sides: dict[str, SidePlan], volumes: BreastVolumes, shown: Pla
     """Each side's measures before and as planned (`shown`, her torso so: `torso`, input frame, mm), and
     their asymmetry (left − right). The volume is hers, measured on her skin; as planned, it changes by
     as much as the fitted model's does."""
-    landmarks = volumes.landmarks
     before, after, nipples = {}, {}, {"before": {}, "after": {}}
     for side, sp in sides.items():
-        verts, nipple, planned = sp.surface_input, sp.scan.nipple_camera_mm, shown.planned[side]
+        nipple, planned = sp.scan.nipple_camera_mm, shown.planned[side]
         nipples["before"][side], nipples["after"][side] = nipple, planned.model(nipple[None])[0]
-        before[side] = breast_measures(landmarks, nipple, verts, sp.fit.faces)
-        after[side] = breast_measures(landmarks, nipples["after"][side], planned.model(verts), sp.fit.faces)
-        measured = volumes.sides[side].volume_cc
-        after[side]["volume_cc"] = measured + after[side]["volume_cc"] - before[side]["volume_cc"]
-        before[side]["volume_cc"] = measured
+        before[side] = _model_measures(volumes, sp)
+        after[side] = _as_planned(volumes, sp, planned, before[side])
+        before[side]["volume_cc"] = volumes.sides[side].volume_cc
     asym = {when: {k: v["left_minus_right"] for k, v in asymmetry(m).items()} for when, m in
             (("before", before), ("after", after))}
     symmetry, ptosis = _symmetry(volumes, nipples, torso)

@@ -25,11 +25,22 @@ PLAIN = {"volume_cc": ("breast volume", "cc"),
 """The measures the summary and the handout give, in plain words, and their units."""
 
 
+def state_words(plan: Plan, kind: str | None, degree: float | None) -> str:
+    """What a state of the plan shows, in words: `kind` at `degree` (the other changes as planned), or (kind
+    None) their combination."""
+    if kind is None:
+        return "all planned changes combined"
+    if len(plan.options.changes) == 1:
+        return f"{kind}, degree {degree:g}"
+    return f"{kind} at degree {degree:g}, the other changes as planned"
+
+
 def shown_words(plan: Plan) -> str:
-    """What the pictures as planned show, in words."""
+    """What the pictures as planned show, in words, the changes named."""
+    words = state_words(plan, plan.shown.kind, plan.shown.degree)
     if plan.shown.kind is None:
-        return "all planned changes combined (" + ", ".join(f"{k} {d:g}" for k, d in plan.options.changes) + ")"
-    return f"{plan.shown.kind}, degree {plan.shown.degree:g}"
+        words += " (" + ", ".join(f"{k} {d:g}" for k, d in plan.options.changes) + ")"
+    return words
 
 
 def measure_rows(plan: Plan) -> list[tuple[str, ...]]:

@@ -31,7 +31,7 @@ def write_plan(plan: Plan, folder: Path) -> dict:
     plan.json record."""
     from .handout import handout_pdf
     from .pictures import before_after
-    from .report import render
+    from .report import first_state, render
     from .summary import summary_png
     from .views import build_views
 
@@ -59,7 +59,7 @@ def write_plan(plan: Plan, folder: Path) -> dict:
             torso_files[state.key] = name
         views = build_views(plan)
         Path(stage(folder / Case.REPORT)).write_bytes(utf8(render(plan, views)))
-        shots = before_after(views, next(st for st in views.states if st.key == plan.shown.key))
+        shots = before_after(views, first_state(plan, views))
         summary_png(plan, shots, stage(folder / SUMMARY))
         handout_pdf(plan, shots, stage(folder / HANDOUT))
         Path(stage(folder / Case.PLAN_JSON)).write_text(to_json(record, indent=1), encoding="utf-8")

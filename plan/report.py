@@ -37,7 +37,7 @@ from breastplan.fitting.ffd import STOP_RESIDUAL
 
 from .breast_volume import model_differs_much
 from .changes import short_of
-from .handout import DISCLAIMER, PLAIN, plain_value
+from .handout import DISCLAIMER, PLAIN, plain_value, state_words
 from .measures import asymmetry, measure_label
 from .pictures import FOLD, FOOTPRINT, LANDMARK, LIGHT, SHADE, SKIN_RGB, VIEWS, camera, picture
 from .result import Plan
@@ -89,22 +89,13 @@ def _mesh(vertices: np.ndarray, faces: np.ndarray) -> dict:
     return {**_points(vertices), "faces": _b64(faces, "<i4"), "m": int(len(faces))}
 
 
-def _state_words(plan: Plan, st: State) -> str:
-    """What a drawn state shows, in words."""
-    if st.kind is None:
-        return "all planned changes combined"
-    if len(plan.options.changes) == 1:
-        return f"{st.kind}, degree {st.degree:g}"
-    return f"{st.kind} at degree {st.degree:g}, the other changes as planned"
-
-
 def page_data(plan: Plan, views: Views) -> dict:
     """The JSON the page's script reads: geometry, states, sliders and the state it opens on."""
     sides = list(plan.sides)
     patch = views.patch
     states = []
     for st in views.states:
-        entry = {"key": st.key, "words": _state_words(plan, st), "mesh": {},
+        entry = {"key": st.key, "words": state_words(plan, st.kind, st.degree), "mesh": {},
                  "measures": {side: {k: round(float(v), 3) for k, v in m.items()}
                               for side, m in plan.shown_measures[st.key].items()},
                  "asymmetry": {k: round(v["left_minus_right"], 3)
