@@ -15,6 +15,9 @@ $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV) || { \
 	  echo "python3 cannot create a virtual environment: install python3-venv (apt-get install python3-venv) and run make again." >&2; exit 1; }
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[test]'
+	@# pip compiles the packages it installs, not this editable source; where PYTHONDONTWRITEBYTECODE is set,
+	@# every command would otherwise compile breastplan's modules again.
+	$(BIN)/python -m compileall -q -x '/(\.venv|\.git|out)/' .
 	@touch $@
 
 # open3d cannot be imported without the system library libusb-1.0-0.
