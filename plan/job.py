@@ -36,8 +36,9 @@ def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Prog
     """Plan `options` on `input` (None: the bundled sample) into the case folder `out`, by `method`
     (`options.method` resolved; resolved here when not given), for `patient` (named in the report and
     handout; default anonymous, today). A folder `out` holding the case of another input is refused, or
-    with `force` planned afresh and put in its place whole. `parallel`: fit both sides at once when two CPUs
-    allow (`plan.stages.fitted_sides`); a batch, which plans several cases at once, leaves it off."""
+    with `force` planned afresh and put in its place whole. `parallel`: fit both sides, and draw her pictures
+    beside the report, at once when two CPUs allow (`breastplan.forked`); a batch, which plans several cases
+    at once, leaves it off."""
     from threadpoolctl import threadpool_limits
 
     from .compute import compute_plan
@@ -55,7 +56,7 @@ def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Prog
         plan = replace(compute_plan(source, fitted, options, method, earlier, clock), patient=patient or Patient())
         with clock("report"):
             progress("report")
-            write_plan(plan, folder)
+            write_plan(plan, folder, parallel)
     moved = {s: replace(sp, case=Case(out / sp.case.folder.relative_to(folder))) for s, sp in plan.sides.items()}
     return replace(plan, sides=moved)
 

@@ -26,9 +26,12 @@ SUMMARY = "summary.png"
 HANDOUT = "report.pdf"
 
 
-def write_plan(plan: Plan, folder: Path) -> dict:
+def write_plan(plan: Plan, folder: Path, parallel: bool = False) -> dict:
     """Write every artefact of `plan` into `folder` (its case folder, or the one being built); the
-    plan.json record."""
+    plan.json record. With `parallel`, her pictures (summary.png, report.pdf) are drawn in a forked child
+    (`breastplan.forked`) while this process writes the report."""
+    from breastplan.forked import beside
+
     from .handout import handout_pdf
     from .pictures import before_after
     from .report import first_state, render
@@ -58,10 +61,17 @@ def write_plan(plan: Plan, folder: Path) -> dict:
                 f"breastplan plan: {state.key}, the torso with the planned change, input frame, mm"])
             torso_files[state.key] = name
         views = build_views(plan)
-        Path(stage(folder / Case.REPORT)).write_bytes(utf8(render(plan, views)))
-        shots = before_after(views, first_state(plan, views))
-        summary_png(plan, shots, stage(folder / SUMMARY))
-        handout_pdf(plan, shots, stage(folder / HANDOUT))
+        summary, handout, first = stage(folder / SUMMARY), stage(folder / HANDOUT), first_state(plan, views)
+
+        def pictures() -> None:
+            shots = before_after(views, first)
+            summary_png(plan, shots, summary)
+            handout_pdf(plan, shots, handout)
+
+        with beside(pictures if parallel else None) as finished:
+            Path(stage(folder / Case.REPORT)).write_bytes(utf8(render(plan, views)))
+            if not finished():
+                pictures()
         Path(stage(folder / Case.PLAN_JSON)).write_text(to_json(record, indent=1), encoding="utf-8")
     _remove_earlier_plans(folder, record)
     return record

@@ -196,54 +196,32 @@ def _to_fit(case: Case, scan: Scan, earlier: Case | None) -> _ToFit:
     return _ToFit(_reused(case.load_fit, case.is_fresh(Case.FIT_NPZ, wanted)), scan, wanted, scan_ply, follow_up)
 
 
-STUCK = (60.0, 10.0)
-"""A forked child still fitting after the larger of this many seconds and this many times the parent's own fit
-is taken for stuck (a lock another thread held at the fork) and stopped; its side is then fitted here. Either
-way the fit is the same: the wait changes only when it comes."""
-
-
 def _fitted(todo: dict[str, _ToFit], cases: dict[str, Case], parallel: bool) -> dict[str, Fit]:
-    """Each side of `todo` fitted and saved in its case. With `parallel`, two sides and two CPUs (and not in a
-    daemonic worker, which may start no process), the second is fitted in a forked child that saves it, while
-    this process fits the first: the same computation, so the same fit. A child that fails or is stuck leaves
-    its side to be fitted here, where any error is raised as usual."""
-    import multiprocessing
-    import os
-    import time
+    """Each side of `todo` fitted and saved in its case. With `parallel` and two sides, the second is fitted
+    in a forked child that saves it (`breastplan.forked`), while this process fits the first: the same
+    computation, so the same fit. A child that fails or is stuck leaves its side to be fitted here, where
+    any error is raised as usual."""
+    from functools import partial
 
     from breastplan.fitting import breast_fit  # noqa: F401 — imported before the fork, not in the child
+    from breastplan.forked import beside
 
     sides = list(todo)
-    child = None
-    if parallel and len(sides) == 2 and len(os.sched_getaffinity(0)) >= 2 \
-            and not multiprocessing.current_process().daemon:
-        child = multiprocessing.get_context("fork").Process(target=_fit_and_save,
-                                                            args=(todo[sides[1]], cases[sides[1]]))
-        child.start()
-    fits, started = {}, time.monotonic()
-    for side in sides:
-        if child is not None and side == sides[1]:
-            child.join(max(STUCK[0], STUCK[1] * (time.monotonic() - started)))
-            if child.exitcode is None:
-                child.kill()
-                child.join()
-            elif child.exitcode == 0 and cases[side].is_fresh(Case.FIT_NPZ, todo[side].wanted):
+    second = sides[1] if parallel and len(sides) == 2 else None
+    fits = {}
+    with beside(None if second is None else partial(_fit_and_save, todo[second], cases[second])) as finished:
+        for side in sides:
+            if side == second and finished() and cases[side].is_fresh(Case.FIT_NPZ, todo[side].wanted):
                 fits[side] = cases[side].load_fit()
                 continue
-        fits[side] = fit_one_thread(todo[side].scan, FitOptions(), todo[side].source).artefact(todo[side].wanted)
-        cases[side].save_fit(fits[side])
+            fits[side] = fit_one_thread(todo[side].scan, FitOptions(), todo[side].source).artefact(todo[side].wanted)
+            cases[side].save_fit(fits[side])
     return fits
 
 
 def _fit_and_save(todo: _ToFit, case: Case) -> None:
-    """A forked child's work: fit and save one side; any failure is an exit code, left to the parent to meet."""
-    import os
-
-    try:
-        case.save_fit(fit_one_thread(todo.scan, FitOptions(), todo.source).artefact(todo.wanted))
-    except BaseException:                                      # noqa: BLE001 — the parent fits this side again
-        os._exit(1)
-    os._exit(0)
+    """A forked child's work: fit one side and save its fit in its case."""
+    case.save_fit(fit_one_thread(todo.scan, FitOptions(), todo.source).artefact(todo.wanted))
 
 
 def on_earlier_wall(scan: Scan, earlier: Case, earlier_scan: Scan) -> tuple[Scan, Registration, dict, dict]:

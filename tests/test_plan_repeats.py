@@ -1,10 +1,12 @@
 """A plan's numbers depend on her surface alone: the same scan file with its points in another order,
 planned on one BLAS thread or two, run again — and with both sides fitted in turn in one process rather
-than at once in two, as `plan` fits them — gives the same plan.json to the printed digit."""
+than at once in two, as `plan` fits them — gives the same plan.json to the printed digit, and the same
+pictures of her whether a forked child or the plan itself drew them."""
 from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 
 import numpy as np
@@ -32,6 +34,11 @@ def _numbers(record: dict) -> dict:
     return {"measures": record["measures"], "sides": sides}
 
 
+def _undated(pdf) -> bytes:
+    """A PDF's bytes without the moments it was made."""
+    return re.sub(rb"/(CreationDate|ModDate) ?\(D:[^)]*\)", b"", pdf.read_bytes())
+
+
 @pytest.fixture(scope="module")
 def scan_files(tmp_path_factory):
     """A MakeHuman body's scan file (1 mm of noise), and the same points shuffled."""
@@ -46,6 +53,7 @@ def scan_files(tmp_path_factory):
     return folder
 
 
+@pytest.mark.long
 def test_a_plan_is_the_same_for_any_order_of_the_points_any_blas_threads_and_from_run_to_run(cli, scan_files,
                                                                                             tmp_path):
     first = _numbers(_plan(cli, scan_files / "her.ply", tmp_path / "a", threads=1))
@@ -55,4 +63,6 @@ def test_a_plan_is_the_same_for_any_order_of_the_points_any_blas_threads_and_fro
 
     run_plan(scan_files / "her.ply", tmp_path / "c", PlanOptions(), parallel=False)   # run to run, one process
     assert _numbers(json.loads((tmp_path / "c" / "plan.json").read_text())) == first
+    assert (tmp_path / "a" / "summary.png").read_bytes() == (tmp_path / "c" / "summary.png").read_bytes()
+    assert _undated(tmp_path / "a" / "report.pdf") == _undated(tmp_path / "c" / "report.pdf")
     assert all(r["volume"]["volume_cc"] > 100 for r in first["sides"].values())
