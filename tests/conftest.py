@@ -23,3 +23,9 @@ def cli():
     exe = Path(sys.executable).with_name("breastplan")
     assert exe.exists(), f"the breastplan command is not installed next to {sys.executable}"
     return str(exe)
+
+
+def pytest_collection_modifyitems(items):
+    """The long tests first (stable order otherwise): handed out first, they do not leave one worker busy
+    while the other has finished."""
+    items.sort(key=lambda item: item.get_closest_marker("long") is None)

@@ -280,11 +280,11 @@ def _alive(pid: int) -> bool:
         return False
 
 
-def _five_patients_batched_until_one_is_finished(cli, tmp_path, **popen):
-    """(input folder, output folder, names, the running batch) once one of five cases is whole."""
+def _three_patients_batched_until_one_is_finished(cli, tmp_path, **popen):
+    """(input folder, output folder, names, the running batch) once one of three cases is whole."""
     folder = tmp_path / "scans"
     folder.mkdir()
-    names = [f"patient{i}" for i in range(5)]
+    names = [f"patient{i}" for i in range(3)]
     for name in names:
         shutil.copy(SAMPLE, folder / f"{name}.mcap")
     out = tmp_path / "cases"
@@ -295,9 +295,10 @@ def _five_patients_batched_until_one_is_finished(cli, tmp_path, **popen):
     return folder, out, names, batch
 
 
+@pytest.mark.long
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the workers' parent-death signal is Linux's")
 def test_kill_9_at_a_random_moment_loses_no_finished_case_and_leaves_none_half_written(cli, tmp_path):
-    folder, out, names, batch = _five_patients_batched_until_one_is_finished(
+    folder, out, names, batch = _three_patients_batched_until_one_is_finished(
         cli, tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     delay = random.uniform(0.0, 4.0)
     time.sleep(delay)
@@ -324,11 +325,12 @@ def test_kill_9_at_a_random_moment_loses_no_finished_case_and_leaves_none_half_w
     assert not _hidden(out)
 
 
+@pytest.mark.long
 def test_ctrl_c_stops_the_batch_at_once_with_its_manifest_true_to_the_disk(cli, tmp_path):
     """SIGINT to the batch and its workers (a terminal's Ctrl-C) once a case is finished: the cases being
     planned are dropped, not finished behind the manifest's back; the sentence says what is left and the
     same command finishes it."""
-    folder, out, names, batch = _five_patients_batched_until_one_is_finished(   # SIGINT heard, as at a terminal,
+    folder, out, names, batch = _three_patients_batched_until_one_is_finished(   # SIGINT heard, as at a terminal,
         cli, tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,  # even
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))   # when the tests run in the background
     os.killpg(batch.pid, signal.SIGINT)
@@ -340,7 +342,7 @@ def test_ctrl_c_stops_the_batch_at_once_with_its_manifest_true_to_the_disk(cli, 
     for n in set(names) - set(settled):                   # pending: nothing of it on disk
         assert rows[f"{n}.mcap"]["status"] == "pending" and not (out / n).exists()
     assert not _hidden(out)
-    assert (f"interrupted: {len(settled)} of the 5 inputs to plan were settled and {5 - len(settled)} left pending "
+    assert (f"interrupted: {len(settled)} of the 3 inputs to plan were settled and {3 - len(settled)} left pending "
             f"in {out / 'manifest.csv'}") in " ".join(err.split())
     res = run(cli, "batch", folder, "--out", out, "--jobs", "2")
     assert res.returncode == 0, res.stderr[-2000:]
@@ -384,6 +386,7 @@ def dask_cluster(tmp_path):
                 p.wait()
 
 
+@pytest.mark.long
 def test_dask_scheduler_with_two_worker_processes_plans_the_folder(cli, dask_cluster, tmp_path):
     folder = tmp_path / "scans"
     folder.mkdir()

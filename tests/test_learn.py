@@ -146,6 +146,7 @@ def test_deform_by_degree_usage_errors(cli, db_s, tmp_path, args):
     assert not (tmp_path / "o.ply").exists()
 
 
+@pytest.mark.long
 def test_quick_study_end_to_end(cli, tmp_path):
     """`evaluate --quick` writes the report with its row fields, both directions."""
     out = tmp_path / "study"
@@ -166,6 +167,7 @@ def test_quick_study_end_to_end(cli, tmp_path):
         assert all((out / p).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in paths)
 
 
+@pytest.mark.long
 def test_train_command_writes_loadable_models(cli, tmp_path):
     res = run(cli, "train", "--quick", "--out", tmp_path / "m", "--json")
     assert res.returncode == 0, res.stderr

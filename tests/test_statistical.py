@@ -19,6 +19,7 @@ from breastplan.learn.metrics import indirect_distances, indirect_metrics
 from breastplan.learn.statistical import FieldModel
 from breastplan.learn.statistical_study import StudyPlan
 from clitools import assert_bad_input, run
+from made_once import made_once
 
 
 @pytest.fixture(scope="module")
@@ -136,13 +137,17 @@ def test_features_name_the_type_only_for_a_model_of_several():
 @pytest.fixture(scope="module")
 def trained(cli, tmp_path_factory):
     """synth --pairs → train-statistical: a ptosis model from corresponding synthetic pairs."""
-    tmp = tmp_path_factory.mktemp("statistical")
-    res = run(cli, "synth", "--db", "S", "--points", "900", "--pairs", "ptosis b0>b1", "--out", tmp / "pairs", "--json")
-    assert res.returncode == 0, res.stderr
-    res = run(cli, "train-statistical", "--pairs", tmp / "pairs", "--out", tmp / "model.npz", "--corresponding",
-              "--regressor", "ridge", "--cache", tmp / "cache", "--json")
-    assert res.returncode == 0, res.stderr
-    return tmp, json.loads(res.stdout)
+    def make(tmp):
+        res = run(cli, "synth", "--db", "S", "--points", "900", "--pairs", "ptosis b0>b1", "--out", tmp / "pairs",
+                  "--json")
+        assert res.returncode == 0, res.stderr
+        res = run(cli, "train-statistical", "--pairs", tmp / "pairs", "--out", tmp / "model.npz", "--corresponding",
+                  "--regressor", "ridge", "--cache", tmp / "cache", "--json")
+        assert res.returncode == 0, res.stderr
+        (tmp / "trained.json").write_text(res.stdout)
+
+    tmp = made_once(tmp_path_factory, "statistical", make)
+    return tmp, json.loads((tmp / "trained.json").read_text())
 
 
 def test_train_statistical_learns_from_the_training_pairs(trained):
@@ -153,16 +158,16 @@ def test_train_statistical_learns_from_the_training_pairs(trained):
 
 
 @pytest.mark.parametrize("row", [1, 5])
-def test_deform_with_the_model_comes_close_to_the_true_after_breast(cli, trained, row):
+def test_deform_with_the_model_comes_close_to_the_true_after_breast(cli, trained, row, tmp_path):
     """On a test breast (never trained on), the model's breast is far nearer the true one than the original."""
     tmp, _ = trained
     lines = (tmp / "pairs" / "pairs.csv").read_text().splitlines()[1:]
     test = [line.split(",") for line in lines if line.split(",")[4] == "test" and line.split(",")[3] == str(row + 1)]
     before, after = tmp / "pairs" / test[0][0], tmp / "pairs" / test[0][1]
     res = run(cli, "deform", before, "--kind", "ptosis", "--degree", row + 1, "--model", tmp / "model.npz",
-              "--out", tmp / f"out-{row}.ply", "--json")
+              "--out", tmp_path / "out.ply", "--json")
     assert res.returncode == 0, res.stderr
-    truth, original, modelled = read_ply(after).points, read_ply(before).points, read_ply(tmp / f"out-{row}.ply").points
+    truth, original, modelled = read_ply(after).points, read_ply(before).points, read_ply(tmp_path / "out.ply").points
     key = "modelled_to_original_euclidean"
     assert indirect_distances(truth, modelled)[key] < indirect_distances(truth, original)[key] / 5
     assert abs(json.loads(res.stdout)["degree_reached"] - (row + 1)) < 1.0
@@ -237,6 +242,7 @@ def test_deform_model_needs_a_degree(cli, trained, tmp_path):
     assert res.returncode == 2 and "--degree" in res.stderr
 
 
+@pytest.mark.long
 def test_the_quick_study_writes_its_report_with_the_thesis_beside_ours(cli, tmp_path):
     res = run(cli, "evaluate", "--study", "statistical", "--quick", "--out", tmp_path / "study",
               "--cache", tmp_path / "cache", "--json")
