@@ -1,17 +1,20 @@
 """Work done beside this process in a forked child, on a second CPU, while this process does its own.
 
 The child shares this process's memory as it was at the fork and reports only its exit code: its work
-writes files. A child that failed, or is stuck (a lock another thread held at the fork is never released
+writes files, or into an array `shared` with this process. A child that failed, or is stuck (a lock another thread held at the fork is never released
 in the child), leaves its work to this process, which does it as it would have alone: the same result
 either way, only later.
 """
 from __future__ import annotations
 
 import contextlib
+import mmap
 import multiprocessing
 import os
 import time
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
+
+import numpy as np
 
 STUCK = (60.0, 10.0)
 """A child still working after the larger of this many seconds and this many times the time this process
@@ -41,6 +44,14 @@ def beside(work: Callable[[], None] | None) -> Iterator[Callable[[], bool]]:
     finally:
         if child is not None:
             _stopped(child)
+
+
+def shared(shape: tuple[int, ...], dtype) -> np.ndarray:
+    """A zeroed array in memory this process shares with the children it forks afterwards: what a child
+    writes there, this process reads."""
+    dtype = np.dtype(dtype)
+    count = int(np.prod(shape))
+    return np.frombuffer(mmap.mmap(-1, max(count * dtype.itemsize, 1)), dtype, count).reshape(shape)
 
 
 def _stopped(child) -> int:

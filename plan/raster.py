@@ -185,8 +185,10 @@ def _draw_spans(spans: _Spans, width, zbuf, rgb) -> None:
     n = spans.count
     seg = np.repeat(np.arange(len(n)), n)
     col = spans.first[seg] + np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
-    value = spans.slope[seg] * (col + 0.5)[:, None] + spans.offset[seg]   # (N, 4): depth, r, g, b
+    x = col + 0.5
+    depth = spans.slope[seg, 0] * x + spans.offset[seg, 0]
     pix = spans.row[seg] * width + col
-    np.minimum.at(zbuf, pix, value[:, 0])
-    win = value[:, 0] <= zbuf[pix]
-    rgb[pix[win]] = value[win, 1:]
+    np.minimum.at(zbuf, pix, depth)
+    win = depth <= zbuf[pix]
+    seg, x = seg[win], x[win]
+    rgb[pix[win]] = spans.slope[seg, 1:] * x[:, None] + spans.offset[seg, 1:]   # the colours of the nearest only

@@ -28,12 +28,9 @@ HANDOUT = "report.pdf"
 
 def write_plan(plan: Plan, folder: Path, parallel: bool = False) -> dict:
     """Write every artefact of `plan` into `folder` (its case folder, or the one being built); the
-    plan.json record. With `parallel`, her pictures (summary.png, report.pdf) are drawn in a forked child
-    (`breastplan.forked`) while this process writes the report."""
-    from breastplan.forked import beside
-
+    plan.json record. With `parallel`, some of her pictures (for summary.png and report.pdf) are drawn in a
+    forked child while this process writes the report (`_shots`)."""
     from .handout import handout_pdf
-    from .pictures import before_after
     from .report import first_state, render
     from .summary import summary_png
     from .views import build_views
@@ -61,20 +58,42 @@ def write_plan(plan: Plan, folder: Path, parallel: bool = False) -> dict:
                 f"breastplan plan: {state.key}, the torso with the planned change, input frame, mm"])
             torso_files[state.key] = name
         views = build_views(plan)
-        summary, handout, first = stage(folder / SUMMARY), stage(folder / HANDOUT), first_state(plan, views)
-
-        def pictures() -> None:
-            shots = before_after(views, first)
-            summary_png(plan, shots, summary)
-            handout_pdf(plan, shots, handout)
-
-        with beside(pictures if parallel else None) as finished:
-            Path(stage(folder / Case.REPORT)).write_bytes(utf8(render(plan, views)))
-            if not finished():
-                pictures()
+        shots = _shots(views, first_state(plan, views), parallel, stage(folder / Case.REPORT),
+                       lambda: utf8(render(plan, views)))
+        summary_png(plan, shots, stage(folder / SUMMARY))
+        handout_pdf(plan, shots, stage(folder / HANDOUT))
         Path(stage(folder / Case.PLAN_JSON)).write_text(to_json(record, indent=1), encoding="utf-8")
     _remove_earlier_plans(folder, record)
     return record
+
+
+SHOTS_BESIDE = 3
+"""Of her five views, the pictures of this many are drawn by a forked child while the plan writes the report and
+draws the others: about as long."""
+
+
+def _shots(views, state, parallel: bool, report: Path, page) -> dict:
+    """`plan.pictures.before_after` of every view for `state`, the report `page()` written to `report` meanwhile:
+    with `parallel`, the first SHOTS_BESIDE views drawn beside (`breastplan.forked`), else here."""
+    from PIL import Image
+
+    from breastplan.forked import beside, shared
+
+    from .pictures import SHOT_PX, VIEWS, before_after
+
+    theirs, mine = tuple(VIEWS)[:SHOTS_BESIDE], tuple(VIEWS)[SHOTS_BESIDE:]
+    drawn = shared((len(theirs), 2, SHOT_PX[1], SHOT_PX[0], 3), np.uint8)
+
+    def draw() -> None:
+        for i, pair in enumerate(before_after(views, state, theirs).values()):
+            drawn[i] = [np.asarray(p) for p in pair]
+
+    with beside(draw if parallel else None) as finished:
+        Path(report).write_bytes(page())
+        shots = before_after(views, state, mine)
+        shots |= ({n: tuple(Image.fromarray(p) for p in drawn[i]) for i, n in enumerate(theirs)} if finished()
+                  else before_after(views, state, theirs))
+    return {n: shots[n] for n in VIEWS}
 
 
 def input_record(plan: Plan) -> dict:
