@@ -1,15 +1,14 @@
-"""Measures of closed triangle meshes (libigl), and integrals over their triangles."""
+"""Measures of closed triangle meshes, and integrals over their triangles."""
 from __future__ import annotations
 
-import igl
 import numpy as np
 
 
 def mesh_volume(vertices, faces) -> float:
-    """Enclosed volume of a closed, outward-oriented triangle mesh (units of vertices³)."""
-    _, volume = igl.centroid(np.ascontiguousarray(vertices, dtype=np.float64),
-                             np.ascontiguousarray(faces, dtype=np.int64))
-    return float(volume)
+    """Enclosed volume of a closed, outward-oriented triangle mesh (units of vertices³): the sum of the signed
+    volumes of the tetrahedra each triangle makes with the origin, (v0 · (v1 × v2)) / 6 (as libigl's centroid)."""
+    tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
+    return float(np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0)
 
 
 BASE_QUADRATURE = 8
