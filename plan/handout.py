@@ -63,6 +63,16 @@ def measure_rows(plan: Plan) -> list[tuple[str, ...]]:
     return rows
 
 
+def draw_rows(pen: ImageDraw.ImageDraw, rows: list[tuple[str, ...]], at: tuple[int, int], face, step: int) -> None:
+    """Draw `rows` of text as a table from `at` (px), `step` px apart: each column as wide as its widest cell
+    and a gap; the first row (the head) grey."""
+    widths = [max(pen.textlength(row[k], font=face) for row in rows if k < len(row)) for k in range(len(rows[0]))]
+    starts = at[0] + np.concatenate([[0], np.cumsum(np.array(widths[:-1]) + 2 * face.size)])
+    for i, row in enumerate(rows):
+        for x, text in zip(starts, row):
+            pen.text((float(x), at[1] + step * i), text, fill="#555555" if i == 0 else "black", font=face)
+
+
 def plain_value(v) -> str:
     """A measure as the plain-words tables write it: whole above 10, two decimals below; — if not finite."""
     if v is None or not np.isfinite(v):
@@ -114,11 +124,8 @@ def _pictures_page(plan: Plan, shots: dict) -> Image.Image:
 
 def _measures_page(plan: Plan) -> Image.Image:
     page, pen = _page(plan, "The measures, before and as planned")
-    top, columns = MARGIN_PX + 160, (MARGIN_PX, MARGIN_PX + 620, MARGIN_PX + 1100)
-    rows = measure_rows(plan)
-    for i, row in enumerate(rows):
-        for x, text in zip(columns, row):
-            pen.text((x, top + 48 * i), text, fill="#555555" if i == 0 else "black", font=font(26))
+    top, rows = MARGIN_PX + 160, measure_rows(plan)
+    draw_rows(pen, rows, (MARGIN_PX, top), font(26), 48)
     notes = (("Volumes are measured on the scan of her skin, down to the chest wall beneath each breast; the ± is "
               "how far a new scan may read."), "Lengths are measured over her skin in millimetres.",
              "Her right breast is on the left of a picture from the front, as in a mirror seen by someone facing her.")

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from PIL import Image, ImageDraw
 
-from .handout import DISCLAIMER, measure_rows, shown_words, vertical_text
+from .handout import DISCLAIMER, draw_rows, measure_rows, shown_words, vertical_text
 from .pictures import SHOT_PX, font
 from .result import Plan
 
@@ -33,10 +33,7 @@ def summary_png(plan: Plan, shots: dict, path: Path) -> Path:
         pen.text((x + w // 2, HEAD_PX - 6), name, fill="#333333", font=small, anchor="mb")
     for row, label in enumerate(("before", "as planned")):
         vertical_text(page, label, (4, HEAD_PX + row * h + h // 2), small)
-    y = HEAD_PX + 2 * h + 12
-    for i, row in enumerate(measure_rows(plan)):
-        for x, text in zip((12, 250, 520), row):
-            pen.text((x, y + 22 * i), text, fill="#555555" if i == 0 else "black", font=small)
+    draw_rows(pen, measure_rows(plan), (12, HEAD_PX + 2 * h + 12), small, 22)
     pen.text((12, page.height - 26), DISCLAIMER, fill="#555555", font=small)
     page.save(path, format="PNG", compress_level=3)
     return Path(path)
