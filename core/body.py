@@ -14,12 +14,13 @@ from .errors import BadInputError
 @dataclass(frozen=True, eq=False)
 class Body:
     """The torso she was scanned as (input frame, mm), the transform to the scan's viewing frame (None:
-    not known, her up and facing are then taken from the torso alone) and the unit normal of a wall
-    behind her (input frame; None: no wall)."""
+    not known, her up and facing are then taken from the torso alone), the unit normal of a wall
+    behind her (input frame; None: no wall) and her skin's colour at each torso point (None: not recorded)."""
 
     torso_input: np.ndarray                 # (M, 3)
     input_to_view: np.ndarray | None = None  # (4, 4)
     plumb_input: np.ndarray | None = None    # (3,)
+    torso_rgb: np.ndarray | None = None      # (M, 3) uint8 RGB
 
     def same(self, other: "Body") -> bool:
         """Whether `other` is this body as the same scan saw it (the same torso, in the same frame)."""

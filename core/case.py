@@ -88,7 +88,8 @@ class Source:
 @dataclass(frozen=True, eq=False)
 class Scan:
     """An ingested breast: scan.ply (points, normals; mm, breast frame), camera.ply (the
-    background-free torso, mm, input frame) and scan.npz (how they were found)."""
+    background-free torso, mm, input frame, with the colour seen at each point when one was recorded) and
+    scan.npz (how they were found)."""
 
     points: np.ndarray               # (N, 3)
     normals: np.ndarray              # (N, 3) outward unit normals
@@ -108,11 +109,12 @@ class Scan:
     plumb_camera: np.ndarray | None = None  # (3,) unit normal of a wall behind her, input frame; None: no wall
     timings_ms: dict = field(default_factory=dict)
     provenance: Provenance = field(default_factory=Provenance)
+    torso_rgb: np.ndarray | None = None   # (M, 3) uint8 her skin's colour at each torso point; None: not recorded
 
     @property
     def body(self) -> Body:
         """Her body as this scan saw it (shared by both sides of one recording)."""
-        return Body(self.torso_camera, self.input_to_view, self.plumb_camera)
+        return Body(self.torso_camera, self.input_to_view, self.plumb_camera, self.torso_rgb)
 
     @property
     def nipple_breast_mm(self) -> np.ndarray:
@@ -240,7 +242,7 @@ class Case:
         if scan.plumb_camera is not None:
             meta["plumb_camera"] = [float(v) for v in scan.plumb_camera]
         plys = {self.SCAN_PLY: dict(points=scan.points, normals=scan.normals, comments=header),
-                self.CAMERA_PLY: dict(points=scan.torso_camera, comments=[
+                self.CAMERA_PLY: dict(points=scan.torso_camera, colours=scan.torso_rgb, comments=[
                     f"breastplan ingest: background-free torso, {torso_frame}", f"source {src.description}"])}
         return self._write_set(plys, self.SCAN_NPZ, SCAN_SCHEMA, arrays, meta, scan.provenance, frame="camera")
 
@@ -294,7 +296,8 @@ class Case:
                     roi_camera_mm=None if not roi.any() else roi, voxel_mm=float(art["voxel_mm"]), source=source,
                     nipple_found=found,
                     plumb_camera=None if plumb is None else np.asarray(plumb, float),
-                    timings_ms=dict(art.meta.get("timings_ms", {})), provenance=Provenance.from_meta(art.meta))
+                    timings_ms=dict(art.meta.get("timings_ms", {})), provenance=Provenance.from_meta(art.meta),
+                    torso_rgb=torso.colours)
 
     # --- fit --------------------------------------------------------------------------
     def save_fit(self, fit: Fit) -> dict[str, Path]:

@@ -46,6 +46,7 @@ class Geometry:
     faces: np.ndarray | None = None
     normals: np.ndarray | None = None
     comments: list[str] = field(default_factory=list)
+    colours: np.ndarray | None = None      # (N, 3) uint8 RGB per vertex
 
 
 @dataclass
@@ -343,6 +344,8 @@ def _to_geometry(path: Path, elements: list[_Element], arrays: dict, comments: l
     normals = None
     if {"nx", "ny", "nz"} <= set(names):
         normals = np.column_stack([np.asarray(v[c], dtype=np.float64) for c in ("nx", "ny", "nz")])
+    colours = next((_colours(v, c) for c in (("red", "green", "blue"), ("diffuse_red", "diffuse_green", "diffuse_blue"))
+                    if set(c) <= set(names)), None)
     faces = None
     if "face" in arrays and len(arrays["face"]["_n"]):
         f = arrays["face"]
@@ -354,25 +357,38 @@ def _to_geometry(path: Path, elements: list[_Element], arrays: dict, comments: l
         k = idx.shape[1]  # fan triangulation of k-gons, vectorised over faces
         fan = np.stack([np.zeros(k - 2, int), np.arange(1, k - 1), np.arange(2, k)], axis=1)
         faces = idx[:, fan].reshape(-1, 3)
-    return Geometry(points=points, faces=faces, normals=normals, comments=comments)
+    return Geometry(points=points, faces=faces, normals=normals, comments=comments, colours=colours)
 
 
-def write_ply(path: str | Path, points, faces=None, normals=None, comments=()) -> Path:
-    """Write points (N,3) [and triangles (M,3), normals (N,3)] as binary little-endian PLY, atomically."""
+def _colours(v, names: tuple[str, str, str]) -> np.ndarray:
+    """(N, 3) uint8 RGB of vertex colour properties: integers as they are, floats as 0..1."""
+    rgb = np.column_stack([np.asarray(v[c], dtype=np.float64) for c in names])
+    if np.asarray(v[names[0]]).dtype.kind == "f":
+        rgb = rgb * 255.0
+    return np.clip(np.nan_to_num(np.rint(rgb)), 0, 255).astype(np.uint8)
+
+
+def write_ply(path: str | Path, points, faces=None, normals=None, comments=(), colours=None) -> Path:
+    """Write points (N,3) [and triangles (M,3), normals (N,3), colours (N,3) uint8 RGB] as binary little-endian
+    PLY, atomically."""
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError(f"points must be (N, 3), got {points.shape}")
     fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
     if normals is not None:
         fields += [("nx", "<f8"), ("ny", "<f8"), ("nz", "<f8")]
+    if colours is not None:
+        fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
     vert = np.empty(len(points), dtype=fields)
     vert["x"], vert["y"], vert["z"] = points.T
     if normals is not None:
         vert["nx"], vert["ny"], vert["nz"] = np.asarray(normals, dtype=np.float64).T
+    if colours is not None:
+        vert["red"], vert["green"], vert["blue"] = np.asarray(colours, dtype=np.uint8).T
     header = ["ply", "format binary_little_endian 1.0"]
     header += [f"comment {_header_text(c)}" for c in comments]
     header.append(f"element vertex {len(points)}")
-    header += [f"property double {name}" for name, _ in fields]
+    header += [f"property {'uchar' if kind == 'u1' else 'double'} {name}" for name, kind in fields]
     face_bytes = b""
     if faces is not None:
         faces = np.asarray(faces)

@@ -41,8 +41,21 @@ def dbscan(points: np.ndarray, eps: float, min_points: int) -> np.ndarray:
 def voxel_downsample(points: np.ndarray, size: float) -> np.ndarray:
     """(M, 3) the centroids of the occupied voxels of `size` (mm), in grid order, on a grid anchored half a
     voxel below the points' least corner (as open3d's voxel_down_sample anchors it)."""
+    return _voxels(points, size)[0]
+
+
+def voxel_colours(points: np.ndarray, size: float, rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`voxel_downsample`'s centroids, and the mean of each voxel's points' colours `rgb` ((N, 3) uint8)."""
+    centres, which = _voxels(points, size)
+    counts = np.bincount(which, minlength=len(centres))[:, None]
+    means = np.stack([np.bincount(which, rgb[:, k].astype(float), len(centres)) for k in range(3)], 1) / counts
+    return centres, np.rint(means).astype(np.uint8)
+
+
+def _voxels(points: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
     anchor = points.min(axis=0) - 0.5 * size
-    return voxel_centroids(points - anchor, size)[0] + anchor
+    centres, which = voxel_centroids(points - anchor, size)
+    return centres + anchor, which
 
 
 def radius_inliers(points: np.ndarray, radius: float, others: int) -> np.ndarray:

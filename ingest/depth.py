@@ -43,6 +43,16 @@ def depth_range(image: np.ndarray) -> tuple[float, float]:
     return ref - RANGE_MM, ref + RANGE_MM
 
 
+def colours_at(points: np.ndarray, K: np.ndarray, image: np.ndarray) -> np.ndarray:
+    """(N, 3) uint8: the colour `image` ((H, W, 3), aligned to depth) holds at the pixel each camera-frame point
+    (mm) projects to (u = fx·x/z + cx, the inverse of `to_points`), the nearest pixel on the image's edge for a
+    point off it."""
+    z = np.maximum(points[:, 2], 1e-9)
+    u = np.rint(K[0, 0] * points[:, 0] / z + K[0, 2]).clip(0, image.shape[1] - 1).astype(np.int64)
+    v = np.rint(K[1, 1] * points[:, 1] / z + K[1, 2]).clip(0, image.shape[0] - 1).astype(np.int64)
+    return image[v, u]
+
+
 def to_points(image: np.ndarray, K: np.ndarray, near: float = 0.0, far: float = np.inf) -> np.ndarray:
     """Back-project a depth image (mm) within [near, far] to (N, 3) camera-frame points (mm), row by
     row: x = (u − cx)·z/fx, y = (v − cy)·z/fy."""

@@ -10,7 +10,7 @@ the breasts among the mounds (a pair placed as breasts are), the requested side'
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from breastplan import BadInputError, transform_points
@@ -25,7 +25,7 @@ from . import breast as B
 from .background import plumb_wall
 from .chest_wall import fit_chest_wall
 from .cloud import dbscan, normals_towards, radius_inliers, voxel_downsample
-from .depth import depth_range, fuse, to_points
+from .depth import colours_at, depth_range, fuse, to_points
 from .files import ScanCloud
 from .recording import DepthFrames
 from .trunk import Trunk, find_trunk
@@ -59,10 +59,11 @@ class Ingested:
     torso_camera: np.ndarray         # (M, 3) the background-free torso, input frame
     plumb_camera: np.ndarray | None = None   # (3,) a wall's normal behind her, input frame (ingest.background)
     timings_ms: dict = field(default_factory=dict)
+    torso_rgb: np.ndarray | None = None      # (M, 3) uint8 her skin's colour at each torso point; None: not recorded
 
     @property
     def body(self) -> Body:
-        return Body(self.torso_camera, self.input_to_view, self.plumb_camera)
+        return Body(self.torso_camera, self.input_to_view, self.plumb_camera, self.torso_rgb)
 
 
 @dataclass(frozen=True)
@@ -95,6 +96,7 @@ class BodyScan:
     mounds: tuple[B.Mound, ...]      # largest volume first
     plumb: np.ndarray | None         # (3,) a wall's normal behind her, or None
     timings_ms: dict                 # the steps timed until now (the source's read included)
+    torso_rgb: np.ndarray | None = None   # (M, 3) uint8 the colour seen at each torso point; None: not recorded
 
 
 def ingest_frames(frames: DepthFrames, options: IngestOptions, clock: Clock | None = None) -> Ingested:
@@ -112,7 +114,10 @@ def frames_body(frames: DepthFrames, clock: Clock) -> BodyScan:
         points = to_points(image, frames.K, near, far)
         S = BEHIND_STRIDE                                      # beyond the slab: what stands behind her
         beyond = to_points(image[::S, ::S], np.diag([1.0 / S, 1.0 / S, 1.0]) @ frames.K, far, np.inf)
-    return isolate_body(points, np.eye(4), clock, viewer=np.zeros(3), beyond=beyond)
+    body = isolate_body(points, np.eye(4), clock, viewer=np.zeros(3), beyond=beyond)
+    if frames.colour is None:
+        return body
+    return replace(body, torso_rgb=colours_at(body.torso, frames.K, frames.colour))   # viewing frame = camera
 
 
 def ingest_cloud(cloud: ScanCloud, options: IngestOptions, clock: Clock | None = None) -> Ingested:
@@ -290,7 +295,8 @@ def isolate_side(body: BodyScan, options: IngestOptions, clock: Clock) -> Ingest
         crop={"mound_centre_view_mm": mound.centre, "mound_radius_mm": mound.radius, "mound_peak_mm": mound.peak_mm,
               "roi_camera_mm": None if roi is None else np.asarray(roi, float), "crop_height_mm": B.CROP_MM},
         torso_camera=transform_points(to_camera, torso),
-        plumb_camera=None if body.plumb is None else input_to_view[:3, :3].T @ body.plumb, timings_ms=clock.ms)
+        plumb_camera=None if body.plumb is None else input_to_view[:3, :3].T @ body.plumb, timings_ms=clock.ms,
+        torso_rgb=body.torso_rgb)
 
 
 def _upside_down(up: str | None) -> str:

@@ -2,7 +2,8 @@
 
 A recording is an MCAP file written by `dai.node.RecordMessage` in a host-only pipeline
 (`dai.Pipeline(False)`): RAW16 `ImgFrame`s holding depth in millimetres (0 = no
-measurement), each carrying its pinhole intrinsics in its `ImgTransformation`. Replay goes
+measurement), each carrying its pinhole intrinsics in its `ImgTransformation`, and optionally the
+colour camera's RGB888i/BGR888i `ImgFrame`s aligned to depth (the same pixels). Replay goes
 through `dai.node.ReplayMessage`, unpaced (as fast as the host can take the frames).
 """
 from __future__ import annotations
@@ -44,11 +45,14 @@ def depthai():
 
 @dataclass(frozen=True)
 class DepthFrames:
-    """A stack of depth frames from one camera: depth (N, H, W) uint16 mm, K (3, 3) px."""
+    """A stack of depth frames from one camera: depth (N, H, W) uint16 mm, K (3, 3) px, and the colour
+    seen at each depth pixel ((H, W, 3) uint8 RGB, the median of the colour frames aligned to depth;
+    None: no colour recorded)."""
 
     depth: np.ndarray
     K: np.ndarray
     source: str
+    colour: np.ndarray | None = None
 
     @property
     def size(self) -> tuple[int, int]:
@@ -56,13 +60,21 @@ class DepthFrames:
         return int(self.depth.shape[2]), int(self.depth.shape[1])
 
 
-def write_recording(path: str | Path, depth, K: np.ndarray, fps: float = 30.0) -> Path:
-    """Record depth frames ((N, H, W) or a sequence of (H, W); uint16 mm) with intrinsics K, atomically."""
+def write_recording(path: str | Path, depth, K: np.ndarray, fps: float = 30.0, colour=None) -> Path:
+    """Record depth frames ((N, H, W) or a sequence of (H, W); uint16 mm) with intrinsics K, atomically;
+    with `colour` ((H, W, 3) uint8 RGB aligned to depth, or one such per depth frame), a colour frame after
+    the first depth frame (or after each)."""
     dai = depthai()
     frames = [np.ascontiguousarray(frame, dtype=np.uint16) for frame in depth]
     if not frames:
         raise ValueError("a recording needs at least one depth frame")
-    messages = [_img_frame(dai, frame, K, i, i / fps) for i, frame in enumerate(frames)]
+    colour = None if colour is None else np.ascontiguousarray(colour, dtype=np.uint8)
+    colours = [] if colour is None else [colour] if colour.ndim == 3 else list(colour)
+    messages = []
+    for i, frame in enumerate(frames):
+        messages.append(_img_frame(dai, frame, K, i, i / fps))
+        if i < len(colours):
+            messages.append(_img_frame(dai, colours[i], K, i, i / fps))
     marker = _img_frame(dai, frames[-1], K, END_OF_RECORDING, len(frames) / fps)  # the last frame again
     return record_messages(path, messages + [marker])
 
@@ -116,13 +128,14 @@ def _verify(part: Path, expected: int) -> None:
                       str(part))
 
 
-def _img_frame(dai, depth: np.ndarray, K: np.ndarray, seq: int, seconds: float):
-    h, w = depth.shape
+def _img_frame(dai, image: np.ndarray, K: np.ndarray, seq: int, seconds: float):
+    """A RAW16 depth frame ((H, W) uint16) or an RGB888i colour frame ((H, W, 3) uint8)."""
+    h, w = image.shape[:2]
     frame = dai.ImgFrame()
-    frame.setType(dai.ImgFrame.Type.RAW16)
+    frame.setType(dai.ImgFrame.Type.RAW16 if image.ndim == 2 else dai.ImgFrame.Type.RGB888i)
     frame.setWidth(w)
     frame.setHeight(h)
-    frame.setFrame(depth)
+    frame.setFrame(image)
     frame.setTransformation(dai.ImgTransformation(w, h, np.asarray(K, float).tolist()))
     frame.setSequenceNum(seq)
     stamp = datetime.timedelta(seconds=seconds)
@@ -141,10 +154,15 @@ def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFram
     count = check_recording(path)
     if count == 0:
         raise BadInputError(path, "is an MCAP recording without messages (no depth frames)")
-    raw16 = depthai().ImgFrame.Type.RAW16
-    stack, K, frames, last, messages, ended = None, None, 0, -1, 0, False
+    types = depthai().ImgFrame.Type
+    stack, K, frames, last, messages, ended, colours = None, None, 0, -1, 0, False, []
     for messages, msg in enumerate(_replay(path, count), 1):
-        if type(msg).__name__ != "ImgFrame" or msg.getType() != raw16:
+        if type(msg).__name__ != "ImgFrame":
+            continue
+        if msg.getType() in (types.RGB888i, types.BGR888i):
+            colours.append(_colour_of(msg, msg.getType() == types.BGR888i))
+            continue
+        if msg.getType() != types.RAW16:
             continue
         seq = msg.getSequenceNum()
         if seq == END_OF_RECORDING:
@@ -175,8 +193,21 @@ def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFram
     if not depth.any():
         raise BadInputError(path, f"its {frames} depth frames are all zero (no depth measured)")
     _check_intrinsics(path, K, depth.shape[2], depth.shape[1])
+    aligned = [c for c in colours if c is not None and c.shape[:2] == depth.shape[1:]]
+    colour = np.median(np.stack(aligned), axis=0).round().astype(np.uint8) if aligned else None
+    said = (f", {len(aligned)} colour frame{'s' if len(aligned) > 1 else ''}" if aligned
+            else ", colour not aligned to depth (not used)" if colours else "")
     return DepthFrames(depth, K, f"{path.name}: depthai recording, {frames} frames "
-                                 f"{depth.shape[2]}x{depth.shape[1]}")
+                                 f"{depth.shape[2]}x{depth.shape[1]}{said}", colour)
+
+
+def _colour_of(msg, bgr: bool) -> np.ndarray | None:
+    """The (H, W, 3) uint8 RGB image of an interleaved colour frame; None if its header and data disagree."""
+    w, h, stride, size = msg.getWidth(), msg.getHeight(), msg.getStride(), len(msg.getData())
+    if not (0 < w <= MAX_SIDE_PX and 0 < h <= MAX_SIDE_PX) or stride != 3 * w or size < 3 * w * h:
+        return None
+    image = np.frombuffer(msg.getData(), np.uint8, 3 * w * h).reshape(h, w, 3)
+    return image[:, :, ::-1].copy() if bgr else image.copy()
 
 
 def _depth_of(path: Path, msg, index: int) -> np.ndarray:

@@ -94,4 +94,5 @@ def scan_record(result: Ingested, source: Source, options: IngestOptions, proven
                 mound_centre_view_mm=np.asarray(crop["mound_centre_view_mm"], float),
                 mound_radius_mm=float(crop["mound_radius_mm"]), crop_height_mm=float(crop["crop_height_mm"]),
                 roi_camera_mm=crop["roi_camera_mm"], voxel_mm=options.voxel_mm, source=source,
-                plumb_camera=result.plumb_camera, timings_ms=dict(result.timings_ms), provenance=provenance)
+                plumb_camera=result.plumb_camera, timings_ms=dict(result.timings_ms), provenance=provenance,
+                torso_rgb=result.torso_rgb)

@@ -21,6 +21,16 @@ LIGHT = tuple(np.array([-0.35, -0.85, 0.4]) / np.linalg.norm([-0.35, -0.85, 0.4]
 the viewer's left); a picture from another view turns the light with its camera."""
 SHADE = (0.45, 0.55)
 """A skin colour's share lit by ambient light, and by LIGHT where the surface faces it squarely."""
+RECORDED_SHADE = (0.7, 0.45)
+"""The same for her skin's recorded colour, which the room's light already shades: lit more gently (a surface
+facing LIGHT squarely is drawn a little brighter than recorded)."""
+
+
+def skin_colour(views) -> tuple[np.ndarray, tuple[float, float]]:
+    """Her skin's colour ((3,) or (T + P, 3), 0..255) and its shade: as recorded, else SKIN_RGB."""
+    if views.skin_rgb is None:
+        return np.array(SKIN_RGB, float), SHADE
+    return views.skin_rgb.astype(float), RECORDED_SHADE
 LANDMARK = "#c0392b"
 """The colour of the landmarks the measures start from: sternal notch, midline, the nipples found."""
 FOOTPRINT = "#1f5fbf"
@@ -71,7 +81,8 @@ def picture(views: Views, state: State, cam: raster.Camera, marks: bool = True) 
     """Her skin moved as `state` plans, seen by `cam`, lit from LIGHT turned with it; with `marks`, the
     landmarks (red), the footprints (blue) and folds (purple) where not hidden behind her, and her sides named."""
     vertices = np.concatenate([views.torso, state.torso])
-    colours = raster.lit(vertices, views.skin, np.array(SKIN_RGB), cam.light(LIGHT), SHADE)
+    rgb, shade = skin_colour(views)
+    colours = raster.lit(vertices, views.skin, rgb, cam.light(LIGHT), shade)
     drawn = raster.draw(vertices, views.skin, colours, cam)
     image = Image.fromarray(drawn.rgb)
     if marks:

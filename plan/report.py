@@ -1,8 +1,9 @@
 """report.html: a self-contained, offline page of the plan (plotly.js embedded; no request leaves it).
 
 The page is headed with whom and when it is for (`Plan.patient`). It draws her skin (her torso as one
-shaded, skin-coloured surface, moved near the breasts as the state shown plans it, or coloured by the
-millimetres each point moves, the value under the pointer), on demand each breast's scanned points and
+shaded surface in her recorded colour, or a skin tone where none was recorded, moved near the breasts as
+the state shown plans it, or coloured by the millimetres each point moves, the value under the pointer),
+on demand each breast's scanned points and
 fitted model as planned (from the legend), for a follow-up the breast as fitted at the earlier visit (a
 translucent blue mesh), the landmarks the measures start from (the sternal notch, the midline and the
 nipples found, red), each breast's footprint (blue), the fold beneath each breast (purple) and her sides
@@ -39,7 +40,7 @@ from .breast_volume import model_differs_much
 from .changes import short_of
 from .handout import DISCLAIMER, PLAIN, plain_value, state_words
 from .measures import asymmetry, measure_label
-from .pictures import FOLD, FOOTPRINT, LANDMARK, LIGHT, SHADE, SKIN_RGB, VIEWS, camera, picture
+from .pictures import FOLD, FOOTPRINT, LANDMARK, LIGHT, VIEWS, camera, picture, skin_colour
 from .result import Plan
 from .views import State, Views, quantise
 
@@ -124,8 +125,16 @@ def page_data(plan: Plan, views: Views) -> dict:
             "bounds": _bounds(views),
             "footprints": {s: v.round(2).tolist() for s, v in views.footprints.items()},
             "states": states, "sliders": sliders, "first": first_state(plan, views).key,
-            "skin_rgb": list(SKIN_RGB), "light": list(LIGHT), "shade": list(SHADE),
+            **_skin_colour(views), "light": list(LIGHT),
             "scan": SCAN, "model": MODEL, "landmark": LANDMARK, "footprint": FOOTPRINT, "fold": FOLD}
+
+
+def _skin_colour(views: Views) -> dict:
+    """How the page colours her skin: one tone (`skin_rgb`) or her recorded colour per vertex (`skin_vertex_rgb`,
+    uint8 RGB of the torso then the patch), and its shade (`plan.pictures.skin_colour`)."""
+    rgb, shade = skin_colour(views)
+    return {"shade": list(shade), **({"skin_rgb": rgb.tolist()} if rgb.ndim == 1 else
+                                     {"skin_vertex_rgb": _b64(views.skin_rgb, "u1")})}
 
 
 def _bounds(views: Views) -> list[list[float]]:
@@ -380,7 +389,7 @@ const sf=split(b64(P.skin_faces.faces,Int32Array),P.skin_faces.m,Int32Array);
 idx.skin=traces.length;
 traces.push({type:'mesh3d',name:'her skin',i:sf[0],j:sf[1],k:sf[2],showlegend:true,
  lighting:{ambient:1,diffuse:0,specular:0,fresnel:0},hoverinfo:'skip'});   // lit here (shade), the same in every renderer
-const LIGHT=P.light;
+const LIGHT=P.light, RGB=P.skin_vertex_rgb?b64(P.skin_vertex_rgb,Uint8Array):null;   // her recorded colour, if any
 function shade(x,y,z){   // vertex colours: her skin lit from LIGHT (either side of the surface), as the poster is
  const n=x.length,N=new Float32Array(3*n);
  for(let f=0;f<sf[0].length;f++){const a=sf[0][f],b=sf[1][f],c=sf[2][f];
@@ -390,7 +399,8 @@ function shade(x,y,z){   // vertex colours: her skin lit from LIGHT (either side
  const out=new Array(n);
  for(let v=0;v<n;v++){const l=Math.hypot(N[3*v],N[3*v+1],N[3*v+2])||1;
   const k=P.shade[0]+P.shade[1]*Math.abs(N[3*v]*LIGHT[0]+N[3*v+1]*LIGHT[1]+N[3*v+2]*LIGHT[2])/l;
-  out[v]='rgb('+P.skin_rgb.map(c=>Math.round(c*k)).join(',')+')';}
+  const c=RGB?[RGB[3*v],RGB[3*v+1],RGB[3*v+2]]:P.skin_rgb;
+  out[v]='rgb('+c.map(c=>Math.min(255,Math.round(c*k))).join(',')+')';}
  return out;}
 const meshBase={};
 for(const s of P.sides){

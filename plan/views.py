@@ -18,7 +18,7 @@ import numpy as np
 from scipy.spatial import Delaunay
 
 from breastplan import transform_points
-from breastplan.ingest.cloud import voxel_downsample
+from breastplan.ingest.cloud import voxel_colours, voxel_downsample
 
 from .measures import midline_profile
 from .result import Plan, PlanState
@@ -64,12 +64,16 @@ class Views:
     footprints: dict[str, np.ndarray]   # side → (K, 3) the closed outline her volume is measured inside
     side_labels: dict[str, np.ndarray]  # side → (3,) where her side is named: SIDE_LABEL_MM from its nipple
     folds: dict[str, np.ndarray]        # side → (K, 3) her inframammary fold under the breast, as measured
+    skin_rgb: np.ndarray | None = None  # (T + P, 3) uint8 her skin's recorded colour at the torso then the patch's
+                                        # points (the mean over each TORSO_MM cube); None: none was recorded
 
 
 def build_views(plan: Plan) -> Views:
     """Every state of the plan in the display frame."""
     to_display = VIEW_TO_DISPLAY @ plan.body.input_to_view                  # input frame → display frame
-    torso_in = voxel_downsample(np.asarray(plan.body.torso_input, float), TORSO_MM)
+    torso = np.asarray(plan.body.torso_input, float)
+    torso_in, rgb = ((voxel_downsample(torso, TORSO_MM), None) if plan.body.torso_rgb is None
+                     else voxel_colours(torso, TORSO_MM, plan.body.torso_rgb))
     near = np.zeros(len(torso_in), bool)
     for planned in plan.changes[0].planned.values():
         near |= planned.weights(torso_in) > 0
@@ -88,7 +92,8 @@ def build_views(plan: Plan) -> Views:
                  landmarks=_landmarks(plan, show),
                  footprints={s: show(v.footprint_input_mm + FOOTPRINT_LIFT_MM * plan.volumes.landmarks.anterior_axis)
                              for s, v in plan.volumes.sides.items()},
-                 side_labels=_side_labels(plan, show), folds=_folds(plan, show))
+                 side_labels=_side_labels(plan, show), folds=_folds(plan, show),
+                 skin_rgb=None if rgb is None else np.concatenate([rgb[~near], rgb[near]]))
 
 
 def skin_triangles(points_view: np.ndarray) -> np.ndarray:

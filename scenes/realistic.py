@@ -115,6 +115,13 @@ class BodyScene:
 
         return cast_depth(self.raycasting(), self.camera.K, *self.camera.size)
 
+    def colour(self) -> np.ndarray:
+        """(H, W, 3) uint8 RGB of the colour camera aligned to depth: her skin shaded, her areolae darker."""
+        from .rendering import cast_colour
+
+        return cast_colour(self.raycasting(), self.camera.K, *self.camera.size,
+                           np.stack(list(self.nipples_camera().values())))
+
     def frames(self, n_frames: int, seed: int = 0) -> np.ndarray:
         """(N, H, W) uint16 noisy depth frames, mm."""
         from .rendering import noisy_frames

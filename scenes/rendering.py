@@ -1,4 +1,4 @@
-"""Depth rendering for the synthetic scanners: open3d ray casting, then an OAK-like noise model.
+"""Depth (and colour) rendering for the synthetic scanners: open3d ray casting, then an OAK-like noise model.
 
 Camera frame: OpenCV (x right in the image, y down, z forward), mm. Noise grows with the
 square of the distance; grazing surfaces and random holes give no depth (0), as on an OAK.
@@ -34,6 +34,34 @@ def cast_depth(rc: o3d.t.geometry.RaycastingScene, K: np.ndarray, width: int, he
     grazing = np.abs(np.sum(normals * dirs, axis=1)) < np.cos(np.radians(GRAZING_DEG))
     depth[~np.isfinite(depth) | grazing] = np.nan
     return depth.reshape(height, width), hit["geometry_ids"].numpy().reshape(height, width)
+
+
+SKIN_RGB = (222, 176, 152)
+"""A light skin tone, RGB."""
+AREOLA_RGB = (160, 104, 88)
+"""The areola's darker tone, RGB."""
+AREOLA_MM = 18.0
+"""The areola's radius about the nipple (straight-line distance on her skin), mm."""
+WALL_RGB = (206, 206, 200)
+
+
+def cast_colour(rc: o3d.t.geometry.RaycastingScene, K: np.ndarray, width: int, height: int,
+                nipples: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 RGB the colour camera (aligned to depth: the same pixels) sees: her skin (geometry 0),
+    darker within AREOLA_MM of each nipple (`nipples` (2, 3), camera frame, mm), the wall (geometry 1) grey,
+    lit from the camera (Lambert, with some ambient light); black where nothing is hit."""
+    rays = pixel_rays(K, width, height)
+    hit = rc.cast_rays(o3d.core.Tensor(rays))
+    t = hit["t_hit"].numpy().astype(float)
+    ids = hit["geometry_ids"].numpy()
+    dirs = rays[:, 3:] / np.linalg.norm(rays[:, 3:], axis=1, keepdims=True)
+    lambert = np.abs(np.sum(hit["primitive_normals"].numpy() * dirs, axis=1))
+    points = rays[:, 3:] * np.where(np.isfinite(t), t, 0.0)[:, None]
+    areola = np.min(np.linalg.norm(points[:, None, :] - np.asarray(nipples)[None], axis=2), axis=1) < AREOLA_MM
+    base = np.where((ids == 0)[:, None], np.where(areola[:, None], AREOLA_RGB, SKIN_RGB), WALL_RGB)
+    rgb = base * (0.35 + 0.65 * lambert)[:, None]
+    rgb[~np.isfinite(t)] = 0.0
+    return np.clip(np.rint(rgb), 0, 255).astype(np.uint8).reshape(height, width, 3)
 
 
 def noisy_frames(clean: np.ndarray, noise_mm: float, n_frames: int, seed: int = 0) -> np.ndarray:

@@ -1,0 +1,86 @@
+"""Her own colour: recorded beside depth, kept by ingest on her torso, drawn by the plan."""
+import json
+
+import numpy as np
+import open3d as o3d
+import pytest
+
+from breastplan import read_ply, write_ply
+from breastplan.ingest.recording import read_recording, write_recording
+from breastplan.plan.job import sample_recording
+from breastplan.scenes.rendering import AREOLA_RGB, SKIN_RGB
+
+from clitools import run
+
+K = np.array([[500.0, 0.0, 32.0], [0.0, 500.0, 24.0], [0.0, 0.0, 1.0]])
+
+
+def test_a_ply_keeps_its_colours_as_open3d_reads_them(tmp_path):
+    rng = np.random.default_rng(0)
+    points, colours = rng.normal(size=(50, 3)), rng.integers(0, 256, (50, 3)).astype(np.uint8)
+    write_ply(tmp_path / "c.ply", points, colours=colours)
+    assert np.array_equal(read_ply(tmp_path / "c.ply").colours, colours)
+    theirs = o3d.io.read_point_cloud(str(tmp_path / "c.ply"))              # a second reader
+    assert np.allclose(np.asarray(theirs.colors) * 255, colours)
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))   # a second writer: colours as 0..1
+    cloud.colors = o3d.utility.Vector3dVector(colours / 255.0)
+    o3d.io.write_point_cloud(str(tmp_path / "o3d.ply"), cloud)
+    assert np.array_equal(read_ply(tmp_path / "o3d.ply").colours, colours)
+    assert read_ply(write_ply(tmp_path / "plain.ply", points)).colours is None
+
+
+def test_a_recording_keeps_the_colour_aligned_to_its_depth(tmp_path):
+    depth = np.full((3, 48, 64), 700, np.uint16)
+    colour = np.zeros((48, 64, 3), np.uint8)
+    colour[..., 0], colour[10:20, 30:40] = 200, (90, 50, 40)
+    frames = read_recording(write_recording(tmp_path / "c.mcap", depth, K, colour=colour))
+    assert np.array_equal(frames.colour, colour) and "1 colour frame" in frames.source
+    noisy = np.stack([colour, colour, colour]).astype(int) + [[[[0]]], [[[6]]], [[[-6]]]]   # one per depth frame
+    frames = read_recording(write_recording(tmp_path / "n.mcap", depth, K, colour=noisy.clip(0, 255)))
+    assert np.array_equal(frames.colour, colour)                            # their median
+    assert read_recording(write_recording(tmp_path / "d.mcap", depth, K)).colour is None
+    other = read_recording(write_recording(tmp_path / "o.mcap", depth, K, colour=np.zeros((24, 32, 3), np.uint8)))
+    assert other.colour is None and "colour not aligned to depth (not used)" in other.source
+    assert read_recording(sample_recording()).colour is None
+
+
+@pytest.fixture(scope="module")
+def patient(cli, tmp_path_factory):
+    """A MakeHuman patient recorded with colour (`scan-synth`), and her plan."""
+    folder = tmp_path_factory.mktemp("colour")
+    res = run(cli, "scan-synth", "--body", "makehuman", "--cup", "0.8", "--pose", "arms-down", "--yaw", "-5",
+              "--frames", "4", "--out", folder / "her.mcap", "--truth", folder / "truth.npz", "--json")
+    assert res.returncode == 0, res.stderr
+    nipples = {s: np.array(p) for s, p in json.loads(res.stdout)["nipples_camera_mm"].items()}
+    res = run(cli, "plan", folder / "her.mcap", "--out", folder / "case")
+    assert res.returncode == 0, res.stderr
+    return folder, nipples
+
+
+def _dark(rgb) -> bool:
+    """Of the areola's hue rather than the skin's (green over red: light and shade scale both alike)."""
+    rgb = np.asarray(rgb, float)
+    areola, skin = (np.asarray(c, float) for c in (AREOLA_RGB, SKIN_RGB))
+    return rgb[1] / rgb[0] < 0.5 * (areola[1] / areola[0] + skin[1] / skin[0])
+
+
+def test_scan_synth_records_her_skin_and_darker_areolae(patient):
+    folder, nipples = patient
+    frames = read_recording(folder / "her.mcap")
+    for nipple in nipples.values():
+        for offset, dark in (((0, 0, 0), True), ((0, 60, 0), False), ((0, -60, 0), False)):   # y: down
+            p = nipple + offset
+            u, v = np.rint(frames.K[:2, :2] @ (p[:2] / p[2]) + frames.K[:2, 2]).astype(int)
+            assert _dark(frames.colour[v, u]) == dark, (nipple, offset, frames.colour[v, u])
+
+
+def test_ingest_keeps_her_colour_on_the_torso_and_the_report_draws_it(patient):
+    folder, nipples = patient
+    for side in ("left", "right"):
+        torso = read_ply(folder / "case" / side / "camera.ply")
+        assert torso.colours is not None and len(torso.colours) == len(torso.points)
+        for offset, dark in (((0, 0, 0), True), ((0, 60, 0), False), ((40, -40, 0), False)):
+            near = np.linalg.norm(torso.points - (nipples[side] + offset), axis=1).argsort()[:5]
+            assert all(_dark(c) == dark for c in torso.colours[near]), (side, offset, torso.colours[near])
+    page = (folder / "case" / "report.html").read_text()
+    assert '"skin_vertex_rgb"' in page and '"skin_rgb"' not in page
