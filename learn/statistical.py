@@ -43,10 +43,11 @@ def scaled(regressor, poly: int = 0) -> TransformedTargetRegressor:
     return TransformedTargetRegressor(Pipeline(steps + [("regressor", regressor)]), transformer=MinMaxScaler())
 
 
-def thesis_mlp(hidden: int, seed: int = 0) -> TransformedTargetRegressor:
+def thesis_mlp(hidden: int, seed: int = 0, epochs: int = THESIS_EPOCHS) -> TransformedTargetRegressor:
     """The thesis's network: one hidden layer of `hidden` neurons, features and targets in [0, 1]
-    (scaled conjugate gradient in the thesis; L-BFGS here, the closest full-batch method)."""
-    return scaled(MLPRegressor(hidden_layer_sizes=(hidden,), solver="lbfgs", max_iter=THESIS_EPOCHS, random_state=seed))
+    (scaled conjugate gradient in the thesis; L-BFGS here, the closest full-batch method, for `epochs`
+    iterations)."""
+    return scaled(MLPRegressor(hidden_layer_sizes=(hidden,), solver="lbfgs", max_iter=epochs, random_state=seed))
 
 
 class FieldModel(RegressorMixin, BaseEstimator):

@@ -31,7 +31,7 @@ from .databases import Database, build_database
 from .datasets import Dataset, build_dataset
 from .displacements import Before, FitCache, PairOptions, apply_field, fit_before, fit_pair, pair_features
 from .metrics import indirect_metrics, spike_ratios, vertex_spike_ratios
-from .statistical import REGRESSORS, FieldModel, thesis_mlp
+from .statistical import REGRESSORS, THESIS_EPOCHS, FieldModel, thesis_mlp
 
 CONDITIONS = ("ptosis b0>b1", "ptosis b1>=b0", "turn c0>c1", "turn c1>c0", "top-shape s0->s1+", "top-shape s1->s0+")
 THESIS_CONDITION = "ptosis b0>b1"
@@ -48,6 +48,9 @@ GRIDS = {
 }
 QUICK_GRIDS = {"ridge": {"n_modes": (6, 20)}, "kernel-ridge": {"n_modes": (6, 20), "gamma": (1.0,)},
                "gp": {"n_modes": (6,)}, "mlp": {"n_modes": (6,)}}
+QUICK_EPOCHS = 150
+"""A quick study trains the thesis's network for this many L-BFGS iterations (THESIS_EPOCHS otherwise): the
+quick study shows every method at work, not the thesis's best figure."""
 ALL_TYPES = ("ptosis b0>b1", "turn c0>c1", "top-shape s1->s0+")
 """The conditions one model learns together, a condition per type (the types' default conditions)."""
 CONTINUOUS = ("ridge", "kernel-ridge")
@@ -183,7 +186,7 @@ def run_condition(pairs: Pairs, quick: bool, thesis: bool, advance=lambda: None)
     if thesis:
         X, Xt = pairs.features(train, thesis=True), pairs.features(test, thesis=True)
         K = pairs.options.lattice ** 3
-        est, _, cv = grid_select(thesis_mlp(K), {}, X, Y, groups)
+        est, _, cv = grid_select(thesis_mlp(K, epochs=QUICK_EPOCHS if quick else THESIS_EPOCHS), {}, X, Y, groups)
         results.append(evaluate(pairs, "MLP (thesis)", {"hidden": K}, cv, est.predict(Xt)))
         advance()
         if not quick:
@@ -225,7 +228,8 @@ class StudyPlan:
 
     @classmethod
     def quick_plan(cls) -> "StudyPlan":
-        """The thesis's condition alone, 125 CP from corresponding points, small grids (CI)."""
+        """The thesis's condition alone, 125 CP from corresponding points, small grids, the thesis's network
+        trained for QUICK_EPOCHS (CI)."""
         return cls(conditions=(THESIS_CONDITION,), lattices=(5,), fits=FITS[:1], quick=True)
 
     def runs(self) -> list[tuple[str, PairOptions]]:
