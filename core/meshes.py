@@ -11,6 +11,17 @@ def mesh_volume(vertices, faces) -> float:
     return float(np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0)
 
 
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V, 3) unit normals: each vertex's sum of its triangles' area-weighted normals (zero where it has none)."""
+    tri = vertices[faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    out = np.zeros_like(vertices, dtype=float)
+    for k in range(3):
+        np.add.at(out, faces[:, k], n)
+    length = np.linalg.norm(out, axis=1, keepdims=True)
+    return np.divide(out, length, out=np.zeros_like(out), where=length > 0)
+
+
 BASE_QUADRATURE = 8
 """`volume_below_base` cuts each base-cap triangle into 8² triangles and samples their centroids."""
 

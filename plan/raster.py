@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from breastplan.meshes import vertex_normals
+
 SUPERSAMPLE = 2
 """Each pixel is the mean of SUPERSAMPLE² samples, so that her outline is smooth, not stepped."""
 CHUNK = 4_000_000
@@ -59,17 +61,6 @@ def framing(points: list[np.ndarray], azimuth_deg: float, width: int, height: in
     lo, hi = np.quantile(p, stray, axis=0), np.quantile(p, 1.0 - stray, axis=0)
     scale = max((hi[0] - lo[0]) / (width * (1 - 2 * margin)), (hi[2] - lo[2]) / (height * (1 - 2 * margin)), 1e-9)
     return Camera(azimuth_deg, probe.rotation.T @ ((lo + hi) / 2), float(scale), width, height)
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(V, 3) unit normals: each vertex's sum of its triangles' area-weighted normals (zero where it has none)."""
-    tri = vertices[faces]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    out = np.zeros_like(vertices, dtype=float)
-    for k in range(3):
-        np.add.at(out, faces[:, k], n)
-    length = np.linalg.norm(out, axis=1, keepdims=True)
-    return np.divide(out, length, out=np.zeros_like(out), where=length > 0)
 
 
 def lit(vertices: np.ndarray, faces: np.ndarray, rgb: np.ndarray, light: np.ndarray,

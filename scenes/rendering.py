@@ -9,6 +9,8 @@ import numpy as np
 import open3d as o3d
 from scipy import ndimage
 
+from breastplan.meshes import vertex_normals
+
 GRAZING_DEG = 78.0
 """Surfaces seen at a larger angle of incidence give no depth."""
 NOISE_REF_MM = 600.0
@@ -45,22 +47,35 @@ AREOLA_MM = 18.0
 WALL_RGB = (206, 206, 200)
 
 
-def cast_colour(rc: o3d.t.geometry.RaycastingScene, K: np.ndarray, width: int, height: int,
+def cast_colour(meshes: list[tuple[np.ndarray, np.ndarray]], K: np.ndarray, width: int, height: int,
                 nipples: np.ndarray) -> np.ndarray:
-    """(H, W, 3) uint8 RGB the colour camera (aligned to depth: the same pixels) sees: her skin (geometry 0),
-    darker within AREOLA_MM of each nipple (`nipples` (2, 3), camera frame, mm), the wall (geometry 1) grey,
-    lit from the camera (Lambert, with some ambient light); black where nothing is hit."""
+    """(H, W, 3) uint8 RGB the colour camera (aligned to depth: the same pixels) sees of camera-frame `meshes`
+    ((V, 3) mm, (F, 3); the body first, then the wall): her skin, darker within AREOLA_MM of each nipple
+    (`nipples` (2, 3), camera frame, mm), the wall grey; smoothly shaded (vertex normals interpolated across
+    each triangle), lit from the camera with some ambient light; black where nothing is hit."""
+    rc = o3d.t.geometry.RaycastingScene()
+    normals = []
+    for V, F in meshes:
+        rc.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(F.astype(np.uint32)))
+        normals.append((vertex_normals(V, F), F))
     rays = pixel_rays(K, width, height)
     hit = rc.cast_rays(o3d.core.Tensor(rays))
-    t = hit["t_hit"].numpy().astype(float)
-    ids = hit["geometry_ids"].numpy()
+    t, ids = hit["t_hit"].numpy().astype(float), hit["geometry_ids"].numpy()
+    found = np.isfinite(t)
+    n = np.zeros((len(t), 3))
+    uv, prim = hit["primitive_uvs"].numpy().astype(float), hit["primitive_ids"].numpy()
+    for g, (N, F) in enumerate(normals):
+        on = found & (ids == g)
+        corners = N[F[prim[on]]]                                                   # (k, 3 corners, 3)
+        w = np.column_stack([1.0 - uv[on].sum(axis=1), uv[on]])
+        n[on] = np.einsum("kc,kcd->kd", w, corners)
     dirs = rays[:, 3:] / np.linalg.norm(rays[:, 3:], axis=1, keepdims=True)
-    lambert = np.abs(np.sum(hit["primitive_normals"].numpy() * dirs, axis=1))
-    points = rays[:, 3:] * np.where(np.isfinite(t), t, 0.0)[:, None]
+    lambert = np.abs(np.sum(n * dirs, axis=1)) / np.maximum(np.linalg.norm(n, axis=1), 1e-12)   # n: interpolated
+    points = rays[:, 3:] * np.where(found, t, 0.0)[:, None]
     areola = np.min(np.linalg.norm(points[:, None, :] - np.asarray(nipples)[None], axis=2), axis=1) < AREOLA_MM
     base = np.where((ids == 0)[:, None], np.where(areola[:, None], AREOLA_RGB, SKIN_RGB), WALL_RGB)
     rgb = base * (0.35 + 0.65 * lambert)[:, None]
-    rgb[~np.isfinite(t)] = 0.0
+    rgb[~found] = 0.0
     return np.clip(np.rint(rgb), 0, 255).astype(np.uint8).reshape(height, width, 3)
 
 

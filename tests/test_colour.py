@@ -7,7 +7,6 @@ import pytest
 
 from breastplan import read_ply, write_ply
 from breastplan.ingest.recording import read_recording, write_recording
-from breastplan.plan.job import sample_recording
 from breastplan.scenes.rendering import AREOLA_RGB, SKIN_RGB
 
 from clitools import run
@@ -41,7 +40,6 @@ def test_a_recording_keeps_the_colour_aligned_to_its_depth(tmp_path):
     assert read_recording(write_recording(tmp_path / "d.mcap", depth, K)).colour is None
     other = read_recording(write_recording(tmp_path / "o.mcap", depth, K, colour=np.zeros((24, 32, 3), np.uint8)))
     assert other.colour is None and "colour not aligned to depth (not used)" in other.source
-    assert read_recording(sample_recording()).colour is None
 
 
 @pytest.fixture(scope="module")
