@@ -65,7 +65,7 @@ def read_mesh(path: str | Path) -> Mesh:
     if Path(path).suffix.lower() == ".mcap":
         raise BadInputError(path, f"is a depthai recording; filters take a scan or mesh file ({', '.join(SUPPORTED)}), "
                                   "and `breastplan ingest` or `breastplan plan` reads recordings")
-    points, faces, _, _ = read_scan_arrays(path)
+    points, faces, *_ = read_scan_arrays(path)
     with about(path):
         return Mesh(points, faces)
 

@@ -50,13 +50,15 @@ _MAGIC = {b"\x89PNG": "a PNG image", b"\xff\xd8\xff": "a JPEG image", b"\x89MCAP
 
 @dataclass(frozen=True, eq=False)
 class ScanCloud:
-    """A scan as points (N, 3) in mm, in the file's own frame, with optional unit normals (N, 3)."""
+    """A scan as points (N, 3) in mm, in the file's own frame, with optional unit normals (N, 3) and colours
+    ((N, 3) uint8 RGB)."""
 
     points: np.ndarray
     normals: np.ndarray | None
     frame_hint: str | None
     """"camera-opencv" if a PLY comment says "frame camera-opencv", else None."""
     description: str
+    colours: np.ndarray | None = None
 
 
 def read_scan_file(path: str | Path, units: str = "auto") -> ScanCloud:
@@ -64,25 +66,26 @@ def read_scan_file(path: str | Path, units: str = "auto") -> ScanCloud:
     path = Path(path)
     if units not in ("auto", "mm", "m"):
         raise BadInputError(None, f"units must be auto, mm or m, not '{units}'")
-    points, faces, normals, comments = read_scan_arrays(path)
-    return scan_cloud(points, faces, normals, units, comments=comments, path=path)
+    points, faces, normals, comments, colours = read_scan_arrays(path)
+    return scan_cloud(points, faces, normals, units, comments=comments, path=path, colours=colours)
 
 
-def read_scan_arrays(path: str | Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, list[str]]:
+def read_scan_arrays(path: str | Path) -> tuple:
     """A scan file's own arrays, in its units: points (N, 3), triangles (M, 3) or None, normals (N, 3)
-    or None, and its header comments (PLY); BadInputError naming the file for any defect."""
+    or None, its header comments (PLY), and its vertices' colours ((N, 3) uint8 RGB) or None; BadInputError
+    naming the file for any defect."""
     path = Path(path)
     _check_file(path)
     return _READERS[path.suffix.lower()](path)
 
 
 def scan_cloud(points, faces=None, normals=None, units: str = "auto", *, name: str = "mesh",
-               comments=(), path: str | Path | None = None) -> ScanCloud:
+               comments=(), path: str | Path | None = None, colours=None) -> ScanCloud:
     """A scan's arrays (file units) → a `ScanCloud` in mm, as `read_scan_file` makes it from a file.
 
     points (N, 3); faces (M, 3) triangles or None (a point cloud; its normals (N, 3) kept, if any);
-    a triangle mesh is sampled uniformly by area. `path` is named in the errors (None: none is named)
-    and its file name in the description, else `name`."""
+    a triangle mesh is sampled uniformly by area, its vertices' colours (N, 3) uint8, if any, interpolated.
+    `path` is named in the errors (None: none is named) and its file name in the description, else `name`."""
     path = None if path is None else Path(path)
     if units not in ("auto", "mm", "m"):
         raise BadInputError(None, f"units must be auto, mm or m, not '{units}'")
@@ -97,20 +100,24 @@ def scan_cloud(points, faces=None, normals=None, units: str = "auto", *, name: s
         raise BadInputError(path, f"has faces that refer to missing vertices (it has {counted(len(points), 'point')})")
     if normals is not None and len(normals) != len(points):
         raise BadInputError(path, f"has {len(normals)} normals for {counted(len(points), 'point')}")
+    if colours is not None and len(colours) != len(points):
+        raise BadInputError(path, f"has {len(colours)} colours for {counted(len(points), 'point')}")
     extent = extent_of(points)
     mm_per_unit, units_text = _mm_per_unit(path, extent, units)
     points = points * mm_per_unit
     if faces is not None:
         n_faces = len(faces)
-        points, normals = _sample_surface(path, points, faces)
+        points, normals, colours = _sample_surface(path, points, faces, colours)
         what = f"triangle mesh, {counted(n_faces, 'face')}, sampled to {counted(len(points), 'point')}"
     else:
         normals = _unit_normals(path, normals)
         with_normals = " with normals" if normals is not None else ""
         what = f"point cloud, {counted(len(points), 'point')}{with_normals}"
     hint = "camera-opencv" if any(CAMERA_FRAME in c for c in comments) else None
+    coloured = ", in colour" if colours is not None else ""
     return ScanCloud(points=_frozen(points), normals=None if normals is None else _frozen(normals),
-                     frame_hint=hint, description=f"{path.name if path is not None else name}: {what}, {units_text}")
+                     frame_hint=hint, colours=None if colours is None else np.asarray(colours, np.uint8),
+                     description=f"{path.name if path is not None else name}: {what}{coloured}, {units_text}")
 
 
 def as_rows(path: Path | None, values, columns: int, dtype, what: str) -> np.ndarray:
@@ -179,18 +186,22 @@ def _mm_per_unit(path: Path | None, extent: float, units: str) -> tuple[float, s
                               f"millimetres); {how}")
 
 
-def _sample_surface(path: Path, points_mm: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Sample a mesh (mm) uniformly by area, ~1 point per mm², seeded; normals from the triangles."""
+def _sample_surface(path: Path, points_mm: np.ndarray, faces: np.ndarray, colours=None) -> tuple:
+    """Sample a mesh (mm) uniformly by area, ~1 point per mm², seeded: (points, normals from the triangles,
+    colours interpolated from the vertices' (N, 3) uint8, or None)."""
     with _open3d() as o3d:
         mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(points_mm),
                                          o3d.utility.Vector3iVector(np.ascontiguousarray(faces, dtype=np.int32)))
+        if colours is not None:
+            mesh.vertex_colors = o3d.utility.Vector3dVector(np.asarray(colours, float) / 255.0)
         area = mesh.get_surface_area()
         if not area > 0:
             raise BadInputError(path, "is a mesh whose triangles have no area")
         n = int(np.clip(round(area * POINTS_PER_MM2), *SAMPLE_RANGE))
         o3d.utility.random.seed(SAMPLE_SEED)
         cloud = mesh.sample_points_uniformly(n, use_triangle_normal=True)
-    return np.asarray(cloud.points), np.asarray(cloud.normals)
+        sampled = np.rint(np.asarray(cloud.colors) * 255).astype(np.uint8) if colours is not None else None
+    return np.asarray(cloud.points), np.asarray(cloud.normals), sampled
 
 
 def _unit_normals(path: Path, normals: np.ndarray | None) -> np.ndarray | None:
@@ -209,7 +220,7 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
-# --- format readers: path → (points, faces or None, normals or None, comments), file units ---
+# --- format readers: path → (points, faces or None, normals or None, comments, colours or None), file units ---
 
 def _read_ply(path: Path):
     """PLY through breastplan's strict reader (ArtefactError, a BadInputError, on defects); a mesh whose
@@ -221,8 +232,8 @@ def _read_ply(path: Path):
         polygons = _read_polygons(path)
         if polygons is None:
             raise
-        return *polygons, None, []
-    return g.points, g.faces, g.normals, g.comments
+        return *polygons, None, [], None
+    return g.points, g.faces, g.normals, g.comments, g.colours
 
 
 def _read_mesh(path: Path):
@@ -243,7 +254,7 @@ def _read_mesh(path: Path):
             points, faces = polygons
     if len(faces) == 0:
         raise _not_valid(path, "or holds no triangles")
-    return points, faces, None, []
+    return points, faces, None, [], None
 
 
 def _read_pcd(path: Path):
@@ -254,7 +265,8 @@ def _read_pcd(path: Path):
     if len(cloud.points) == 0:
         raise _not_valid(path, "or holds no points")
     normals = np.asarray(cloud.normals, dtype=np.float64) if cloud.has_normals() else None
-    return np.asarray(cloud.points, dtype=np.float64), None, normals, []
+    colours = np.rint(np.asarray(cloud.colors) * 255).clip(0, 255).astype(np.uint8) if cloud.has_colors() else None
+    return np.asarray(cloud.points, dtype=np.float64), None, normals, [], colours
 
 
 def _read_xyz(path: Path):
@@ -280,7 +292,7 @@ def _read_xyz(path: Path):
         if not np.allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-2):
             raise BadInputError(path, "has columns 4–6 that are not unit normals; an .xyz file must hold "
                                       "x y z or x y z nx ny nz per line")
-    return table[:, :3], None, normals, []
+    return table[:, :3], None, normals, [], None
 
 
 _READERS = {".ply": _read_ply, ".obj": _read_mesh, ".stl": _read_mesh, ".pcd": _read_pcd, ".xyz": _read_xyz}

@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.spatial import cKDTree
 from breastplan import BadInputError, transform_points
 from breastplan.body import Body
 from breastplan.chest_wall import ChestWall
@@ -131,12 +132,17 @@ def cloud_body(cloud: ScanCloud, up: str, clock: Clock) -> BodyScan:
     order first (sorted by their coordinates): what is found depends on her surface, not on the order
     a file lists its points in."""
     with clock("viewing frame"):
-        ordered = cloud.points[canonical_order(cloud.points)]
+        order = canonical_order(cloud.points)
+        ordered = cloud.points[order]
         view, found = (np.eye(4), None) if cloud.frame_hint == "camera-opencv" else viewing_frame(ordered, up)
         points = transform_points(view, ordered)
         viewer = points.mean(0) - [0.0, 0.0, 2000.0]
-    return isolate_body(points, view, clock, viewer=viewer, found=found,
+    body = isolate_body(points, view, clock, viewer=viewer, found=found,
                         up=None if cloud.frame_hint == "camera-opencv" else up)
+    if cloud.colours is None:
+        return body
+    torso = transform_points(np.linalg.inv(body.input_to_view), body.torso)   # the file's own points, its frame
+    return replace(body, torso_rgb=cloud.colours[order][cKDTree(ordered).query(torso)[1]])
 
 
 def viewing_frame(points: np.ndarray, up: str) -> tuple[np.ndarray, BodyInView]:

@@ -248,7 +248,8 @@ def visible_faces(scene: BodyScene) -> np.ndarray:
 def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: str = "+y",
                     suffix: str | None = None) -> dict:
     """Write what the camera sees as a scan file, atomically: a `.ply` holds the noise-free depth
-    pixels (body and wall) back-projected, an `.obj` the body's visible triangles (`visible_faces`).
+    pixels (body and wall) back-projected, each with the colour seen there (`BodyScene.colour`), an `.obj`
+    the body's visible triangles (`visible_faces`).
     The format is `path`'s suffix, or `suffix` when given (a staged file's name says none).
     Coordinates: the body frame turned by `file_from_body(up, units)`. Returns the counts written
     (points or vertices, faces)."""
@@ -262,11 +263,14 @@ def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: s
         raise OptionError("up", f"the up axis is one of {' '.join(UP_AXES)}, not '{up}'")
     frame = f"units {units}; body frame turned so that its up lies on {up}: {file_axes(up)}"
     if suffix == ".ply":
+        from breastplan.ingest.depth import colours_at
+
         points, ids = visible_points(scene)
         to_file = file_from_body(up, units) @ np.linalg.inv(scene.camera_from_body)
         what = "body and wall" if (ids == 1).any() else "body"
-        write_ply(path, transform_points(to_file, points),
-                  comments=[f"breastplan scan-synth: realistic {what}, noise-free depth pixels back-projected", frame])
+        write_ply(path, transform_points(to_file, points), colours=colours_at(points, scene.camera.K, scene.colour()),
+                  comments=[f"breastplan scan-synth: realistic {what}, noise-free depth pixels back-projected, with "
+                            "the colour seen at each", frame])
         return {"points": len(points), "faces": 0}
     used, faces = np.unique(scene.body.faces[visible_faces(scene)], return_inverse=True)
     V = transform_points(file_from_body(up, units), scene.body.vertices[used])

@@ -1,12 +1,15 @@
-"""Her own colour: recorded beside depth, kept by ingest on her torso, drawn by the plan."""
+"""Her own colour: recorded beside depth or in a scan file, kept by ingest on her torso, drawn by the plan."""
 import json
 
 import numpy as np
 import open3d as o3d
 import pytest
 
-from breastplan import read_ply, write_ply
+from breastplan import read_ply, transform_points, write_ply
+from breastplan.ingest.files import scan_cloud
 from breastplan.ingest.recording import read_recording, write_recording
+from breastplan.scenes.makehuman import BodyOptions
+from breastplan.scenes.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
 from breastplan.scenes.rendering import AREOLA_RGB, SKIN_RGB
 
 from clitools import run
@@ -82,3 +85,29 @@ def test_ingest_keeps_her_colour_on_the_torso_and_the_report_draws_it(patient):
             assert all(_dark(c) == dark for c in torso.colours[near]), (side, offset, torso.colours[near])
     page = (folder / "case" / "report.html").read_text()
     assert '"skin_vertex_rgb"' in page and '"skin_rgb"' not in page
+
+
+def test_a_mesh_samples_its_vertices_colours():
+    square = np.array([[0, 0, 0], [100, 0, 0], [100, 100, 0], [0, 100, 0]], float)
+    points = np.vstack([square, square + [300.0, 0, 0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    colours = np.repeat(np.array([[200, 30, 30], [30, 30, 200]], np.uint8), 4, axis=0)   # a red, a blue square
+    cloud = scan_cloud(points, faces, units="mm", colours=colours)
+    red = cloud.points[:, 0] < 200
+    assert red.any() and (~red).any() and "in colour" in cloud.description
+    assert (cloud.colours[red] == [200, 30, 30]).all() and (cloud.colours[~red] == [30, 30, 200]).all()
+
+
+def test_a_scan_files_colour_is_kept_on_her_torso(cli, tmp_path):
+    scene = make_body_scene(BodyOptions(cup=0.8, weight=0.6, pose="hands-on-hips"),
+                            CameraOptions(680.0, 4.0, 6.0, wall_mm=None))
+    write_scan_file(tmp_path / "her.ply", scene, "mm", "+z")
+    to_file = file_from_body("+z", "mm") @ np.linalg.inv(scene.camera_from_body)
+    res = run(cli, "ingest", tmp_path / "her.ply", "--side", "right", "--up", "+z", "--out", tmp_path / "right")
+    assert res.returncode == 0, res.stderr
+    torso = read_ply(tmp_path / "right" / "camera.ply")
+    nipple = transform_points(to_file, scene.nipples_camera()["right"])
+    down = to_file[:3, :3] @ [0.0, 60.0, 0.0]                                 # 60 mm down her front
+    for offset, dark in ((np.zeros(3), True), (down, False)):
+        near = np.linalg.norm(torso.points - (nipple + offset), axis=1).argsort()[:5]
+        assert all(_dark(c) == dark for c in torso.colours[near]), (offset, torso.colours[near])
