@@ -25,12 +25,6 @@ RECORDED_SHADE = (0.7, 0.45)
 """The same for her skin's recorded colour, which the room's light already shades: lit more gently (a surface
 facing LIGHT squarely is drawn a little brighter than recorded)."""
 
-
-def skin_colour(views) -> tuple[np.ndarray, tuple[float, float]]:
-    """Her skin's colour ((3,) or (T + P, 3), 0..255) and its shade: as recorded, else SKIN_RGB."""
-    if views.skin_rgb is None:
-        return np.array(SKIN_RGB, float), SHADE
-    return views.skin_rgb.astype(float), RECORDED_SHADE
 LANDMARK = "#c0392b"
 """The colour of the landmarks the measures start from: sternal notch, midline, the nipples found."""
 FOOTPRINT = "#1f5fbf"
@@ -59,6 +53,13 @@ def font(size: int) -> ImageFont.FreeTypeFont:
 STRAY = 0.002
 """A picture's framing may leave out this share of her drawn points at each end of each axis: a stray piece of
 the scan (a hand, a fold of cloth) then does not shrink her."""
+
+
+def skin_colour(views) -> tuple[np.ndarray, tuple[float, float]]:
+    """Her skin's colour ((3,) or (T + P, 3), 0..255) and its shade: as recorded, else SKIN_RGB."""
+    if views.skin_rgb is None:
+        return np.array(SKIN_RGB, float), SHADE
+    return views.skin_rgb.astype(float), RECORDED_SHADE
 
 
 def camera(views: Views, states: list[State], azimuth_deg: float, size: tuple[int, int]) -> raster.Camera:
