@@ -31,6 +31,8 @@ UNPACED_FPS = 1e6
 """Replay rate asked of ReplayMessage: far above any camera's, so replay is not paced."""
 MAX_SIDE_PX = 4096
 """The largest depth image side replayed: depth cameras give at most 1280×800."""
+MAX_COLOUR_FRAMES = 30
+"""Her colour is the median of at most this many colour frames (the first)."""
 
 
 def depthai():
@@ -160,7 +162,8 @@ def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFram
         if type(msg).__name__ != "ImgFrame":
             continue
         if msg.getType() in (types.RGB888i, types.BGR888i):
-            colours.append(_colour_of(msg, msg.getType() == types.BGR888i))
+            if len(colours) < MAX_COLOUR_FRAMES:
+                colours.append(_colour_of(msg, msg.getType() == types.BGR888i))
             continue
         if msg.getType() != types.RAW16:
             continue
@@ -196,7 +199,7 @@ def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFram
     aligned = [c for c in colours if c is not None and c.shape[:2] == depth.shape[1:]]
     colour = np.median(np.stack(aligned), axis=0).round().astype(np.uint8) if aligned else None
     said = (f", {len(aligned)} colour frame{'s' if len(aligned) > 1 else ''}" if aligned
-            else ", colour not aligned to depth (not used)" if colours else "")
+            else ", colour frames not aligned to depth or damaged (not used)" if colours else "")
     return DepthFrames(depth, K, f"{path.name}: depthai recording, {frames} frames "
                                  f"{depth.shape[2]}x{depth.shape[1]}{said}", colour)
 

@@ -42,7 +42,7 @@ def test_a_recording_keeps_the_colour_aligned_to_its_depth(tmp_path):
     assert np.array_equal(frames.colour, colour)                            # their median
     assert read_recording(write_recording(tmp_path / "d.mcap", depth, K)).colour is None
     other = read_recording(write_recording(tmp_path / "o.mcap", depth, K, colour=np.zeros((24, 32, 3), np.uint8)))
-    assert other.colour is None and "colour not aligned to depth (not used)" in other.source
+    assert other.colour is None and "colour frames not aligned to depth or damaged (not used)" in other.source
 
 
 @pytest.fixture(scope="module")
