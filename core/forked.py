@@ -1,9 +1,9 @@
 """Work done beside this process in a forked child, on a second CPU, while this process does its own.
 
 The child shares this process's memory as it was at the fork and reports only its exit code: its work
-writes files, or into an array `shared` with this process. A child that failed, or is stuck (a lock another thread held at the fork is never released
-in the child), leaves its work to this process, which does it as it would have alone: the same result
-either way, only later.
+writes files, or into an array `shared` with this process. A child that failed, or is stuck (a lock
+another thread held at the fork is never released in the child), leaves its work to this process,
+which does it as it would have alone: the same result either way, only later.
 """
 from __future__ import annotations
 

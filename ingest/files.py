@@ -200,8 +200,13 @@ def _sample_surface(path: Path, points_mm: np.ndarray, faces: np.ndarray, colour
         n = int(np.clip(round(area * POINTS_PER_MM2), *SAMPLE_RANGE))
         o3d.utility.random.seed(SAMPLE_SEED)
         cloud = mesh.sample_points_uniformly(n, use_triangle_normal=True)
-        sampled = np.rint(np.asarray(cloud.colors) * 255).astype(np.uint8) if colours is not None else None
+        sampled = _rgb8(cloud.colors) if colours is not None else None
     return np.asarray(cloud.points), np.asarray(cloud.normals), sampled
+
+
+def _rgb8(colors) -> np.ndarray:
+    """(N, 3) uint8 RGB of open3d's colours (0..1)."""
+    return np.rint(np.asarray(colors) * 255).clip(0, 255).astype(np.uint8)
 
 
 def _unit_normals(path: Path, normals: np.ndarray | None) -> np.ndarray | None:
@@ -265,7 +270,7 @@ def _read_pcd(path: Path):
     if len(cloud.points) == 0:
         raise _not_valid(path, "or holds no points")
     normals = np.asarray(cloud.normals, dtype=np.float64) if cloud.has_normals() else None
-    colours = np.rint(np.asarray(cloud.colors) * 255).clip(0, 255).astype(np.uint8) if cloud.has_colors() else None
+    colours = _rgb8(cloud.colors) if cloud.has_colors() else None
     return np.asarray(cloud.points, dtype=np.float64), None, normals, [], colours
 
 

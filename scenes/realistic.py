@@ -119,7 +119,7 @@ class BodyScene:
         """(H, W, 3) uint8 RGB of the colour camera aligned to depth: her skin shaded, her areolae darker."""
         from .rendering import cast_colour
 
-        return cast_colour(self.meshes(), self.camera.K, *self.camera.size,
+        return cast_colour(self.raycasting(), self.meshes(), self.camera.K, *self.camera.size,
                            np.stack(list(self.nipples_camera().values())))
 
     def frames(self, n_frames: int, seed: int = 0) -> np.ndarray:

@@ -47,17 +47,14 @@ AREOLA_MM = 18.0
 WALL_RGB = (206, 206, 200)
 
 
-def cast_colour(meshes: list[tuple[np.ndarray, np.ndarray]], K: np.ndarray, width: int, height: int,
-                nipples: np.ndarray) -> np.ndarray:
-    """(H, W, 3) uint8 RGB the colour camera (aligned to depth: the same pixels) sees of camera-frame `meshes`
-    ((V, 3) mm, (F, 3); the body first, then the wall): her skin, darker within AREOLA_MM of each nipple
-    (`nipples` (2, 3), camera frame, mm), the wall grey; smoothly shaded (vertex normals interpolated across
-    each triangle), lit from the camera with some ambient light; black where nothing is hit."""
-    rc = o3d.t.geometry.RaycastingScene()
-    normals = []
-    for V, F in meshes:
-        rc.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(F.astype(np.uint32)))
-        normals.append((vertex_normals(V, F), F))
+def cast_colour(rc: o3d.t.geometry.RaycastingScene, meshes: list[tuple[np.ndarray, np.ndarray]], K: np.ndarray,
+                width: int, height: int, nipples: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 RGB the colour camera (aligned to depth: the same pixels) sees of the ray-casting scene
+    `rc` of camera-frame `meshes` ((V, 3) mm, (F, 3), geometry ids in order: the body, then the wall): her
+    skin, darker within AREOLA_MM of each nipple (`nipples` (2, 3), camera frame, mm), the wall grey;
+    smoothly shaded (vertex normals interpolated across each triangle), lit from the camera with some
+    ambient light; black where nothing is hit."""
+    normals = [(vertex_normals(V, F), F) for V, F in meshes]
     rays = pixel_rays(K, width, height)
     hit = rc.cast_rays(o3d.core.Tensor(rays))
     t, ids = hit["t_hit"].numpy().astype(float), hit["geometry_ids"].numpy()
