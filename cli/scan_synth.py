@@ -179,7 +179,7 @@ def _scan_makehuman(clock: Clock, as_json: bool, *, out, truth, frames, seed, pi
             result.update(recording=str(out), frames=frames, valid_pixels=round(float(np.mean(depth > 0)), 4),
                           megabytes=round(staged.stat().st_size / 1e6, 2))
         if scan_file is not None:
-            counts = realistic.write_scan_file(stage(scan_file), scene, units or "mm", up or "+y", scan_file.suffix)
+            counts = realistic.write_scan_file(scan_file, scene, units or "mm", up or "+y", stage)
             result.update(scan_file=str(scan_file), scan_points=counts["points"], scan_faces=counts["faces"],
                           units=units or "mm", up=up or "+y")
         realistic.save_body_truth(stage(truth), scene, frames if out is not None else 0)

@@ -1,7 +1,9 @@
 """Scan files (PLY, OBJ, STL, PCD, XYZ) → a point cloud in millimetres, in the file's own frame.
 
 Meshes are sampled uniformly by area (about 1 point per mm², seeded, so reads are
-deterministic) with the triangle normals; point files keep their points and normals. Units
+deterministic) with the triangle normals; point files keep their points and normals. Colour is kept:
+a PLY's or PCD's per-point colour, an OBJ's vertex colours, or the texture image its material names
+(OBJ + MTL + image, as clinics' scanners export), read at each vertex. Units
 are detected from the extent (largest side of the axis-aligned bounding box) or declared.
 Every defect raises BadInputError naming the file: open3d reports corrupt or foreign files
 only as console warnings and hands back an empty geometry, so this module checks for that.
@@ -17,7 +19,7 @@ import warnings
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, NamedTuple
 
 import numpy as np
 
@@ -61,31 +63,42 @@ class ScanCloud:
     colours: np.ndarray | None = None
 
 
+class ScanArrays(NamedTuple):
+    """A scan file's own arrays, in its units."""
+
+    points: np.ndarray                  # (N, 3)
+    faces: np.ndarray | None            # (M, 3) triangles; None: a point cloud
+    normals: np.ndarray | None          # (N, 3)
+    comments: list                      # its header comments (PLY)
+    colours: np.ndarray | None = None   # (N, 3) uint8 RGB of its points (vertices)
+    note: str = ""                      # what of the file was not used, for the scan's description: ", …"
+
+
 def read_scan_file(path: str | Path, units: str = "auto") -> ScanCloud:
     """Read a PLY/OBJ/STL/PCD/XYZ scan as mm points; units "auto" (from the extent), "mm" or "m"."""
     path = Path(path)
     if units not in ("auto", "mm", "m"):
         raise BadInputError(None, f"units must be auto, mm or m, not '{units}'")
-    points, faces, normals, comments, colours = read_scan_arrays(path)
-    return scan_cloud(points, faces, normals, units, comments=comments, path=path, colours=colours)
+    a = read_scan_arrays(path)
+    return scan_cloud(a.points, a.faces, a.normals, units, comments=a.comments, path=path, colours=a.colours,
+                      note=a.note)
 
 
-def read_scan_arrays(path: str | Path) -> tuple:
-    """A scan file's own arrays, in its units: points (N, 3), triangles (M, 3) or None, normals (N, 3)
-    or None, its header comments (PLY), and its vertices' colours ((N, 3) uint8 RGB) or None; BadInputError
-    naming the file for any defect."""
+def read_scan_arrays(path: str | Path) -> ScanArrays:
+    """A scan file's own arrays (`ScanArrays`); BadInputError naming the file for any defect."""
     path = Path(path)
     _check_file(path)
     return _READERS[path.suffix.lower()](path)
 
 
 def scan_cloud(points, faces=None, normals=None, units: str = "auto", *, name: str = "mesh",
-               comments=(), path: str | Path | None = None, colours=None) -> ScanCloud:
+               comments=(), path: str | Path | None = None, colours=None, note: str = "") -> ScanCloud:
     """A scan's arrays (file units) → a `ScanCloud` in mm, as `read_scan_file` makes it from a file.
 
     points (N, 3); faces (M, 3) triangles or None (a point cloud; its normals (N, 3) kept, if any);
     a triangle mesh is sampled uniformly by area, its vertices' colours (N, 3) uint8, if any, interpolated.
-    `path` is named in the errors (None: none is named) and its file name in the description, else `name`."""
+    `path` is named in the errors (None: none is named) and its file name in the description, else `name`;
+    `note` (", …") is added to the description."""
     path = None if path is None else Path(path)
     if units not in ("auto", "mm", "m"):
         raise BadInputError(None, f"units must be auto, mm or m, not '{units}'")
@@ -117,7 +130,7 @@ def scan_cloud(points, faces=None, normals=None, units: str = "auto", *, name: s
     coloured = ", in colour" if colours is not None else ""
     return ScanCloud(points=_frozen(points), normals=None if normals is None else _frozen(normals),
                      frame_hint=hint, colours=None if colours is None else np.asarray(colours, np.uint8),
-                     description=f"{path.name if path is not None else name}: {what}{coloured}, {units_text}")
+                     description=f"{path.name if path is not None else name}: {what}{coloured}{note}, {units_text}")
 
 
 def as_rows(path: Path | None, values, columns: int, dtype, what: str) -> np.ndarray:
@@ -225,7 +238,7 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
-# --- format readers: path → (points, faces or None, normals or None, comments, colours or None), file units ---
+# --- format readers: path → ScanArrays, in the file's units ---
 
 def _read_ply(path: Path):
     """PLY through breastplan's strict reader (ArtefactError, a BadInputError, on defects); a mesh whose
@@ -237,29 +250,75 @@ def _read_ply(path: Path):
         polygons = _read_polygons(path)
         if polygons is None:
             raise
-        return *polygons, None, [], None
-    return g.points, g.faces, g.normals, g.comments, g.colours
+        return polygons
+    return ScanArrays(g.points, g.faces, g.normals, g.comments, g.colours)
 
 
-def _read_mesh(path: Path):
-    """OBJ/STL through open3d; polygon OBJs, whose non-triangles open3d drops, through pymeshlab; an OBJ
-    of indented lines (legal, but neither reads them) from a copy without the indentation."""
+def _read_mesh(path: Path) -> ScanArrays:
+    """OBJ/STL through open3d, with an OBJ's vertex colours or its texture's colour at each vertex (`_texture_rgb`);
+    polygon OBJs, whose non-triangles open3d drops, through pymeshlab; an OBJ of indented lines (legal, but
+    neither reads them) from a copy without the indentation."""
     obj = path.suffix.lower() == ".obj"
-    polygons, n_vertices, n_faces, indented = _check_obj(path) if obj else (_check_stl(path), 0, 0, False)
+    polygons, n_vertices, n_faces, indented, materials = _check_obj(path) if obj else (_check_stl(path), 0, 0,
+                                                                                        False, False)
     with _dedented(path) if indented else nullcontext(path) as readable:
-        with _open3d() as o3d:
-            mesh = o3d.io.read_triangle_mesh(str(readable))
-        points, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.triangles, dtype=np.int64)
-        if obj and not polygons and len(faces) < n_faces:
-            _check_face_references(path, n_vertices)
         if polygons:
-            polygons = _read_polygons(readable)
-            if polygons is None:
+            read = _read_polygons(readable, materials)
+            if read is None:
                 raise _not_valid(path, "")
-            points, faces = polygons
-    if len(faces) == 0:
+        else:
+            with _open3d() as o3d:
+                mesh = o3d.io.read_triangle_mesh(str(readable))
+            faces = np.asarray(mesh.triangles, dtype=np.int64)
+            if obj and len(faces) < n_faces:
+                _check_face_references(path, n_vertices)
+            colours = _rgb8(mesh.vertex_colors) if mesh.has_vertex_colors() else None
+            if materials:
+                colours = _texture_rgb(mesh)
+            read = ScanArrays(np.asarray(mesh.vertices, dtype=np.float64), faces, None, [], colours,
+                              UNREAD_TEXTURE if materials and colours is None else "")
+    if len(read.faces) == 0:
         raise _not_valid(path, "or holds no triangles")
-    return points, faces, None, [], None
+    return read
+
+
+UNREAD_TEXTURE = ", its texture image not readable beside it (not used)"
+
+
+def _texture_rgb(mesh) -> np.ndarray | None:
+    """(V, 3) uint8: the colour of an open3d mesh's texture images at each vertex, the mean over the corners of its
+    triangles of the texel each corner's coordinate falls in (coordinates outside 0..1 clamped; open3d holds an
+    OBJ's image flipped, its rows running with v as OBJ's v runs up the image); None when it holds no readable
+    texture. A vertex of no textured corner is black."""
+    uv, material = np.asarray(mesh.triangle_uvs), np.asarray(mesh.triangle_material_ids)
+    images = [np.asarray(t) if not t.is_empty() else None for t in mesh.textures]
+    vertex = np.asarray(mesh.triangles).ravel()
+    if len(uv) != len(vertex) or all(im is None for im in images):
+        return None
+    corner = np.repeat(material, 3) if len(material) == len(vertex) // 3 else np.zeros(len(vertex), int)
+    total, count = np.zeros((len(mesh.vertices), 3)), np.zeros(len(mesh.vertices))
+    for m in np.unique(corner):
+        image = images[m] if 0 <= m < len(images) else None
+        if image is None:
+            continue
+        rgb = _image_rgb(image)
+        h, w = rgb.shape[:2]
+        on = corner == m
+        col = np.clip(np.floor(uv[on, 0] * w), 0, w - 1).astype(int)
+        row = np.clip(np.floor(uv[on, 1] * h), 0, h - 1).astype(int)
+        np.add.at(total, vertex[on], rgb[row, col])
+        count += np.bincount(vertex[on], minlength=len(count))
+    if not count.any():
+        return None
+    return np.rint(total / np.maximum(count, 1)[:, None]).clip(0, 255).astype(np.uint8)
+
+
+def _image_rgb(image: np.ndarray) -> np.ndarray:
+    """(H, W, 3) float 0..255 of an image's pixels: grey or RGB(A), 8 or 16 bits, or floats 0..1."""
+    rgb = np.repeat(image[..., None], 3, axis=2) if image.ndim == 2 else image[..., :3]
+    if rgb.dtype == np.uint16:
+        return rgb / 257.0
+    return rgb * 255.0 if rgb.dtype.kind == "f" else rgb.astype(float)
 
 
 def _read_pcd(path: Path):
@@ -271,7 +330,7 @@ def _read_pcd(path: Path):
         raise _not_valid(path, "or holds no points")
     normals = np.asarray(cloud.normals, dtype=np.float64) if cloud.has_normals() else None
     colours = _rgb8(cloud.colors) if cloud.has_colors() else None
-    return np.asarray(cloud.points, dtype=np.float64), None, normals, [], colours
+    return ScanArrays(np.asarray(cloud.points, dtype=np.float64), None, normals, [], colours)
 
 
 def _read_xyz(path: Path):
@@ -297,15 +356,16 @@ def _read_xyz(path: Path):
         if not np.allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-2):
             raise BadInputError(path, "has columns 4–6 that are not unit normals; an .xyz file must hold "
                                       "x y z or x y z nx ny nz per line")
-    return table[:, :3], None, normals, [], None
+    return ScanArrays(table[:, :3], None, normals, [])
 
 
 _READERS = {".ply": _read_ply, ".obj": _read_mesh, ".stl": _read_mesh, ".pcd": _read_pcd, ".xyz": _read_xyz}
 
 
-def _read_polygons(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
-    """(vertices, triangles) of a mesh with quads or larger polygons, triangulated by pymeshlab; None if
-    pymeshlab cannot read it."""
+def _read_polygons(path: Path, materials: bool = False) -> ScanArrays | None:
+    """A mesh read by pymeshlab, its quads and larger polygons triangulated, with its vertex colours, or (with
+    `materials`) the colour of its texture at each vertex (MeshLab's texture-to-vertex filter); None if pymeshlab
+    cannot read it. A texture that cannot be read leaves the mesh without colour, and its `note` says so."""
     import pymeshlab
 
     ms = pymeshlab.MeshSet()
@@ -313,8 +373,18 @@ def _read_polygons(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
         ms.load_new_mesh(str(path))
     except pymeshlab.PyMeshLabException:
         return None
+    colours, note = None, ""
+    if materials:
+        try:
+            ms.compute_color_from_texture_per_vertex()
+            colours = _rgb8(ms.current_mesh().vertex_color_matrix()[:, :3])
+        except pymeshlab.PyMeshLabException:
+            note = UNREAD_TEXTURE
+    elif ms.current_mesh().has_vertex_color():
+        colours = _rgb8(ms.current_mesh().vertex_color_matrix()[:, :3])
     mesh = ms.current_mesh()
-    return mesh.vertex_matrix().astype(np.float64), mesh.face_matrix().astype(np.int64)
+    return ScanArrays(mesh.vertex_matrix().astype(np.float64), mesh.face_matrix().astype(np.int64), None, [],
+                      colours, note)
 
 
 # --- checks before a reader loads a file: what no body scan holds, refused from headers and lines ---
@@ -335,12 +405,12 @@ def _text_chunks(path: Path) -> Iterator[bytes]:
         yield carry
 
 
-def _check_obj(path: Path) -> tuple[bool, int, int, bool]:
+def _check_obj(path: Path) -> tuple[bool, int, int, bool, bool]:
     """Refuse an OBJ that is not text or holds more vertices or faces than any body scan; whether it
-    has a face ('f' line) of 4 or more vertices, its numbers of vertices and faces, and whether any of
-    its lines is indented."""
+    has a face ('f' line) of 4 or more vertices, its numbers of vertices and faces, whether any of
+    its lines is indented, and whether it names a material library ('mtllib' line) and texture coordinates."""
     vertices = faces = 0
-    polygons = indented = False
+    polygons = indented = library = coordinates = False
     for chunk in _text_chunks(path):
         chunk = b"\n" + chunk                                          # every line starts after a newline
         inner = re.findall(rb"\n[ \t]+([vf])[ \t]", chunk)                  # OBJ lines may be indented
@@ -348,13 +418,15 @@ def _check_obj(path: Path) -> tuple[bool, int, int, bool]:
         vertices += chunk.count(b"\nv ") + chunk.count(b"\nv\t") + inner.count(b"v")
         faces += chunk.count(b"\nf ") + chunk.count(b"\nf\t") + inner.count(b"f")
         polygons = polygons or re.search(rb"(?m)^[ \t]*f(?:[ \t]+[^ \t\r\n]+){4,}", chunk) is not None
+        library = library or re.search(rb"\n[ \t]*mtllib[ \t]", chunk) is not None
+        coordinates = coordinates or re.search(rb"\n[ \t]*vt[ \t]", chunk) is not None
         for count, what in ((vertices, "vertices"), (faces, "faces")):
             if count > MAX_POINTS:
                 raise BadInputError(path, f"holds more than {MAX_POINTS:,} {what}, more than any body scan")
     problem = faces_problem(vertices, faces)
     if problem:
         raise BadInputError(path, f"holds {problem}")
-    return polygons, vertices, faces, indented
+    return polygons, vertices, faces, indented, library and coordinates
 
 
 @contextmanager

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from breastplan import load_npz, save_npz, transform_points, write_ply
-from breastplan.atomic import atomic_open
+from breastplan.atomic import Stage, atomic_set
 from breastplan.options import SIDES, UP_AXES, OptionError
 
 from .makehuman import Body, BodyOptions, breast_region, make_body
@@ -246,15 +246,19 @@ def visible_faces(scene: BodyScene) -> np.ndarray:
 
 
 def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: str = "+y",
-                    suffix: str | None = None) -> dict:
-    """Write what the camera sees as a scan file, atomically: a `.ply` holds the noise-free depth
-    pixels (body and wall) back-projected, each with the colour seen there (`BodyScene.colour`), an `.obj`
-    the body's visible triangles (`visible_faces`).
-    The format is `path`'s suffix, or `suffix` when given (a staged file's name says none).
+                    stage: Stage | None = None) -> dict:
+    """Write what the camera sees as a scan file: a `.ply` holds the noise-free depth pixels (body and wall)
+    back-projected, each with the colour seen there (`BodyScene.colour`); an `.obj` the body's visible
+    triangles (`visible_faces`), textured as a scanner textures its mesh: the colour camera's image as
+    `NAME.png`, its material `NAME.mtl` beside it, each vertex's texture coordinate where the camera sees it.
+    All or nothing: each file is written to `stage(file)` (an `atomic_set`'s), or in a set of its own.
     Coordinates: the body frame turned by `file_from_body(up, units)`. Returns the counts written
     (points or vertices, faces)."""
     path = Path(path)
-    suffix = (suffix or path.suffix).lower()
+    if stage is None:
+        with atomic_set() as own:
+            return write_scan_file(path, scene, units, up, own)
+    suffix = path.suffix.lower()
     if suffix not in SCAN_SUFFIXES:
         raise OptionError("path", f"a scan file ends in {' or '.join(SCAN_SUFFIXES)}, not '{suffix}'")
     if units not in SCAN_UNITS:
@@ -268,17 +272,27 @@ def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: s
         points, ids = visible_points(scene)
         to_file = file_from_body(up, units) @ np.linalg.inv(scene.camera_from_body)
         what = "body and wall" if (ids == 1).any() else "body"
-        write_ply(path, transform_points(to_file, points), colours=colours_at(points, scene.camera.K, scene.colour()),
+        write_ply(stage(path), transform_points(to_file, points), colours=colours_at(points, scene.camera.K,
+                                                                                    scene.colour()),
                   comments=[f"breastplan scan-synth: realistic {what}, noise-free depth pixels back-projected, with "
                             "the colour seen at each", frame])
         return {"points": len(points), "faces": 0}
+    from PIL import Image
+
     used, faces = np.unique(scene.body.faces[visible_faces(scene)], return_inverse=True)
     V = transform_points(file_from_body(up, units), scene.body.vertices[used])
-    text = (f"# breastplan scan-synth: realistic body, the triangles the camera sees\n# {frame}\n"
+    seen = transform_points(scene.camera_from_body, scene.body.vertices[used]) @ scene.camera.K.T
+    w, h = scene.camera.size
+    texture = (seen[:, :2] / seen[:, 2:] + 0.5) / [w, h]                # pixel centres at (i + ½) / size
+    texture[:, 1] = 1.0 - texture[:, 1]                                  # OBJ's v runs up the image
+    Image.fromarray(scene.colour()).save(stage(path.with_suffix(".png")), format="PNG")
+    stage(path.with_suffix(".mtl")).write_text(f"newmtl skin\nKd 1 1 1\nmap_Kd {path.stem}.png\n")
+    text = (f"# breastplan scan-synth: realistic body, the triangles the camera sees, textured by its colour "
+            f"camera\n# {frame}\nmtllib {path.stem}.mtl\n"
             + ("v {:.6f} {:.6f} {:.6f}\n" * len(V)).format(*V.ravel())
-            + ("f {} {} {}\n" * (faces.size // 3)).format(*(faces.ravel() + 1)))
-    with atomic_open(path) as fh:
-        fh.write(text.encode("ascii"))
+            + ("vt {:.6f} {:.6f}\n" * len(V)).format(*texture.ravel()) + "usemtl skin\n"
+            + ("f {}/{} {}/{} {}/{}\n" * (faces.size // 3)).format(*np.repeat(faces.ravel() + 1, 2)))
+    stage(path).write_bytes(text.encode("ascii"))
     return {"points": len(V), "faces": faces.size // 3}
 
 

@@ -1,12 +1,14 @@
 """Her own colour: recorded beside depth or in a scan file, kept by ingest on her torso, drawn by the plan."""
 import json
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import open3d as o3d
 import pytest
 
 from breastplan import read_ply, transform_points, write_ply
-from breastplan.ingest.files import scan_cloud
+from breastplan.ingest.files import read_scan_arrays, read_scan_file, scan_cloud
 from breastplan.ingest.recording import read_recording, write_recording
 from breastplan.scenes.makehuman import BodyOptions
 from breastplan.scenes.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
@@ -98,12 +100,61 @@ def test_a_mesh_samples_its_vertices_colours():
     assert (cloud.colours[red] == [200, 30, 30]).all() and (cloud.colours[~red] == [30, 30, 200]).all()
 
 
-def test_a_scan_files_colour_is_kept_on_her_torso(cli, tmp_path):
+def _atlas_obj(folder, colours: np.ndarray) -> tuple:
+    """An OBJ of a grid of vertices, each textured by a pixel of its own in a PNG holding its colour (an
+    atlas: every vertex's texture coordinate at its pixel's centre), and its material file."""
+    from PIL import Image
+
+    n = len(colours)
+    side = int(np.ceil(np.sqrt(n)))
+    row, col = np.divmod(np.arange(n), side)
+    image = np.zeros((side, side, 3), np.uint8)
+    image[row, col] = colours
+    Image.fromarray(image).save(folder / "atlas.png")
+    (folder / "atlas.mtl").write_text("newmtl skin\nmap_Kd atlas.png\n")
+    grid = np.column_stack([col * 10.0, row * 10.0, np.zeros(n)])
+    uv = np.column_stack([(col + 0.5) / side, 1.0 - (row + 0.5) / side])
+    quads = [(r * side + c, r * side + c + 1, (r + 1) * side + c + 1, (r + 1) * side + c)
+             for r in range(side - 1) for c in range(side - 1) if (r + 1) * side + c + 1 < n]
+    faces = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+    lines = (["mtllib atlas.mtl"] + [f"v {x:g} {y:g} {z:g}" for x, y, z in grid]
+             + [f"vt {u:.8f} {v:.8f}" for u, v in uv] + ["usemtl skin"]
+             + [f"f {a}/{a} {b}/{b} {c}/{c}" for a, b, c in faces + 1])
+    (folder / "atlas.obj").write_text("\n".join(lines) + "\n")
+    return folder / "atlas.obj", grid, faces
+
+
+def test_an_obj_takes_its_colours_from_its_texture_image(tmp_path):
+    """Each vertex's colour is the texture's pixel at its texture coordinate (its own pixel in an atlas)."""
+    colours = np.random.default_rng(1).integers(0, 256, (60, 3)).astype(np.uint8)
+    obj, grid, faces = _atlas_obj(tmp_path, colours)
+    read = read_scan_arrays(obj)
+    which = {tuple(p): i for i, p in enumerate(grid)}
+    order = [which[tuple(p)] for p in read.points]                # its reader may order the vertices its own way
+    assert sorted(order) == list(range(len(grid))) and len(read.faces) == len(faces) and read.note == ""
+    assert np.array_equal(read.colours, colours[order])
+    (tmp_path / "atlas.png").unlink()                              # the image not copied with it
+    cloud = read_scan_file(obj, units="mm")
+    assert cloud.colours is None and "its texture image not readable beside it (not used)" in cloud.description
+
+
+def test_an_obj_keeps_its_vertex_colours():
+    """OBJ's common extension, `v x y z r g b` (0..1), for triangle and polygon meshes alike."""
+    with tempfile.TemporaryDirectory() as folder:
+        for face in ("f 1 2 3\nf 1 3 4", "f 1 2 3 4"):
+            path = Path(folder) / "c.obj"
+            path.write_text("v 0 0 0 1 0 0\nv 100 0 0 0 1 0\nv 100 100 0 0 0 1\nv 0 100 0 0.2 0.2 0.2\n" + face + "\n")
+            assert read_scan_arrays(path).colours.tolist() == [[255, 0, 0], [0, 255, 0], [0, 0, 255], [51, 51, 51]]
+
+
+@pytest.mark.parametrize("name", ["her.ply", "her.obj"])
+def test_a_scan_files_colour_is_kept_on_her_torso(cli, tmp_path, name):
+    """A PLY with the colour seen at each point, an OBJ textured by the colour camera's image."""
     scene = make_body_scene(BodyOptions(cup=0.8, weight=0.6, pose="hands-on-hips"),
                             CameraOptions(680.0, 4.0, 6.0, wall_mm=None))
-    write_scan_file(tmp_path / "her.ply", scene, "mm", "+z")
+    write_scan_file(tmp_path / name, scene, "mm", "+z")
     to_file = file_from_body("+z", "mm") @ np.linalg.inv(scene.camera_from_body)
-    res = run(cli, "ingest", tmp_path / "her.ply", "--side", "right", "--up", "+z", "--out", tmp_path / "right")
+    res = run(cli, "ingest", tmp_path / name, "--side", "right", "--up", "+z", "--out", tmp_path / "right")
     assert res.returncode == 0, res.stderr
     torso = read_ply(tmp_path / "right" / "camera.ply")
     nipple = transform_points(to_file, scene.nipples_camera()["right"])

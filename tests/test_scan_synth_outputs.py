@@ -172,6 +172,6 @@ def test_makehuman_writes_its_three_files_together(cli, tmp_path):
     assert res.returncode == 0, res.stderr
     out = json.loads(res.stdout)
     assert out["frames"] == 1 and out["megabytes"] == round((tmp_path / "a.mcap").stat().st_size / 1e6, 2)
-    assert leftovers(tmp_path) == ["a.mcap", "s.obj", "t.npz"]
+    assert leftovers(tmp_path) == ["a.mcap", "s.mtl", "s.obj", "s.png", "t.npz"]
     assert len(read_recording(tmp_path / "a.mcap").depth) == 1
 
