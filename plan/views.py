@@ -2,8 +2,10 @@
 breast), and every planned state.
 
 All in the display frame (x to the image's right, y away from the viewer, z up; mm), from the
-scan's viewing frame (x right, y down, z away). Her torso is drawn as one triangle surface
-(`skin_triangles`) through the centroids of its points in TORSO_MM cubes; its points near the breasts
+scan's viewing frame (x right, y down, z away). Her torso is drawn as one triangle surface through the
+centroids of its points in TORSO_MM cubes: one camera's view (a recording) triangulated as its pixels lie
+(`skin_triangles`), a scan file's points, which need not be one view's, reconstructed in 3-D
+(`surface_triangles`); its points near the breasts
 (the patch) move with the plan. A state is one the report's sliders show (`Plan.slider_states`: each
 requested kind at the degrees 1..8 and the requested one, with the other kinds at their requested
 degrees), drawn: the planned breast meshes and the moved patch, each stored as a displacement from the
@@ -81,8 +83,10 @@ def build_views(plan: Plan) -> Views:
     show = lambda p: transform_points(to_display, p)  # noqa: E731
     meshes = {s: (show(sp.surface_input), sp.fit.faces) for s, sp in plan.sides.items()}
     drawn = np.concatenate([still_in, patch_in])
+    one_view = all(sp.scan.source.kind != "file" for sp in plan.sides.values())
     return Views(torso=show(still_in), patch=show(patch_in),
-                 skin=skin_triangles(transform_points(plan.body.input_to_view, drawn)),
+                 skin=(skin_triangles if one_view else surface_triangles)(transform_points(plan.body.input_to_view,
+                                                                                           drawn)),
                  scans={s: show(transform_points(sp.frames.breast_to_input, sp.scan.points))
                         for s, sp in plan.sides.items()},
                  meshes=meshes, states=[_state(plan, st, patch_in, show)
@@ -106,7 +110,35 @@ def skin_triangles(points_view: np.ndarray) -> np.ndarray:
     a, b, c = (uv[faces[:, k]] for k in range(3))
     away = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]) > 0
     faces[away] = faces[away][:, ::-1]
+    return _without_gaps(points_view, faces)
+
+
+BALL_RADII_MM = (1.6 * TORSO_MM, 2.4 * TORSO_MM)
+"""The radii of the balls `surface_triangles` rolls over her points, in turn (the larger closes what the smaller
+cannot cross), mm."""
+
+
+def surface_triangles(points_view: np.ndarray) -> np.ndarray:
+    """(F, 3) vertex indices of a triangle surface over points of her skin (viewing frame, mm) that need not be one
+    camera's view (a scan file's): pymeshlab's ball pivoting (BALL_RADII_MM) over their normals (turned towards
+    the viewer), each triangle wound so that its normal faces the viewer, without those with an edge over GAP_MM."""
+    import pymeshlab
+
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.ascontiguousarray(points_view, float)))
+    ms.compute_normal_for_point_clouds(k=10, viewpos=np.zeros(3))
+    for radius in BALL_RADII_MM:
+        ms.generate_surface_reconstruction_ball_pivoting(ballradius=pymeshlab.PureValue(radius))
+    faces = ms.current_mesh().face_matrix().astype(np.int64)
     tri = points_view[faces]
+    away = np.einsum("ij,ij->i", np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), tri.mean(axis=1)) > 0
+    faces[away] = faces[away][:, ::-1]
+    return _without_gaps(points_view, faces)
+
+
+def _without_gaps(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """`faces` without those with an edge over GAP_MM (int64)."""
+    tri = points[faces]
     longest = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
     return faces[longest <= GAP_MM].astype(np.int64)
 
