@@ -74,6 +74,9 @@ def fit(
     from breastplan.fitting.ffd import STOP_RESIDUAL
     from breastplan.plan.stages import fit_one_thread, on_earlier_wall
 
+    if scan is not None:                                      # refused before anything is written
+        with about(folder):
+            measured, both = measured_volume(scan, folder)
     inputs, carried = {source.name: source}, {}
     if earlier is not None:
         scan, _, earlier_inputs, carried = on_earlier_wall(scan, earlier, earlier_scan)
@@ -97,8 +100,6 @@ def fit(
     if scan is None:
         volume = {"volume_cc": round(fit.volume_cc, 2), "volume_from": "model"}
     else:
-        with about(folder):
-            measured, both = measured_volume(scan, folder)
         if not both:
             stderr.print(f"note: {folder}: her volume is measured from this side's scan alone; a plan of both sides "
                          "measures both breasts on one chest wall, inside one mirrored outline, and its figure is the "

@@ -28,6 +28,9 @@ def mu3_to_cc(volume_mu3):
 BREAST_EXTENT_MM = (20.0, 600.0)
 """A breast (or its fit) in millimetres spans more than 20 mm and less than 600 mm (the base of the
 smallest breast is some 80 mm across, of the largest some 350 mm)."""
+BREAST_VOLUME_CC = 12_000.0
+"""More than any breast holds: about twice the heaviest tissue removed from one breast in the reports of
+gigantomastia we found (6.6 kg, at about 1 g per cc). A larger measure is a failed one."""
 FLAT_RATIO = 0.05
 """A breast rises from its base by more than this share of its width (a flat chest by some 0.1)."""
 SCAN_EXTENT_MM = 8000.0
@@ -70,6 +73,17 @@ def breast_points_problem(points_mm) -> str | None:
         return f"is flat (some {thickness:.3g} mm thick over {size:.4g} mm): no breast rises from it"
     if np.median(p[:, 2]) < 0.0:
         return "lies mostly below z = 0: a breast rises from its base along +z (is its z axis reversed?)"
+    return None
+
+
+def volume_problem(cc: float) -> str | None:
+    """Why `cc` cannot be a breast's volume (not a number, negative, more than any breast holds), or None."""
+    if not np.isfinite(cc):
+        return "not a number"
+    if cc < 0.0:
+        return "a negative volume"
+    if cc > BREAST_VOLUME_CC:
+        return f"more than any breast holds ({BREAST_VOLUME_CC:,.0f} cc)"
     return None
 
 

@@ -21,6 +21,7 @@ from breastplan.deform.names import DEFORMATION_PARAMS, at_bounds
 from breastplan.meshes import mesh_volume, volume_below_base
 from breastplan.options import FitOptions
 from breastplan.point_order import canonical_order
+from breastplan.units import volume_problem
 
 from .ffd import STOP_RESIDUAL, FFDFit, fit_ffd
 from .sampling import one_blas_thread
@@ -147,6 +148,10 @@ def _fit_breast(points_mm, options: FitOptions, chest: ChestBeneath | None) -> B
     if not fit.mesh_volume_cc > 0.0:
         raise BadInputError(None, f"gives a fitted surface that encloses no volume ({fit.mesh_volume_cc:.0f} cc): "
                                   "its points do not hold a breast")
+    problem = volume_problem(fit.volume_cc)
+    if problem:
+        raise BadInputError(None, f"gives a fitted breast of {fit.volume_cc:,.0f} cc down to the chest wall, "
+                                  f"{problem}: the chest wall found beneath it is not hers")
     return fit
 
 

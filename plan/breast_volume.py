@@ -37,6 +37,7 @@ from scipy import ndimage
 from breastplan import BadInputError, transform_points
 from breastplan.body import Body
 from breastplan.point_order import canonical_order
+from breastplan.units import volume_problem
 
 from .measures import BodyLandmarks, find_landmarks
 
@@ -194,6 +195,11 @@ def measure_breasts(body: Body, nipples: dict) -> BreastVolumes:
     for side in grid.nipples:
         mask = footprint & grid.half(side)
         volume = _volume_cc(height, mask)
+        problem = volume_problem(volume)
+        if problem:
+            raise BadInputError(None, f"gives her {side} breast {volume:,.0f} cc on her skin, {problem}: the chest "
+                                      "wall beneath it was not found on her (a scan wrapped round her body, or in "
+                                      "other units?)")
         unseen = _volume_cc(height, mask & ~grid.seen)
         area_cm2 = float(mask.sum() * CELL_MM ** 2 / 100.0)
         sides[side] = BreastVolume(

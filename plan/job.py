@@ -53,7 +53,8 @@ def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Prog
         fitted = fitted_sides(source, folder, options, clock, progress, parallel)
         progress("changes and measures")
         earlier = None if options.wall_from is None else earlier_volumes(Path(options.wall_from))
-        plan = replace(compute_plan(source, fitted, options, method, earlier, clock), patient=patient or Patient())
+        with about(source):
+            plan = replace(compute_plan(source, fitted, options, method, earlier, clock), patient=patient or Patient())
         with clock("report"):
             progress("report")
             write_plan(plan, folder, parallel)

@@ -162,6 +162,18 @@ def test_a_torso_that_shows_too_little_chest_around_the_breasts_is_refused_in_a_
         measure_breasts(Body(torso[near | neck], view_from, plumb), nipples)
 
 
+@pytest.mark.parametrize("cc, problem", [(float("nan"), "not a number"), (-1.0, "a negative volume"),
+                                         (12_001.0, "more than any breast holds (12,000 cc)"), (0.0, None),
+                                         (4_500.0, None), (12_000.0, None)])
+def test_a_volume_no_breast_holds_is_named(cc, problem):
+    """What a measure of a breast cannot be: not a number, negative, or over twice the heaviest breast tissue
+    removed from one breast in the reports of gigantomastia (6.6 kg); an empty footprint (0 cc) and a very
+    large breast can."""
+    from breastplan.units import volume_problem
+
+    assert volume_problem(cc) == problem
+
+
 def _cells(height, footprint, wall):
     from breastplan.plan.breast_volume import SkinCells
 

@@ -89,6 +89,16 @@ def realistic_breast(side: str, **body):
     return ingest_frames(DepthFrames(scene.frames(8, 0), scene.camera.K, "synthetic"), IngestOptions(side))
 
 
+@pytest.mark.parametrize("wall_mm, words", [(-2000.0, "more than any breast holds"), (500.0, "a negative volume")])
+def test_a_fitted_breast_on_a_chest_wall_that_is_not_hers_is_refused(wall_mm, words):
+    """A chest wall 2 m behind her breast's base adds its 150-odd cm² times 2 m (some 30 litres) beneath it; one
+    half a metre in front of it takes more than the breast holds: neither is a breast's volume, and it is said."""
+    from breastplan import BadInputError
+
+    with pytest.raises(BadInputError, match=words):
+        fit_breast(realistic_breast("left", cup=0.7).points, chest=lambda xy: np.full(np.shape(xy)[:-1], wall_mm))
+
+
 def test_fit_of_a_realistic_breast_ends_below_the_plain_primitive_whatever_the_order_of_its_points():
     """Truths: zero deformations give the plain primitive, so a fit with deformations that ends farther
     from the points than the plain primitive has stopped in a local minimum; and the order of the
