@@ -163,7 +163,7 @@ def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFram
             continue
         if msg.getType() in (types.RGB888i, types.BGR888i):
             if len(colours) < MAX_COLOUR_FRAMES:
-                colours.append(_colour_of(msg, msg.getType() == types.BGR888i))
+                colours.append(colour_of(msg, msg.getType() == types.BGR888i))
             continue
         if msg.getType() != types.RAW16:
             continue
@@ -196,15 +196,23 @@ def read_recording(path: str | Path, max_frames: int | None = None) -> DepthFram
     if not depth.any():
         raise BadInputError(path, f"its {frames} depth frames are all zero (no depth measured)")
     _check_intrinsics(path, K, depth.shape[2], depth.shape[1])
-    aligned = [c for c in colours if c is not None and c.shape[:2] == depth.shape[1:]]
-    colour = np.median(np.stack(aligned), axis=0).round().astype(np.uint8) if aligned else None
-    said = (f", {len(aligned)} colour frame{'s' if len(aligned) > 1 else ''}" if aligned
-            else ", colour frames not aligned to depth or damaged (not used)" if colours else "")
+    colour, said = aligned_colour(colours, depth.shape[1:])
     return DepthFrames(depth, K, f"{path.name}: depthai recording, {frames} frames "
                                  f"{depth.shape[2]}x{depth.shape[1]}{said}", colour)
 
 
-def _colour_of(msg, bgr: bool) -> np.ndarray | None:
+def aligned_colour(colours: list, shape: tuple[int, int]) -> tuple[np.ndarray | None, str]:
+    """Her colour from colour frames ((H, W, 3) uint8 RGB, or None for a damaged one) beside depth frames of
+    `shape` (H, W): the median of those aligned to depth (of its size), or None; and what was used, for the
+    source's description (", 3 colour frames")."""
+    aligned = [c for c in colours if c is not None and c.shape[:2] == tuple(shape)]
+    colour = np.median(np.stack(aligned), axis=0).round().astype(np.uint8) if aligned else None
+    said = (f", {len(aligned)} colour frame{'s' if len(aligned) > 1 else ''}" if aligned
+            else ", colour frames not aligned to depth or damaged (not used)" if colours else "")
+    return colour, said
+
+
+def colour_of(msg, bgr: bool) -> np.ndarray | None:
     """The (H, W, 3) uint8 RGB image of an interleaved colour frame; None if its header and data disagree."""
     w, h, stride, size = msg.getWidth(), msg.getHeight(), msg.getStride(), len(msg.getData())
     if not (0 < w <= MAX_SIDE_PX and 0 < h <= MAX_SIDE_PX) or stride != 3 * w or size < 3 * w * h:
