@@ -1,6 +1,6 @@
-"""Named operations on a point cloud (N, 3), mm, any frame: clusters, voxel downsampling, radius outliers
-and normals (numpy and scipy's k-d tree). Clusters and outliers depend on the points, not on their order; a
-normal's neighbours tied at the last place are taken in the points' order, so ingest gives them in
+"""Named operations on a point cloud (N, 3), mm, any frame: clusters, voxel downsampling, radius outliers,
+normals and what a viewer sees (numpy and scipy's k-d tree). Clusters and outliers depend on the points, not on
+their order; a normal's neighbours tied at the last place are taken in the points' order, so ingest gives them in
 a canonical one (voxel centroids in grid order)."""
 from __future__ import annotations
 
@@ -79,6 +79,25 @@ def normals_towards(points: np.ndarray, viewer: np.ndarray, radius: float, most:
     flip = np.einsum("ij,ij->i", normals, viewer - points) < 0
     normals[flip] *= -1
     return normals
+
+
+SEEN_CELL_MM = 4.0
+SEEN_DEPTH_MM = 15.0
+"""`seen_from`: the viewer's rays are binned in cells this wide where her body is (mm); a point is seen when it
+lies within SEEN_DEPTH_MM of the nearest point of its cell (a surface as steep as 75° stays whole)."""
+
+
+def seen_from(points: np.ndarray, viewer: np.ndarray) -> np.ndarray:
+    """(N,) bool: the points a viewer at `viewer` sees, not hidden behind others, for points in a frame whose z
+    runs away from the viewer (a z-buffer over the directions from it, SEEN_CELL_MM cells at the points' median
+    distance): the front of a scan that wraps round her body, without its back."""
+    d = np.asarray(points, float) - viewer
+    depth = d[:, 2]
+    cell = np.floor(d[:, :2] / depth[:, None] * (np.median(depth) / SEEN_CELL_MM)).astype(np.int64)
+    key = np.unique(cell, axis=0, return_inverse=True)[1].ravel()
+    nearest = np.full(key.max() + 1, np.inf)
+    np.minimum.at(nearest, key, depth)
+    return depth <= nearest[key] + SEEN_DEPTH_MM
 
 
 def _pairs(points: np.ndarray, eps: float) -> np.ndarray:

@@ -25,12 +25,16 @@ from breastplan.voxels import voxel_centroids
 from . import breast as B
 from .background import plumb_wall
 from .chest_wall import fit_chest_wall
-from .cloud import dbscan, normals_towards, radius_inliers, voxel_downsample
+from .cloud import dbscan, normals_towards, radius_inliers, seen_from, voxel_downsample
 from .depth import colours_at, depth_range, fuse, to_points
 from .files import ScanCloud
 from .recording import DepthFrames
 from .trunk import Trunk, find_trunk
 
+WRAPPED_HIDDEN = 0.08
+"""A scan file of which more than this share of the points is hidden from a viewer in front of her wraps round
+her body (a 180° scan hides 12–14 % of its points, a closed one about half; a camera's view, 1–4 %: what lies
+behind her)."""
 BEHIND_STRIDE = 4
 """Every this-many-th pixel row and column beyond the depth slab is looked at for a wall behind her
 (a wall's 20 mm voxels, 1–2 m away, span more pixels than that)."""
@@ -128,15 +132,21 @@ def ingest_cloud(cloud: ScanCloud, options: IngestOptions, clock: Clock | None =
 
 
 def cloud_body(cloud: ScanCloud, up: str, clock: Clock) -> BodyScan:
-    """A scan file's points, `up` its superior axis → the body in view. The points are put in a canonical
-    order first (sorted by their coordinates): what is found depends on her surface, not on the order
-    a file lists its points in."""
+    """A scan file's points, `up` its superior axis → the body in view: of a scan that wraps round her (more than
+    WRAPPED_HIDDEN of its points hidden from a viewer in front of her), the points that viewer sees (`seen_from`);
+    of a frontal scan, all (the wall behind her, which gives her vertical, stays whole). The points
+    are put in a canonical order first (sorted by their coordinates): what is found depends on her surface, not
+    on the order a file lists its points in."""
     with clock("viewing frame"):
         order = canonical_order(cloud.points)
         ordered = cloud.points[order]
         view, found = (np.eye(4), None) if cloud.frame_hint == "camera-opencv" else viewing_frame(ordered, up)
         points = transform_points(view, ordered)
         viewer = points.mean(0) - [0.0, 0.0, 2000.0]
+    with clock("seen from the front"):
+        seen = seen_from(points, viewer)
+        if 1.0 - seen.mean() > WRAPPED_HIDDEN:        # a scan that wraps round her: its front, as a camera sees it
+            points, found = points[seen], None
     body = isolate_body(points, view, clock, viewer=viewer, found=found,
                         up=None if cloud.frame_hint == "camera-opencv" else up)
     if cloud.colours is None:
