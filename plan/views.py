@@ -73,9 +73,8 @@ class Views:
 def build_views(plan: Plan) -> Views:
     """Every state of the plan in the display frame."""
     to_display = VIEW_TO_DISPLAY @ plan.body.input_to_view                  # input frame → display frame
-    torso = np.asarray(plan.body.torso_input, float)
-    torso_in, rgb = ((voxel_downsample(torso, TORSO_MM), None) if plan.body.torso_rgb is None
-                     else voxel_colours(torso, TORSO_MM, plan.body.torso_rgb))
+    torso, rgb = _trunk(plan)
+    torso_in, rgb = (voxel_downsample(torso, TORSO_MM), None) if rgb is None else voxel_colours(torso, TORSO_MM, rgb)
     near = np.zeros(len(torso_in), bool)
     for planned in plan.changes[0].planned.values():
         near |= planned.weights(torso_in) > 0
@@ -98,6 +97,20 @@ def build_views(plan: Plan) -> Views:
                              for s, v in plan.volumes.sides.items()},
                  side_labels=_side_labels(plan, show), folds=_folds(plan, show),
                  skin_rgb=None if rgb is None else np.concatenate([rgb[~near], rgb[near]]))
+
+
+DRAWN_MM = (80.0, -650.0)
+"""Her torso is drawn from this far above her sternal notch to this far below it (along her up axis), mm: her
+trunk, not the head and legs a whole-body scan holds."""
+
+
+def _trunk(plan: Plan) -> tuple[np.ndarray, np.ndarray | None]:
+    """Her torso's points (input frame, mm) within DRAWN_MM of her sternal notch, and their colours (or None)."""
+    marks = plan.volumes.landmarks
+    torso = np.asarray(plan.body.torso_input, float)
+    height = (torso - marks.sternal_notch) @ marks.up_axis
+    keep = (height <= DRAWN_MM[0]) & (height >= DRAWN_MM[1])
+    return torso[keep], None if plan.body.torso_rgb is None else np.asarray(plan.body.torso_rgb)[keep]
 
 
 def skin_triangles(points_view: np.ndarray) -> np.ndarray:

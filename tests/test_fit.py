@@ -76,6 +76,7 @@ def test_fit_of_ingested_synthetic_scans_is_within_1_mm_of_the_true_breast_and_3
 
 
 @functools.cache
+@functools.lru_cache(maxsize=None)
 def realistic_breast(side: str, **body):
     """One breast of a MakeHuman body (`BodyOptions`; modifiers as (name, value) pairs), as
     `ingest_frames` gives it (points and chest wall), seen from the front (a-pose, 650 mm, 800×600, wall at 400 mm, 8 frames)."""

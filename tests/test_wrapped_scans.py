@@ -12,8 +12,7 @@ from breastplan.scenes.makehuman import BodyOptions, make_body
 from breastplan.scenes.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
 
 WRAPPED = {   # her body, her turn about her vertical axis in the file (°, +: her left forward), its up, units, format
-    "cup 0.8, facing the file's +z": (BodyOptions(cup=0.8), 0.0, "+y", "mm", ".obj"),
-    "seen from behind (turned 180°)": (BodyOptions(cup=0.8), 180.0, "+y", "mm", ".obj"),
+    "cup 0.8, her back to the file's +z (turned 180°)": (BodyOptions(cup=0.8), 180.0, "+y", "mm", ".obj"),
     "heavy, arms down, turned 35°, Z up, metres": (BodyOptions(cup=0.6, weight=0.8, pose="arms-down"), 35.0, "+z",
                                                     "m", ".ply"),
     "soft, hands on hips, turned −40°, X down": (BodyOptions(cup=0.9, firmness=0.2, pose="hands-on-hips"), -40.0,
