@@ -94,7 +94,8 @@ def seen_from(points: np.ndarray, viewer: np.ndarray) -> np.ndarray:
     d = np.asarray(points, float) - viewer
     depth = d[:, 2]
     cell = np.floor(d[:, :2] / depth[:, None] * (np.median(depth) / SEEN_CELL_MM)).astype(np.int64)
-    key = np.unique(cell, axis=0, return_inverse=True)[1].ravel()
+    cell -= cell.min(axis=0)
+    key = np.unique(cell[:, 0] * (cell[:, 1].max() + 1) + cell[:, 1], return_inverse=True)[1]
     nearest = np.full(key.max() + 1, np.inf)
     np.minimum.at(nearest, key, depth)
     return depth <= nearest[key] + SEEN_DEPTH_MM

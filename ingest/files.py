@@ -289,7 +289,7 @@ def _texture_rgb(mesh) -> np.ndarray | None:
     """(V, 3) uint8: the colour of an open3d mesh's texture images at each vertex, the mean over the corners of its
     triangles of the texel each corner's coordinate falls in (coordinates outside 0..1 clamped; open3d holds an
     OBJ's image flipped, its rows running with v as OBJ's v runs up the image); None when it holds no readable
-    texture. A vertex of no textured corner is black."""
+    texture. A vertex of no textured corner takes the mean colour of those of one."""
     uv, material = np.asarray(mesh.triangle_uvs), np.asarray(mesh.triangle_material_ids)
     images = [np.asarray(t) if not t.is_empty() else None for t in mesh.textures]
     vertex = np.asarray(mesh.triangles).ravel()
@@ -310,7 +310,9 @@ def _texture_rgb(mesh) -> np.ndarray | None:
         count += np.bincount(vertex[on], minlength=len(count))
     if not count.any():
         return None
-    return np.rint(total / np.maximum(count, 1)[:, None]).clip(0, 255).astype(np.uint8)
+    rgb = total / np.maximum(count, 1)[:, None]
+    rgb[count == 0] = rgb[count > 0].mean(axis=0)
+    return np.rint(rgb).clip(0, 255).astype(np.uint8)
 
 
 def _image_rgb(image: np.ndarray) -> np.ndarray:
