@@ -9,7 +9,9 @@ from breastplan.plan.job import run_plan
 from breastplan.plan.pictures import before_after
 from breastplan.plan.views import build_views
 from breastplan.scenes.makehuman import BodyOptions
-from breastplan.scenes.realistic import CameraOptions, make_body_scene, write_scan_file
+from breastplan import transform_points
+from breastplan.scenes.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
+from test_colour import _dark
 
 
 def holes(picture) -> tuple[float, int]:
@@ -25,7 +27,8 @@ def holes(picture) -> tuple[float, int]:
 
 def test_her_skin_from_a_scanners_mesh_shows_no_background_through_her(tmp_path, monkeypatch):
     """A MakeHuman patient as a scanner's textured mesh (OBJ): her skin in the five views, before and as planned,
-    shows no background through her; one camera view's triangulation of the same points would."""
+    shows no background through her (one camera view's triangulation of the same points would), in the colour of
+    her texture (the areola's hue at her nipple, the skin's below)."""
     scene = make_body_scene(BodyOptions(cup=0.9, firmness=0.3, weight=0.6, pose="a-pose"),
                             CameraOptions(680.0, 6.0, -5.0, wall_mm=None))
     write_scan_file(tmp_path / "her.obj", scene, "mm", "+y")
@@ -36,6 +39,13 @@ def test_her_skin_from_a_scanners_mesh_shows_no_background_through_her(tmp_path,
             share, pixels = holes(drawn)
             assert share < 0.005, (name, share, pixels)
     assert np.array_equal(build_views(plan).skin, views.skin)              # the same surface every time
+    to_file = file_from_body("+y", "mm") @ np.linalg.inv(scene.camera_from_body)
+    torso, rgb = plan.body.torso_input, plan.body.torso_rgb                # her texture's colour, kept
+    for side, nipple in scene.nipples_camera().items():
+        for offset, dark in ((0.0, True), (-60.0, False)):                 # at her nipple, 60 mm down her front
+            near = np.linalg.norm(torso - transform_points(to_file, nipple[None])[0] - [0.0, offset, 0.0],
+                                  axis=1).argsort()[:5]
+            assert all(_dark(c) == dark for c in rgb[near]), (side, offset, rgb[near])
     monkeypatch.setattr(views_module, "surface_triangles", views_module.skin_triangles)
     before, _ = before_after(build_views(plan), views.states[0], names=("front",))["front"]
     assert holes(before)[0] > 0.01

@@ -15,8 +15,6 @@ WRAPPED = {   # her body, her turn about her vertical axis in the file (°, +: h
     "cup 0.8, her back to the file's +z (turned 180°)": (BodyOptions(cup=0.8), 180.0, "+y", "mm", ".obj"),
     "heavy, arms down, turned 35°, Z up, metres": (BodyOptions(cup=0.6, weight=0.8, pose="arms-down"), 35.0, "+z",
                                                     "m", ".ply"),
-    "soft, hands on hips, turned −40°, X down": (BodyOptions(cup=0.9, firmness=0.2, pose="hands-on-hips"), -40.0,
-                                                 "-x", "mm", ".obj"),
 }
 
 
