@@ -175,7 +175,7 @@ def _scan_makehuman(clock: Clock, as_json: bool, *, out, truth, frames, seed, pi
     with atomic_set() as stage:                         # recording, scan file and truth, all or nothing
         if out is not None:
             depth = scene.frames(frames, seed)
-            staged = write_recording(stage(out), depth, camera.K, colour=scene.colour())
+            staged = write_recording(stage(out), depth, camera.K, colour=scene.colour)
             result.update(recording=str(out), frames=frames, valid_pixels=round(float(np.mean(depth > 0)), 4),
                           megabytes=round(staged.stat().st_size / 1e6, 2))
         if scan_file is not None:

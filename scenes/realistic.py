@@ -14,6 +14,7 @@ check its camera options without that cost.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -115,8 +116,10 @@ class BodyScene:
 
         return cast_depth(self.raycasting(), self.camera.K, *self.camera.size)
 
+    @cached_property
     def colour(self) -> np.ndarray:
-        """(H, W, 3) uint8 RGB of the colour camera aligned to depth: her skin shaded, her areolae darker."""
+        """(H, W, 3) uint8 RGB of the colour camera aligned to depth: her skin shaded, her areolae darker (cast
+        once: a recording and a scan file of the scene share it)."""
         from .rendering import cast_colour
 
         return cast_colour(self.raycasting(), self.meshes(), self.camera.K, *self.camera.size,
@@ -273,7 +276,7 @@ def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: s
         to_file = file_from_body(up, units) @ np.linalg.inv(scene.camera_from_body)
         what = "body and wall" if (ids == 1).any() else "body"
         write_ply(stage(path), transform_points(to_file, points), colours=colours_at(points, scene.camera.K,
-                                                                                    scene.colour()),
+                                                                                    scene.colour),
                   comments=[f"breastplan scan-synth: realistic {what}, noise-free depth pixels back-projected, with "
                             "the colour seen at each", frame])
         return {"points": len(points), "faces": 0}
@@ -285,7 +288,7 @@ def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: s
     w, h = scene.camera.size
     texture = (seen[:, :2] / seen[:, 2:] + 0.5) / [w, h]                # pixel centres at (i + ½) / size
     texture[:, 1] = 1.0 - texture[:, 1]                                  # OBJ's v runs up the image
-    Image.fromarray(scene.colour()).save(stage(path.with_suffix(".png")), format="PNG")
+    Image.fromarray(scene.colour).save(stage(path.with_suffix(".png")), format="PNG")
     stage(path.with_suffix(".mtl")).write_text(f"newmtl skin\nKd 1 1 1\nmap_Kd {path.stem}.png\n")
     text = (f"# breastplan scan-synth: realistic body, the triangles the camera sees, textured by its colour "
             f"camera\n# {frame}\nmtllib {path.stem}.mtl\n"

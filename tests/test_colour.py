@@ -149,12 +149,11 @@ def test_an_obj_keeps_its_vertex_colours():
 
 def test_a_scan_files_colour_is_kept_on_her_torso(cli, tmp_path):
     """A PLY with the colour seen at each point (a textured OBJ's: `test_skin_surface`)."""
-    name = "her.ply"
     scene = make_body_scene(BodyOptions(cup=0.8, weight=0.6, pose="hands-on-hips"),
                             CameraOptions(680.0, 4.0, 6.0, wall_mm=None))
-    write_scan_file(tmp_path / name, scene, "mm", "+z")
+    write_scan_file(tmp_path / "her.ply", scene, "mm", "+z")
     to_file = file_from_body("+z", "mm") @ np.linalg.inv(scene.camera_from_body)
-    res = run(cli, "ingest", tmp_path / name, "--side", "right", "--up", "+z", "--out", tmp_path / "right")
+    res = run(cli, "ingest", tmp_path / "her.ply", "--side", "right", "--up", "+z", "--out", tmp_path / "right")
     assert res.returncode == 0, res.stderr
     torso = read_ply(tmp_path / "right" / "camera.ply")
     nipple = transform_points(to_file, scene.nipples_camera()["right"])

@@ -1,15 +1,15 @@
-"""Her skin as the report draws it: one surface without holes where her body was seen, from a recording's one view
-or from a scan file's points (which need not be one view's)."""
+"""Her skin as the report draws it from a scan file's points (which need not be one camera's view): one surface
+without holes where her body was seen."""
 import numpy as np
 from scipy import ndimage
 
+from breastplan import transform_points
 from breastplan.options import PlanOptions
 from breastplan.plan import views as views_module
 from breastplan.plan.job import run_plan
 from breastplan.plan.pictures import before_after
 from breastplan.plan.views import build_views
 from breastplan.scenes.makehuman import BodyOptions
-from breastplan import transform_points
 from breastplan.scenes.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
 from test_colour import _dark
 
