@@ -81,7 +81,8 @@ def _options(
 
 JSON = typer.Option(False, "--json", help="Print one JSON object on stdout (logs go to stderr).")
 UNITS_HELP = "Units of a scan file: auto (from its extent), mm or m."
-UP_HELP = "Superior axis of a scan file: +x, -x, +y, -y, +z or -z."
+UP_HELP = ("Superior axis of a scan file: auto (found from her body: the axis along which her head stands above "
+           "her chest), +x, -x, +y, -y, +z or -z.")
 
 
 def parse_pairs(items: List[str], what: str, option: str) -> dict[str, float]:
@@ -110,7 +111,7 @@ def scan_file_options(input: Path | None, units: str, up: str) -> None:
 
     if input is not None and not input.is_dir() and not is_recording(input):
         return
-    given = [name for name, value, default in (("--units", units, "auto"), ("--up", up, "+y")) if value != default]
+    given = [name for name, value, default in (("--units", units, "auto"), ("--up", up, "auto")) if value != default]
     if given:
         what = ("a case folder, ingested already" if input is not None and input.is_dir() else
                 "a depth recording, whose frame is its camera's (mm)")

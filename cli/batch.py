@@ -29,7 +29,7 @@ def batch(
                                      + " ".join(f"{k}:{d:g}" for k, d in DEFAULT_PLAN) + "."),
     method: str = typer.Option("exact", "--method", help="exact, learnt or MODEL.npz, as for plan."),
     units: str = typer.Option("auto", "--units", help=UNITS_HELP + " The same for every scan file."),
-    up: str = typer.Option("+y", "--up", help=UP_HELP + " The same for every scan file."),
+    up: str = typer.Option("auto", "--up", help=UP_HELP + " The same for every scan file."),
     executor: str = typer.Option("local", "--executor", help="local (worker processes) or dask (a Dask "
                                  "distributed cluster)."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="With --executor dask: the address of a "

@@ -28,7 +28,7 @@ def ingest(
     roi: Optional[str] = typer.Option(None, "--roi", help="X0,Y0,Z0,X1,Y1,Z1: box (camera mm) holding the breast."),
     nipple: Optional[str] = typer.Option(None, "--nipple", help="X,Y,Z: the nipple (camera mm), overriding the apex."),
     units: str = typer.Option("auto", "--units", help=UNITS_HELP),
-    up: str = typer.Option("+y", "--up", help=UP_HELP),
+    up: str = typer.Option("auto", "--up", help=UP_HELP),
     device: bool = typer.Option(False, "--device", help="Capture from a live OAK device instead of INPUT."),
     device_id: Optional[str] = typer.Option(None, "--device-id", help="With --device: the OAK's ID (default: the first)."),
     as_json: bool = JSON,

@@ -31,7 +31,7 @@ def plan(
     out: Optional[Path] = typer.Option(None, "--out", help="Case folder to write (default: INPUT if it is a case "
                                        "folder, else ./<input name>-plan)."),
     units: str = typer.Option("auto", "--units", help=UNITS_HELP),
-    up: str = typer.Option("+y", "--up", help=UP_HELP),
+    up: str = typer.Option("auto", "--up", help=UP_HELP),
     wall_from: Optional[Path] = typer.Option(None, "--wall-from", help="An earlier case folder of the same patient "
                                              "(a plan's, or one side's from `ingest`): each breast is measured "
                                              "down to that case's chest wall, and its volume change since then "

@@ -12,6 +12,8 @@ from dataclasses import asdict, dataclass
 SIDES = ("left", "right")
 UNITS = ("auto", "mm", "m")
 UP_AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
+UP_CHOICES = ("auto", *UP_AXES)
+"""A scan file's superior axis: found from her body (auto) or one of its six signed axes."""
 DEFORMATIONS = ("top-shape", "ptosis", "turn")
 """Global deformations fitted with the primitive by default (docs/model.md §3, §6): ptosis and turn
 are shears by z with closed-form inverses, top-shape gives the upper half its own profile; a
@@ -48,7 +50,7 @@ class IngestOptions:
     roi_camera_mm: tuple[float, ...] | None = None   # (x0, y0, z0, x1, y1, z1): box holding the breast
     nipple_camera_mm: tuple[float, ...] | None = None  # the nipple, overriding the apex
     units: str = "auto"                              # of a scan file: auto (from its extent), mm or m
-    up: str = "+y"                                   # superior axis of a scan file
+    up: str = "auto"                                 # superior axis of a scan file (UP_CHOICES)
     device_id: str | None = None                     # the live OAK to capture from (None: the first)
 
     def __post_init__(self):
@@ -97,11 +99,11 @@ DEFAULT_PLAN = (("ptosis", 3.0), ("turn", 3.0), ("top-shape", 3.0))
 
 
 def _check_scan_file(units: str, up: str) -> None:
-    """OptionError unless `units` and `up` say how to read a scan file (UNITS, UP_AXES)."""
+    """OptionError unless `units` and `up` say how to read a scan file (UNITS, UP_CHOICES)."""
     if units not in UNITS:
         raise OptionError("units", f"the units are auto, mm or m, not '{units}'")
-    if up not in UP_AXES:
-        raise OptionError("up", f"the up axis is one of {' '.join(UP_AXES)}, not '{up}'")
+    if up not in UP_CHOICES:
+        raise OptionError("up", f"the up axis is one of {' '.join(UP_CHOICES)}, not '{up}'")
 
 
 @dataclass(frozen=True)
@@ -118,7 +120,7 @@ class PlanOptions:
     sides: tuple[str, ...] = SIDES
     method: str = "exact"
     units: str = "auto"
-    up: str = "+y"
+    up: str = "auto"
     wall_from: str | None = None
 
     def __post_init__(self):
@@ -143,7 +145,7 @@ class PlanOptions:
 
     @classmethod
     def parse(cls, deform: list[str], side: str = "both", method: str = "exact", units: str = "auto",
-              up: str = "+y", wall_from: str | None = None) -> "PlanOptions":
+              up: str = "auto", wall_from: str | None = None) -> "PlanOptions":
         """From the command line's KIND:DEGREE items, side (left, right or both) and the rest as given."""
         changes = []
         for item in deform:

@@ -39,7 +39,7 @@ import numpy as np
 
 from breastplan import BadInputError, transform_points
 from breastplan.deform.names import KIND_PARAMS, METHODS
-from breastplan.options import PLAN_DEGREES, SIDES, UNITS, UP_AXES, FitOptions, IngestOptions, OptionError
+from breastplan.options import PLAN_DEGREES, SIDES, UNITS, UP_CHOICES, FitOptions, IngestOptions, OptionError
 
 from .mesh import Mesh
 from .registry import ParameterError, filter
@@ -51,7 +51,7 @@ if TYPE_CHECKING:
 
 SideOrAuto = Literal[("auto", *SIDES)]
 Units = Literal[UNITS]
-Up = Literal[UP_AXES]
+Up = Literal[UP_CHOICES]
 Method = Literal[METHODS]
 
 MEMORY = 16
@@ -88,7 +88,7 @@ def _check_degree(values: dict) -> None:
 
 
 @filter("compute_breast_isolation", check=_isolation_options)
-def compute_breast_isolation(mesh: Mesh, *, side: SideOrAuto = "auto", units: Units = "auto", up: Up = "+y",
+def compute_breast_isolation(mesh: Mesh, *, side: SideOrAuto = "auto", units: Units = "auto", up: Up = "auto",
                              voxel_mm: float = 2.0) -> Mesh:
     """Isolate one breast of a scan: its points (no faces), input frame, mm.
 
@@ -103,7 +103,7 @@ def compute_breast_isolation(mesh: Mesh, *, side: SideOrAuto = "auto", units: Un
 
 
 @filter("compute_breast_fit", check=_fit_options)
-def compute_breast_fit(mesh: Mesh, *, side: SideOrAuto = "auto", units: Units = "auto", up: Up = "+y",
+def compute_breast_fit(mesh: Mesh, *, side: SideOrAuto = "auto", units: Units = "auto", up: Up = "auto",
                        lattice: int = 5, max_iterations: int = 1000) -> Mesh:
     """Fit the breast model to one breast: the closed fitted surface, input frame, mm.
 
@@ -118,7 +118,7 @@ def compute_breast_fit(mesh: Mesh, *, side: SideOrAuto = "auto", units: Units = 
 
 @filter("apply_breast_ptosis", check=_check_degree)
 def apply_breast_ptosis(mesh: Mesh, *, degree: float = 3.0, method: Method = "exact", side: SideOrAuto = "auto",
-                        units: Units = "auto", up: Up = "+y") -> Mesh:
+                        units: Units = "auto", up: Up = "auto") -> Mesh:
     """Give the fitted breast a ptosis (sagging) of a degree 1..8: its surface, input frame, mm.
 
     `mesh`: a remembered fitted or deformed surface, else a scan (isolated and fitted first);
@@ -129,7 +129,7 @@ def apply_breast_ptosis(mesh: Mesh, *, degree: float = 3.0, method: Method = "ex
 
 @filter("apply_breast_turn", check=_check_degree)
 def apply_breast_turn(mesh: Mesh, *, degree: float = 3.0, method: Method = "exact", side: SideOrAuto = "auto",
-                      units: Units = "auto", up: Up = "+y") -> Mesh:
+                      units: Units = "auto", up: Up = "auto") -> Mesh:
     """Turn the fitted breast outwards by a degree 1..8: its surface, input frame, mm.
 
     Parameters as apply_breast_ptosis's."""
@@ -138,7 +138,7 @@ def apply_breast_turn(mesh: Mesh, *, degree: float = 3.0, method: Method = "exac
 
 @filter("apply_breast_top_shape", check=_check_degree)
 def apply_breast_top_shape(mesh: Mesh, *, degree: float = 3.0, method: Method = "exact", side: SideOrAuto = "auto",
-                           units: Units = "auto", up: Up = "+y") -> Mesh:
+                           units: Units = "auto", up: Up = "auto") -> Mesh:
     """Fill the fitted breast's upper pole (top-shape) by a degree 1..8: its surface, input frame, mm.
 
     Parameters as apply_breast_ptosis's."""
@@ -146,7 +146,7 @@ def apply_breast_top_shape(mesh: Mesh, *, degree: float = 3.0, method: Method = 
 
 
 @filter("get_breast_measures")
-def get_breast_measures(mesh: Mesh, *, side: SideOrAuto = "auto", units: Units = "auto", up: Up = "+y") -> dict:
+def get_breast_measures(mesh: Mesh, *, side: SideOrAuto = "auto", units: Units = "auto", up: Up = "auto") -> dict:
     """Measure the fitted (or deformed) breast: volume, poles, width, projection, nipple, fit quality.
 
     Lengths in mm, volumes in cc, `nipple_mm` in the input frame (mm). Up and left–right are the

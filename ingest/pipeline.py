@@ -35,6 +35,11 @@ WRAPPED_HIDDEN = 0.08
 """A scan file of which more than this share of the points is hidden from a viewer in front of her wraps round
 her body (a 180° scan hides 12–14 % of its points, a closed one about half; a camera's view, 1–4 %: what lies
 behind her)."""
+UP_TRIED = ("+y", "+z", "+x")
+"""The axes tried in turn as a scan file's up when it is not given (its sense from her head; +y first, the
+convention of most scanners' files)."""
+UP_SEARCH_MM = 5.0
+"""Voxel size of the cloud the up axes are tried on."""
 BEHIND_STRIDE = 4
 """Every this-many-th pixel row and column beyond the depth slab is looked at for a wall behind her
 (a wall's 20 mm voxels, 1–2 m away, span more pixels than that)."""
@@ -102,6 +107,9 @@ class BodyScan:
     plumb: np.ndarray | None         # (3,) a wall's normal behind her, or None
     timings_ms: dict                 # the steps timed until now (the source's read included)
     torso_rgb: np.ndarray | None = None   # (M, 3) uint8 the colour seen at each torso point; None: not recorded
+    up: str | None = None            # a scan file's superior axis as read (UP_AXES); None: a camera's view
+    up_found: str = "given"          # how that axis was known: "given", "her head" (seen above her chest) or
+                                     # "taken" (her head seen along no axis: UP_TRIED's first that shows a trunk)
 
 
 def ingest_frames(frames: DepthFrames, options: IngestOptions, clock: Clock | None = None) -> Ingested:
@@ -140,19 +148,49 @@ def cloud_body(cloud: ScanCloud, up: str, clock: Clock) -> BodyScan:
     with clock("viewing frame"):
         order = canonical_order(cloud.points)
         ordered = cloud.points[order]
-        view, found = (np.eye(4), None) if cloud.frame_hint == "camera-opencv" else viewing_frame(ordered, up)
+        how = "given"
+        if cloud.frame_hint == "camera-opencv":
+            view, found, up = np.eye(4), None, None
+        elif up == "auto":
+            view, found, up, how = upright_frame(ordered)
+        else:
+            view, found = viewing_frame(ordered, up)
         points = transform_points(view, ordered)
         viewer = points.mean(0) - [0.0, 0.0, 2000.0]
     with clock("seen from the front"):
         seen = seen_from(points, viewer)
         if 1.0 - seen.mean() > WRAPPED_HIDDEN:        # a scan that wraps round her: its front, as a camera sees it
             points, found = points[seen], None
-    body = isolate_body(points, view, clock, viewer=viewer, found=found,
-                        up=None if cloud.frame_hint == "camera-opencv" else up)
+    body = replace(isolate_body(points, view, clock, viewer=viewer, found=found, up=up), up=up, up_found=how)
     if cloud.colours is None:
         return body
     torso = transform_points(np.linalg.inv(body.input_to_view), body.torso)   # the file's own points, its frame
     return replace(body, torso_rgb=cloud.colours[order][cKDTree(ordered).query(torso)[1]])
+
+
+def upright_frame(points: np.ndarray) -> tuple[np.ndarray, BodyInView, str, str]:
+    """`viewing_frame` of a scan file whose up axis is not given, that axis, and how it was found: the first of
+    UP_TRIED along which her head is seen above her chest, or the opposite of one along which it is seen below
+    ("her head"); where her head is seen along none (a torso cut below her neck), the first along which a trunk
+    is seen ("taken"). The first axis is tried on all the points (its frame kept when her head stands above
+    along it), the others on the centroids of UP_SEARCH_MM voxels."""
+    sparse, _ = voxel_centroids(points, UP_SEARCH_MM)
+    taken = None
+    for up in UP_TRIED:
+        try:
+            frame, found = viewing_frame(points if up == UP_TRIED[0] else sparse, up)
+        except BadInputError:
+            continue
+        head = found.trunk.head
+        if head == "above" and up == UP_TRIED[0]:
+            return frame, found, up, "her head"
+        if head is not None:
+            up = up if head == "above" else "-" + up[1]
+            return *viewing_frame(points, up), up, "her head"
+        taken = taken or up
+    if taken is None:
+        raise BadInputError(None, "shows no trunk along any of its axes: nothing in view is as wide as a chest")
+    return *viewing_frame(points, taken), taken, "taken"
 
 
 def viewing_frame(points: np.ndarray, up: str) -> tuple[np.ndarray, BodyInView]:

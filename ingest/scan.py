@@ -59,7 +59,6 @@ def ingest_sides(input: Path | None, options: list[IngestOptions]) -> list[Scan]
         from .pipeline import cloud_body
 
         body_of = lambda up, c: cloud_body(cloud, up, c)  # noqa: E731
-        source = Source("file", cloud.description)
     from .pipeline import isolate_side
 
     inputs = {} if input is None else {Path(input).name: input}
@@ -68,9 +67,20 @@ def ingest_sides(input: Path | None, options: list[IngestOptions]) -> list[Scan]
         up = None if cloud is None else opts.up            # a recording's body does not depend on it
         if up not in bodies:
             bodies[up] = body_of(up, _clock(clock.ms))
+        if cloud is not None:
+            source = Source("file", cloud.description + _up_note(bodies[up]))
         result = isolate_side(bodies[up], opts, _clock(bodies[up].timings_ms))
         scans.append(scan_record(result, source, opts, Provenance.of(inputs, opts.as_dict())))
     return scans
+
+
+def _up_note(body) -> str:
+    """How a scan file's up axis was known, for its description."""
+    if body.up is None:
+        return ""
+    how = {"given": "given", "her head": "found: her head stands above her chest along it",
+           "taken": "taken: her head is not in view, give --up if it is another"}[body.up_found]
+    return f", up {body.up} ({how})"
 
 
 def _clock(ms: dict) -> Clock:

@@ -220,8 +220,9 @@ def test_a_scan_file_read_with_its_up_axis_reversed_exits_3_and_names_the_right_
     assert_bad_input(res, scan, tmp_path)
     assert "shows her upside down with +z up" in res.stderr and "(--up -z)" in res.stderr
     assert not (tmp_path / "case").exists()
-    res = run(cli, "ingest", scan, "--units", "mm", "--up", "-z", "--side", "left", "--out", tmp_path / "case")
-    assert res.returncode == 0, res.stderr
+    res = run(cli, "ingest", scan, "--units", "mm", "--side", "left", "--out", tmp_path / "case", "--json")
+    assert res.returncode == 0, res.stderr            # without --up, her up is found from her head: -z
+    assert "up -z (found: her head" in json.loads(res.stdout)["source"]
 
 
 # --- 3. no breast in view ------------------------------------------------------------------------

@@ -37,8 +37,9 @@ def _write_closed(path, body, to_file: np.ndarray) -> None:
                         + ("f {} {} {}\n" * len(F)).format(*(F.ravel() + 1)))
 
 
-def _read(path, up: str) -> dict:
-    return dict(zip(("left", "right"), ingest_sides(path, [IngestOptions(s, up=up) for s in ("left", "right")])))
+def _read(path) -> dict:
+    """Both breasts of a scan file, its up axis not given: found from her body."""
+    return dict(zip(("left", "right"), ingest_sides(path, [IngestOptions(s) for s in ("left", "right")])))
 
 
 @pytest.fixture(scope="module", params=list(WRAPPED), ids=list(WRAPPED))
@@ -49,13 +50,14 @@ def wrapped(request, tmp_path_factory):
     body = make_body(options)
     to_file = file_from_body(up, units) @ _turned(deg)
     _write_closed(folder / f"closed{suffix}", body, to_file)
-    scans = _read(folder / f"closed{suffix}", up)
+    scans = _read(folder / f"closed{suffix}")
+    assert f"up {up} (found: her head" in scans["left"].source.description
     mm = 1000.0 if units == "m" else 1.0
     errors = {s: float(np.linalg.norm(scan.nipple_camera_mm - mm * transform_points(to_file, body.nipples[s][None])[0]))
               for s, scan in scans.items()}
     frontal = make_body_scene(options, CameraOptions(680.0, 5.0, 0.0, wall_mm=None))
     write_scan_file(folder / "front.obj", frontal, "mm", "+y")
-    return errors, measure_scans(scans).sides, measure_scans(_read(folder / "front.obj", "+y")).sides
+    return errors, measure_scans(scans).sides, measure_scans(_read(folder / "front.obj")).sides
 
 
 def test_a_wrapped_scan_finds_her_nipples_on_her_front(wrapped):
