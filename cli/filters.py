@@ -53,7 +53,7 @@ def list_filters(as_json: bool = JSON):
 @command("filter")
 def run_filter(
     name: str = typer.Argument(..., help="The filter to run (`breastplan filters` lists them)."),
-    input: Path = typer.Argument(..., help="A scan or mesh file: PLY, OBJ, STL, PCD or XYZ."),
+    input: Path = typer.Argument(..., help="A scan or mesh file: PLY, OBJ, STL, PCD, XYZ or glTF/GLB."),
     param: List[str] = typer.Option([], "--param", help="NAME=VALUE: a parameter of the filter (repeatable)."),
     out: Optional[Path] = typer.Option(None, "--out", help="Output PLY of a filter that gives a mesh (mm, the "
                                        "input's frame); written atomically."),

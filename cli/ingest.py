@@ -20,7 +20,7 @@ FLAGS = {"side": "--side", "voxel_mm": "--voxel", "frames": "--frames", "roi_cam
 @command()
 def ingest(
     input: Optional[Path] = typer.Argument(None, help="depthai recording (.mcap) or scan file (PLY, OBJ, STL, PCD, "
-                                           "XYZ); omit with --device."),
+                                           "XYZ, glTF/GLB); omit with --device."),
     side: str = typer.Option(..., "--side", help="The patient's breast to isolate: left or right."),
     out: Path = typer.Option(..., "--out", help="Case folder for scan.ply, scan.npz and camera.ply."),
     voxel: float = typer.Option(2.0, "--voxel", help="Voxel size of the downsampling, mm."),

@@ -20,7 +20,7 @@ FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method", "units"
 @command()
 def plan(
     input: Optional[Path] = typer.Argument(None, help="A depthai recording (.mcap), a scan file (PLY, OBJ, STL, PCD, "
-                                           "XYZ) or a case folder; omitted: the bundled sample recording."),
+                                           "XYZ, glTF/GLB) or a case folder; omitted: the bundled sample recording."),
     side: str = typer.Option("both", "--side", help="The breasts to plan: left, right or both."),
     deform: List[str] = typer.Option([], "--deform", help="KIND:DEGREE, repeatable: a change to plan, KIND one of "
                                      f"{', '.join(DEGREE_KINDS)}, DEGREE in 1..8 (decimals allowed). Default: "

@@ -65,7 +65,8 @@ def scan_synth(
     no_wall: bool = typer.Option(False, "--no-wall", help="makehuman: no wall behind the patient."),
     scan_file: Optional[Path] = typer.Option(None, "--scan-file", help="makehuman: also (or, without --out, instead) "
                                              "write what the camera sees: .ply the depth pixels back-projected, "
-                                             ".obj the body's visible triangles."),
+                                             ".obj the body's visible triangles textured by the colour camera "
+                                             "(with .mtl and .png beside it), .glb those triangles coloured."),
     units: Optional[str] = typer.Option(None, "--units", help="Units of the --scan-file: mm (default) or m."),
     up: Optional[str] = typer.Option(None, "--up", help="The --scan-file axis the body's up lies on: +x, -x, +y "
                                      "(default), -y, +z or -z."),

@@ -56,7 +56,7 @@ def _matrix(values, dtype, what: str) -> np.ndarray:
 
 
 def read_mesh(path: str | Path) -> Mesh:
-    """A scan or mesh file (PLY, OBJ, STL, PCD, XYZ) as it is, in its own units and frame, read with the
+    """A scan or mesh file (PLY, OBJ, STL, PCD, XYZ, glTF/GLB) as it is, in its own units and frame, read with the
     readers of `ingest`; BadInputError naming the file for any defect."""
     from breastplan import BadInputError
     from breastplan.errors import about

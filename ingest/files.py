@@ -1,19 +1,22 @@
-"""Scan files (PLY, OBJ, STL, PCD, XYZ) → a point cloud in millimetres, in the file's own frame.
+"""Scan files (PLY, OBJ, STL, PCD, XYZ, glTF/GLB) → a point cloud in millimetres, in the file's own frame.
 
 Meshes are sampled uniformly by area (about 1 point per mm², seeded, so reads are
 deterministic) with the triangle normals; point files keep their points and normals. Colour is kept:
-a PLY's or PCD's per-point colour, an OBJ's vertex colours, or the texture image its material names
-(OBJ + MTL + image, as clinics' scanners export), read at each vertex. Units
+a PLY's or PCD's per-point colour, an OBJ's or glTF's vertex colours, the texture image an OBJ's material
+names (OBJ + MTL + image, as clinics' scanners export) or a glTF's one embedded texture (phone scanning
+apps), read at each vertex; an STL holds none. Units
 are detected from the extent (largest side of the axis-aligned bounding box) or declared.
 Every defect raises BadInputError naming the file: open3d reports corrupt or foreign files
 only as console warnings and hands back an empty geometry, so this module checks for that.
-What no body scan holds is refused before a reader loads it: each file's header (STL, PCD) or
+What no body scan holds is refused before a reader loads it: each file's header (STL, PCD, glTF) or
 its lines, scanned in chunks (OBJ, XYZ), are checked against MAX_POINTS and the file's size.
 open3d is imported when a reader needs it.
 """
 from __future__ import annotations
 
+import json
 import re
+import struct
 import tempfile
 import warnings
 from contextlib import contextmanager, nullcontext
@@ -31,7 +34,7 @@ from breastplan.units import FAR_EXTENT_MM as FAR_EXTENT
 from breastplan.units import SCAN_EXTENT_MM
 from breastplan.units import extent as extent_of
 
-SUPPORTED = (".ply", ".obj", ".stl", ".pcd", ".xyz")
+SUPPORTED = (".ply", ".obj", ".stl", ".pcd", ".xyz", ".glb", ".gltf")
 POINTS_PER_MM2 = 1.0
 SAMPLE_RANGE = (20_000, 400_000)
 """Bounds on the number of points sampled from a mesh surface."""
@@ -75,7 +78,7 @@ class ScanArrays(NamedTuple):
 
 
 def read_scan_file(path: str | Path, units: str = "auto") -> ScanCloud:
-    """Read a PLY/OBJ/STL/PCD/XYZ scan as mm points; units "auto" (from the extent), "mm" or "m"."""
+    """Read a PLY/OBJ/STL/PCD/XYZ/glTF/GLB scan as mm points; units "auto" (from the extent), "mm" or "m"."""
     path = Path(path)
     if units not in ("auto", "mm", "m"):
         raise BadInputError(None, f"units must be auto, mm or m, not '{units}'")
@@ -296,7 +299,14 @@ def _texture_rgb(mesh) -> np.ndarray | None:
     if len(uv) != len(vertex) or all(im is None for im in images):
         return None
     corner = np.repeat(material, 3) if len(material) == len(vertex) // 3 else np.zeros(len(vertex), int)
-    total, count = np.zeros((len(mesh.vertices), 3)), np.zeros(len(mesh.vertices))
+    return _corner_rgb(len(mesh.vertices), vertex, uv, corner, images)
+
+
+def _corner_rgb(n_vertices: int, vertex: np.ndarray, uv: np.ndarray, corner: np.ndarray, images: list) -> np.ndarray | None:
+    """(V, 3) uint8 at each of `n_vertices`: the mean over the triangle corners on it (`vertex`, (3M,)) of the texel
+    each corner's `uv` (3M, 2) falls in, of the image `corner` (3M,) indexes in `images` (arrays whose rows run
+    with v; None: unreadable); None when no corner falls in a readable image."""
+    total, count = np.zeros((n_vertices, 3)), np.zeros(n_vertices)
     for m in np.unique(corner):
         image = images[m] if 0 <= m < len(images) else None
         if image is None:
@@ -313,6 +323,22 @@ def _texture_rgb(mesh) -> np.ndarray | None:
     rgb = total / np.maximum(count, 1)[:, None]
     rgb[count == 0] = rgb[count > 0].mean(axis=0)
     return np.rint(rgb).clip(0, 255).astype(np.uint8)
+
+
+def _embedded_rgb(mesh) -> np.ndarray | None:
+    """(V, 3) uint8: the colour of a pymeshlab mesh's one texture held in memory (a glTF's embedded image) at each
+    vertex (`_corner_rgb`; MeshLab's v runs up the image); None without exactly one texture and its coordinates."""
+    from PIL import Image
+
+    if not mesh.has_wedge_tex_coord() or mesh.texture_number() != 1:
+        return None
+    with tempfile.TemporaryDirectory(prefix="breastplan-texture-") as folder:
+        png = Path(folder) / "texture.png"
+        next(iter(mesh.textures().values())).save(str(png))
+        image = np.asarray(Image.open(png))[::-1]
+    vertex = mesh.face_matrix().ravel()
+    return _corner_rgb(mesh.vertex_number(), vertex, mesh.wedge_tex_coord_matrix(), np.zeros(len(vertex), int),
+                       [image])
 
 
 def _image_rgb(image: np.ndarray) -> np.ndarray:
@@ -361,13 +387,27 @@ def _read_xyz(path: Path):
     return ScanArrays(table[:, :3], None, normals, [])
 
 
-_READERS = {".ply": _read_ply, ".obj": _read_mesh, ".stl": _read_mesh, ".pcd": _read_pcd, ".xyz": _read_xyz}
+def _read_gltf(path: Path) -> ScanArrays:
+    """glTF or GLB (phone scanning apps' export) through pymeshlab, all its meshes as one, with their vertex colours
+    or the colour of their one embedded texture at each vertex."""
+    _check_gltf(path)
+    read = _read_polygons(path)
+    if read is None:
+        raise _not_valid(path, "")
+    if len(read.faces) == 0:
+        raise _not_valid(path, "or holds no triangles")
+    return read
+
+
+_READERS = {".ply": _read_ply, ".obj": _read_mesh, ".stl": _read_mesh, ".pcd": _read_pcd, ".xyz": _read_xyz,
+            ".glb": _read_gltf, ".gltf": _read_gltf}
 
 
 def _read_polygons(path: Path, materials: bool = False) -> ScanArrays | None:
     """A mesh read by pymeshlab, its quads and larger polygons triangulated, with its vertex colours, or (with
-    `materials`) the colour of its texture at each vertex (MeshLab's texture-to-vertex filter); None if pymeshlab
-    cannot read it. A texture that cannot be read leaves the mesh without colour, and its `note` says so."""
+    `materials`) the colour of its texture at each vertex (MeshLab's texture-to-vertex filter), or that of the one
+    texture it holds in memory (a glTF's); None if pymeshlab cannot read it. A texture that cannot be read leaves
+    the mesh without colour, and its `note` says so."""
     import pymeshlab
 
     ms = pymeshlab.MeshSet()
@@ -385,6 +425,9 @@ def _read_polygons(path: Path, materials: bool = False) -> ScanArrays | None:
     elif ms.current_mesh().has_vertex_color():
         colours = _rgb8(ms.current_mesh().vertex_color_matrix()[:, :3])
     mesh = ms.current_mesh()
+    if not materials and colours is None and mesh.texture_number():
+        colours = _embedded_rgb(mesh)
+        note = "" if colours is not None else ", its textures (several) not used"
     return ScanArrays(mesh.vertex_matrix().astype(np.float64), mesh.face_matrix().astype(np.int64), None, [],
                       colours, note)
 
@@ -477,6 +520,28 @@ def _check_stl(path: Path) -> None:
         raise BadInputError(path, "is a binary STL file with no triangles")
     if 0 < n and size < 84 + 50 * n:
         raise _not_valid(path, f"(it declares {n:,} triangles but ends before their data does)")
+
+
+def _check_gltf(path: Path) -> None:
+    """Refuse a glTF whose JSON (a .gltf's text, a GLB's first chunk) cannot be read, a GLB whose header does not
+    match its size, and one whose meshes hold more vertices than any body scan."""
+    data = path.read_bytes()
+    if path.suffix.lower() == ".glb":
+        magic, _, length = struct.unpack_from("<4sII", data.ljust(20, b"\0"))
+        chunk, kind = struct.unpack_from("<I4s", data.ljust(20, b"\0"), 12)
+        if magic != b"glTF" or kind != b"JSON":
+            raise _not_valid(path, "(it does not start as a binary glTF does)")
+        if length != len(data) or 20 + chunk > len(data):
+            raise _not_valid(path, f"(it declares {length:,} bytes but holds {len(data):,})")
+        data = data[20: 20 + chunk]
+    try:
+        gltf = json.loads(data)
+        positions = [p["attributes"]["POSITION"] for m in gltf.get("meshes", []) for p in m["primitives"]]
+        vertices = sum(int(gltf["accessors"][k]["count"]) for k in positions)
+    except (ValueError, KeyError, IndexError, TypeError):
+        raise _not_valid(path, "(its JSON is not a glTF's meshes and accessors)") from None
+    if vertices > MAX_POINTS:
+        raise BadInputError(path, f"holds {vertices:,} vertices, more than any body scan ({MAX_POINTS:,})")
 
 
 def _check_pcd(path: Path) -> None:

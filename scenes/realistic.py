@@ -13,6 +13,7 @@ check its camera options without that cost.
 """
 from __future__ import annotations
 
+import tempfile
 from dataclasses import asdict, dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
@@ -35,7 +36,7 @@ HFOV_DEG = 72.0
 """Horizontal field of view of the depth camera (an OAK-D's stereo pair)."""
 WALL_MM = (0.0, 3000.0)
 """Range of the gap between the back and the wall."""
-SCAN_SUFFIXES = (".ply", ".obj")
+SCAN_SUFFIXES = (".ply", ".obj", ".glb")
 SCAN_UNITS = {"mm": 1.0, "m": 1000.0}
 """Units of a scan file → millimetres per unit."""
 VISIBLE_TOLERANCE_MM = 1.0
@@ -253,7 +254,8 @@ def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: s
     """Write what the camera sees as a scan file: a `.ply` holds the noise-free depth pixels (body and wall)
     back-projected, each with the colour seen there (`BodyScene.colour`); an `.obj` the body's visible
     triangles (`visible_faces`), textured as a scanner textures its mesh: the colour camera's image as
-    `NAME.png`, its material `NAME.mtl` beside it, each vertex's texture coordinate where the camera sees it.
+    `NAME.png`, its material `NAME.mtl` beside it, each vertex's texture coordinate where the camera sees it;
+    a `.glb` the same triangles, each vertex with the colour seen there (open3d's glTF writer).
     All or nothing: each file is written to `stage(file)` (an `atomic_set`'s), or in a set of its own.
     Coordinates: the body frame turned by `file_from_body(up, units)`. Returns the counts written
     (points or vertices, faces)."""
@@ -284,6 +286,9 @@ def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: s
 
     used, faces = np.unique(scene.body.faces[visible_faces(scene)], return_inverse=True)
     V = transform_points(file_from_body(up, units), scene.body.vertices[used])
+    if suffix == ".glb":
+        return _write_glb(stage(path), V, faces.reshape(-1, 3), transform_points(scene.camera_from_body,
+                                                                                 scene.body.vertices[used]), scene)
     seen = transform_points(scene.camera_from_body, scene.body.vertices[used]) @ scene.camera.K.T
     w, h = scene.camera.size
     texture = (seen[:, :2] / seen[:, 2:] + 0.5) / [w, h]                # pixel centres at (i + ½) / size
@@ -297,6 +302,22 @@ def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: s
             + ("f {}/{} {}/{} {}/{}\n" * (faces.size // 3)).format(*np.repeat(faces.ravel() + 1, 2)))
     stage(path).write_bytes(text.encode("ascii"))
     return {"points": len(V), "faces": faces.size // 3}
+
+
+def _write_glb(path: Path, vertices: np.ndarray, faces: np.ndarray, camera_mm: np.ndarray, scene: BodyScene) -> dict:
+    """A binary glTF of the triangles `faces` over `vertices` (file frame), each vertex coloured as the camera sees
+    it at `camera_mm` (its camera frame); the counts written."""
+    import open3d as o3d
+    from breastplan.ingest.depth import colours_at
+
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(faces))
+    mesh.vertex_colors = o3d.utility.Vector3dVector(colours_at(camera_mm, scene.camera.K, scene.colour) / 255.0)
+    with tempfile.TemporaryDirectory(prefix="breastplan-glb-") as folder:      # open3d goes by the extension
+        glb = Path(folder) / "scan.glb"
+        if not o3d.io.write_triangle_mesh(str(glb), mesh):
+            raise OSError(f"{path}: open3d could not write it")
+        Path(path).write_bytes(glb.read_bytes())
+    return {"points": len(vertices), "faces": len(faces)}
 
 
 def save_body_truth(path: str | Path, scene: BodyScene, frames: int) -> Path:

@@ -15,6 +15,7 @@ from breastplan.scenes.realistic import CameraOptions, file_from_body, make_body
 from breastplan.scenes.rendering import AREOLA_RGB, SKIN_RGB
 
 from clitools import run
+from gltf import write_glb
 
 K = np.array([[500.0, 0.0, 32.0], [0.0, 500.0, 24.0], [0.0, 0.0, 1.0]])
 
@@ -138,6 +139,26 @@ def test_an_obj_takes_its_colours_from_its_texture_image(tmp_path):
     assert cloud.colours is None and "its texture image not readable beside it (not used)" in cloud.description
 
 
+def test_a_glb_takes_its_colours_from_its_embedded_texture_or_its_vertices(tmp_path):
+    """A phone app's GLB: each vertex's colour is its embedded image's pixel at its texture coordinate (glTF's
+    (0, 0) the image's top left), or its COLOR_0."""
+    colours = np.random.default_rng(2).integers(0, 256, (60, 3)).astype(np.uint8)
+    _, grid, faces = _atlas_obj(tmp_path, colours)
+    side = int(np.ceil(np.sqrt(len(colours))))
+    row, col = np.divmod(np.arange(len(colours)), side)
+    image = np.zeros((side, side, 3), np.uint8)
+    image[row, col] = colours
+    uv = np.column_stack([(col + 0.5) / side, (row + 0.5) / side])
+    write_glb(tmp_path / "atlas.glb", grid, faces, uv=uv, image=image)
+    write_glb(tmp_path / "coloured.glb", grid, faces, colours=colours / 255.0)
+    for name in ("atlas.glb", "coloured.glb"):
+        read = read_scan_arrays(tmp_path / name)
+        which = {tuple(p): i for i, p in enumerate(grid)}
+        order = [which[tuple(p)] for p in read.points.astype(np.float32).astype(float)]
+        assert sorted(order) == list(range(len(grid))) and len(read.faces) == len(faces) and read.note == "", name
+        assert np.array_equal(read.colours, colours[order]), name
+
+
 def test_an_obj_keeps_its_vertex_colours():
     """OBJ's common extension, `v x y z r g b` (0..1), for triangle and polygon meshes alike."""
     with tempfile.TemporaryDirectory() as folder:
@@ -153,6 +174,13 @@ def test_a_scan_files_colour_is_kept_on_her_torso(cli, tmp_path):
                             CameraOptions(680.0, 4.0, 6.0, wall_mm=None))
     write_scan_file(tmp_path / "her.ply", scene, "mm", "+z")
     to_file = file_from_body("+z", "mm") @ np.linalg.inv(scene.camera_from_body)
+    write_scan_file(tmp_path / "her.glb", scene, "mm", "+z")                  # her visible triangles, coloured
+    glb = read_scan_file(tmp_path / "her.glb", units="mm")
+    for side in ("left", "right"):
+        nipple = transform_points(to_file, scene.nipples_camera()[side])
+        for offset, dark in ((np.zeros(3), True), (to_file[:3, :3] @ [0.0, 60.0, 0.0], False)):
+            near = np.linalg.norm(glb.points - (nipple + offset), axis=1).argsort()[:5]
+            assert all(_dark(c) == dark for c in glb.colours[near]), (side, offset, glb.colours[near])
     res = run(cli, "ingest", tmp_path / "her.ply", "--side", "right", "--up", "+z", "--out", tmp_path / "right")
     assert res.returncode == 0, res.stderr
     torso = read_ply(tmp_path / "right" / "camera.ply")

@@ -69,7 +69,7 @@ def test_the_builtin_filters_take_the_parameters_of_their_signatures():
     ptosis = {p.name: p for p in get("apply_breast_ptosis").parameters}
     assert (ptosis["degree"].type, ptosis["degree"].default, ptosis["degree"].choices) == (float, 3.0, None)
     assert ptosis["method"].choices == ("exact", "learnt") and ptosis["method"].default == "exact"
-    assert ptosis["up"].choices == ("+x", "-x", "+y", "-y", "+z", "-z")
+    assert ptosis["up"].choices == ("auto", "+x", "-x", "+y", "-y", "+z", "-z") and ptosis["up"].default == "auto"
     fit = {p.name: p for p in get("compute_breast_fit").parameters}
     assert (fit["lattice"].type, fit["lattice"].default) == (int, 5)
 

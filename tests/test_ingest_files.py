@@ -6,6 +6,8 @@ import pytest
 from breastplan import BadInputError, write_ply
 from breastplan.ingest.files import read_scan_file
 
+from gltf import write_glb
+
 SPHERE_AREA_MM2 = 4 * np.pi * 100.0**2
 
 
@@ -47,7 +49,7 @@ def grid_points_mm(n=8):
 
 # --- meshes: sampled by area, in mm -------------------------------------------------------
 
-@pytest.mark.parametrize("ext", [".stl", ".obj", ".ply"])
+@pytest.mark.parametrize("ext", [".stl", ".obj", ".ply", ".glb"])
 def test_sphere_in_metres_comes_back_in_mm_on_its_surface(tmp_path, ext):
     scan = read_scan_file(save_mesh(tmp_path / f"sphere{ext}", sphere_m()))
     r = np.linalg.norm(scan.points, axis=1)
@@ -257,6 +259,12 @@ def _bad_files(tmp_path):
     (d / "comments.xyz").write_text("# nothing here\n")
     (d / "binary.xyz").write_bytes(bytes(range(128, 256)))
     write_ply(d / "nan.ply", np.array([[0, 0, 0], [100, 0, 0], [np.nan, 0, 0]]))
+    write_glb(d / "whole.glb", grid_points_mm(), [[0, 1, 2], [1, 2, 3]])
+    (d / "truncated.glb").write_bytes((d / "whole.glb").read_bytes()[:-40])
+    (d / "zip.glb").write_bytes(b"PK\x03\x04" + bytes(64))
+    (d / "text.gltf").write_text('{"asset": {"version": "2.0"}, "meshes": [{"primitives": [{}]}]}')
+    (d / "huge.gltf").write_text('{"asset": {"version": "2.0"}, "meshes": [{"primitives": [{"attributes": '
+                                 '{"POSITION": 0}}]}], "accessors": [{"count": 300000000, "type": "VEC3"}]}')
     (d / "truncated.ply").write_bytes(write_ply(d / "whole.ply", grid_points_mm()).read_bytes()[:-10])
     return {
         "missing": (d / "missing.stl", "no such file"),
@@ -287,6 +295,10 @@ def _bad_files(tmp_path):
         "binary xyz": (d / "binary.xyz", "is not a valid XYZ file (it is not text)"),
         "nan ply": (d / "nan.ply", "NaN or infinite"),
         "truncated ply": (d / "truncated.ply", "truncated"),
+        "truncated glb": (d / "truncated.glb", "is not a valid GLB file (it declares"),
+        "zip as glb": (d / "zip.glb", "is not a valid GLB file: it is a ZIP or NPZ archive"),
+        "gltf without positions": (d / "text.gltf", "is not a valid GLTF file (its JSON is not a glTF's meshes"),
+        "gltf of 300 M vertices": (d / "huge.gltf", "holds 300,000,000 vertices, more than any body scan"),
     }
 
 

@@ -1,7 +1,8 @@
-"""A scan that wraps round her (a scanner's closed or 180° mesh, as Artec, 3dMD and Vectra export) read as well
-as a frontal view of her: the front a camera would see is chosen from the scan itself, whatever the file's axes,
-units or her turn in it."""
+"""A scan that wraps round her (a scanner's closed or 180° mesh, as Artec, 3dMD and Vectra export, or a phone app's
+GLB) read as well as a frontal view of her: the front a camera would see is chosen from the scan itself, whatever
+the file's axes, units or her turn in it, her up axis found from her body."""
 import numpy as np
+import open3d as o3d
 import pytest
 
 from breastplan import transform_points, write_ply
@@ -15,6 +16,8 @@ WRAPPED = {   # her body, her turn about her vertical axis in the file (°, +: h
     "cup 0.8, her back to the file's +z (turned 180°)": (BodyOptions(cup=0.8), 180.0, "+y", "mm", ".obj"),
     "heavy, arms down, turned 35°, Z up, metres": (BodyOptions(cup=0.6, weight=0.8, pose="arms-down"), 35.0, "+z",
                                                     "m", ".ply"),
+    "cup 0.9, soft, A-pose, turned −40°, −X up, a GLB in metres": (BodyOptions(cup=0.9, firmness=0.2), -40.0, "-x",
+                                                                    "m", ".glb"),
 }
 
 
@@ -32,6 +35,9 @@ def _write_closed(path, body, to_file: np.ndarray) -> None:
     V, F = transform_points(to_file, body.vertices), body.faces
     if path.suffix == ".ply":
         write_ply(path, V, faces=F)
+    elif path.suffix == ".glb":
+        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
+        assert o3d.io.write_triangle_mesh(str(path), mesh)
     else:
         path.write_text(("v {:.6f} {:.6f} {:.6f}\n" * len(V)).format(*V.ravel())
                         + ("f {} {} {}\n" * len(F)).format(*(F.ravel() + 1)))
