@@ -1,0 +1,142 @@
+"""Scanners' wrapped meshes read as well as a frontal view of her, with a frontal export of the same body as the
+baseline in the same run.
+
+1. Closed bodies: MakeHuman bodies (`scenes.makehuman`) of varied cup, firmness, weight and pose, each written as
+   its whole closed mesh (front, sides and back, as Artec and 3dMD export) in a file format (OBJ, PLY, GLB), in
+   units (mm, m), with her up on one of the file's six signed axes and her turned about her vertical axis, and
+   read with no --up (`ingest_sides`, her up found from her body). Per body: was the up found right; both
+   nipples' distance from MakeHuman's (target: median ≤ 3 mm, worst ≤ 8 mm); her volume on her skin
+   (`measure_scans`) against that of a camera's frontal export of the same body (`write_scan_file`, an OBJ of the
+   triangles a camera at 680 mm sees): within the frontal volume's stated ± (target), and by how much.
+2. Speed: a closed body subdivided to over 1 M vertices, as a binary PLY in metres with Z up, read and both
+   breasts isolated (`ingest_sides`, no --up), median of REPEATS after a warm-up (target ≤ 3 s); the baseline is
+   the frontal OBJ export of the same body, read and isolated alternately in the same run.
+
+    .venv/bin/python benchmarks/bench_wrapped.py [--quick]
+"""
+from __future__ import annotations
+
+import json
+import statistics
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import open3d as o3d
+
+from breastplan import transform_points, write_ply
+from breastplan.ingest.scan import ingest_sides
+from breastplan.options import IngestOptions
+from breastplan.plan.compute import measure_scans
+from breastplan.scenes.makehuman import BodyOptions, make_body
+from breastplan.scenes.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
+
+sys.path.insert(0, str(Path(__file__).parent))
+from timing import median_times, repeats_argument  # noqa: E402
+
+BODIES = [  # (name, body, her turn about her vertical axis (°), up in the file, units, format)
+    ("cup 0.8, her back to the viewer", BodyOptions(cup=0.8), 180.0, "+y", "mm", ".obj"),
+    ("heavy, arms down", BodyOptions(cup=0.6, weight=0.8, pose="arms-down"), 35.0, "+z", "m", ".ply"),
+    ("cup 0.9, soft", BodyOptions(cup=0.9, firmness=0.2), -40.0, "-x", "m", ".glb"),
+    ("small, firm, hands on hips", BodyOptions(cup=0.3, firmness=0.8, pose="hands-on-hips"), 20.0, "-y", "mm",
+     ".obj"),
+    ("slim, muscular", BodyOptions(cup=0.6, weight=0.3, muscle=0.7), -15.0, "-z", "mm", ".ply"),
+    ("asymmetric, arms down", BodyOptions(cup=0.7, modifiers={"asymmetry": 0.5}, pose="arms-down"), 45.0, "+x",
+     "m", ".glb"),
+]
+MILLION = 1_000_000
+
+
+def _turned(deg: float) -> np.ndarray:
+    a = np.radians(deg)
+    T = np.eye(4)
+    T[0, 0] = T[2, 2] = np.cos(a)
+    T[0, 2], T[2, 0] = np.sin(a), -np.sin(a)
+    return T
+
+
+def write_closed(path: Path, vertices: np.ndarray, faces: np.ndarray) -> Path:
+    """A closed mesh (file frame) as PLY (breastplan's writer), OBJ (text) or GLB (open3d's writer)."""
+    if path.suffix == ".ply":
+        write_ply(path, vertices, faces=faces)
+    elif path.suffix == ".glb":
+        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(faces))
+        assert o3d.io.write_triangle_mesh(str(path), mesh)
+    else:
+        path.write_text(("v {:.6f} {:.6f} {:.6f}\n" * len(vertices)).format(*vertices.ravel())
+                        + ("f {} {} {}\n" * len(faces)).format(*(faces.ravel() + 1)))
+    return path
+
+
+def both(path: Path) -> dict:
+    return dict(zip(("left", "right"), ingest_sides(path, [IngestOptions(s) for s in ("left", "right")])))
+
+
+def closed_body(folder: Path, name, options, deg, up, units, suffix) -> dict:
+    body = make_body(options)
+    to_file = file_from_body(up, units) @ _turned(deg)
+    scans = both(write_closed(folder / f"closed{suffix}", transform_points(to_file, body.vertices), body.faces))
+    mm = 1000.0 if units == "m" else 1.0
+    errors = [float(np.linalg.norm(s.nipple_camera_mm - mm * transform_points(to_file, body.nipples[side][None])[0]))
+              for side, s in scans.items()]
+    found = all(f"up {up} (found" in s.source.description for s in scans.values())
+    frontal = make_body_scene(options, CameraOptions(680.0, 5.0, 0.0, wall_mm=None))
+    write_scan_file(folder / "front.obj", frontal, "mm", "+y")
+    wrapped, front = measure_scans(scans).sides, measure_scans(both(folder / "front.obj")).sides
+    volumes = {side: (wrapped[side].volume_cc, front[side].volume_cc, front[side].uncertainty_cc) for side in wrapped}
+    return {"name": f"{name}; turned {deg:g}°, {up} up, {units}, {suffix[1:].upper()}", "up_found": found,
+            "nipple_mm": errors, "volumes": volumes}
+
+
+def million(folder: Path, repeats: int) -> dict:
+    """Seconds to read and isolate both breasts of a closed body of over 1 M vertices, and of its frontal OBJ."""
+    options = BodyOptions(cup=0.8)
+    body = make_body(options)
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(body.vertices), o3d.utility.Vector3iVector(body.faces))
+    mesh = mesh.subdivide_loop(1).simplify_quadric_decimation(MILLION // 32 + 1000).subdivide_midpoint(3)
+    V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    big = write_closed(folder / "million.ply", transform_points(file_from_body("+z", "m"), V), F)
+    write_scan_file(folder / "front.obj", make_body_scene(options, CameraOptions(680.0, 5.0, 0.0, wall_mm=None)),
+                    "mm", "+y")
+    wrapped, frontal = median_times(lambda: both(big), lambda: both(folder / "front.obj"), repeats)
+    return {"vertices": len(V), "faces": len(F), "seconds": wrapped, "frontal_seconds": frontal}
+
+
+def main() -> None:
+    repeats = repeats_argument(__doc__.splitlines()[0], 3, 1)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="bench-wrapped-") as tmp:
+        folder = Path(tmp)
+        for args in BODIES:
+            rows.append(closed_body(folder, *args))
+            r = rows[-1]
+            print(f"{r['name']}: up found {r['up_found']}, nipples {r['nipple_mm'][0]:.1f} / {r['nipple_mm'][1]:.1f} mm,"
+                  " volumes " + ", ".join(f"{s} {w:.0f} vs {f:.0f} ± {u:.0f} cc" for s, (w, f, u) in
+                                           r["volumes"].items()), flush=True)
+        speed = million(folder, repeats)
+    errors = [e for r in rows for e in r["nipple_mm"]]
+    more = [(w - f) / f for r in rows for w, f, _ in r["volumes"].values()]
+    within = [abs(w - f) <= u for r in rows for w, f, u in r["volumes"].values()]
+    figures = {
+        "up_found": f"{sum(r['up_found'] for r in rows)}/{len(rows)}",
+        "nipple_median_mm": statistics.median(errors), "nipple_worst_mm": max(errors),
+        "volume_within_frontal_uncertainty": f"{sum(within)}/{len(within)}",
+        "volume_more_than_frontal": [min(more), statistics.median(more), max(more)],
+        **{f"million_{k}": v for k, v in speed.items()},
+    }
+    print(f"\n| closed bodies ({len(rows)}, no --up) | measured | target | met |\n|---|---:|---:|:-:|")
+    print(f"| up axis found | {figures['up_found']} | all | {'✔' if all(r['up_found'] for r in rows) else '✗'} |")
+    print(f"| nipple error, median (worst) | {figures['nipple_median_mm']:.1f} mm ({max(errors):.1f} mm) | ≤ 3 mm "
+          f"(≤ 8 mm) | {'✔' if figures['nipple_median_mm'] <= 3 and max(errors) <= 8 else '✗'} |")
+    print(f"| volume within the frontal export's ± | {figures['volume_within_frontal_uncertainty']} | all | "
+          f"{'✔' if all(within) else '✗'} |")
+    spread = ", ".join(f"{m:+.1%}" for m in figures["volume_more_than_frontal"])
+    print(f"| volume against the frontal export's: least, median, most | {spread} | — | |")
+    print(f"| read + both breasts, {speed['vertices']:,} vertices (frontal OBJ in the same run) | "
+          f"{speed['seconds']:.2f} s ({speed['frontal_seconds']:.2f} s) | ≤ 3 s | {'✔' if speed['seconds'] <= 3 else '✗'} |")
+    print(json.dumps({k: (round(v, 3) if isinstance(v, float) else v) for k, v in figures.items()}))
+
+
+if __name__ == "__main__":
+    main()
