@@ -202,6 +202,23 @@ def case(tmp_path_factory, cli):
     return folder
 
 
+def test_fit_command_refuses_a_volume_no_breast_holds_and_writes_nothing(cli, case, tmp_path):
+    """Her scan's chest wall moved 60 mm nearer the camera, in front of her breast's base (scan.npz edited): the
+    model's volume down to it is negative, which no breast holds; `fit` exits 3 with one sentence naming the
+    case, and writes no fit."""
+    copy = tmp_path / "moved"
+    shutil.copytree(case, copy)
+    with np.load(copy / "scan.npz", allow_pickle=False) as npz:
+        arrays = dict(npz)
+    arrays["chest_wall"] = arrays["chest_wall"].copy()
+    arrays["chest_wall"][4] -= 60.0                        # [degree, x0, y0, σ, constant term, …]: z 60 mm nearer
+    np.savez(copy / "scan.npz", **arrays)
+    res = run(cli, "fit", copy)
+    assert_bad_input(res, copy, copy)
+    assert "a negative volume" in res.stderr, res.stderr
+    assert not (copy / "fit.npz").exists() and not (copy / "fit.ply").exists()
+
+
 def test_fit_command_writes_the_artefacts_it_reports(cli, case):
     res = run(cli, "fit", case, "--json")
     assert res.returncode == 0, res.stderr
