@@ -30,7 +30,8 @@ from breastplan.ingest.scan import ingest_sides
 from breastplan.options import IngestOptions
 from breastplan.plan.compute import measure_scans
 from breastplan.scenes.makehuman import BodyOptions, make_body
-from breastplan.scenes.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
+from breastplan.scenes.realistic import (CameraOptions, file_from_body, make_body_scene, turned, write_closed_scan,
+                                        write_scan_file)
 
 sys.path.insert(0, str(Path(__file__).parent))
 from timing import median_times, repeats_argument  # noqa: E402
@@ -48,35 +49,14 @@ BODIES = [  # (name, body, her turn about her vertical axis (°), up in the file
 MILLION = 1_000_000
 
 
-def _turned(deg: float) -> np.ndarray:
-    a = np.radians(deg)
-    T = np.eye(4)
-    T[0, 0] = T[2, 2] = np.cos(a)
-    T[0, 2], T[2, 0] = np.sin(a), -np.sin(a)
-    return T
-
-
-def write_closed(path: Path, vertices: np.ndarray, faces: np.ndarray) -> Path:
-    """A closed mesh (file frame) as PLY (breastplan's writer), OBJ (text) or GLB (open3d's writer)."""
-    if path.suffix == ".ply":
-        write_ply(path, vertices, faces=faces)
-    elif path.suffix == ".glb":
-        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(faces))
-        assert o3d.io.write_triangle_mesh(str(path), mesh)
-    else:
-        path.write_text(("v {:.6f} {:.6f} {:.6f}\n" * len(vertices)).format(*vertices.ravel())
-                        + ("f {} {} {}\n" * len(faces)).format(*(faces.ravel() + 1)))
-    return path
-
-
 def both(path: Path) -> dict:
     return dict(zip(("left", "right"), ingest_sides(path, [IngestOptions(s) for s in ("left", "right")])))
 
 
 def closed_body(folder: Path, name, options, deg, up, units, suffix) -> dict:
     body = make_body(options)
-    to_file = file_from_body(up, units) @ _turned(deg)
-    scans = both(write_closed(folder / f"closed{suffix}", transform_points(to_file, body.vertices), body.faces))
+    to_file = file_from_body(up, units) @ turned(deg)
+    scans = both(write_closed_scan(folder / f"closed{suffix}", body, to_file))
     mm = 1000.0 if units == "m" else 1.0
     errors = [float(np.linalg.norm(s.nipple_camera_mm - mm * transform_points(to_file, body.nipples[side][None])[0]))
               for side, s in scans.items()]
@@ -96,7 +76,8 @@ def million(folder: Path, repeats: int) -> dict:
     mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(body.vertices), o3d.utility.Vector3iVector(body.faces))
     mesh = mesh.subdivide_loop(1).simplify_quadric_decimation(MILLION // 32 + 1000).subdivide_midpoint(3)
     V, F = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
-    big = write_closed(folder / "million.ply", transform_points(file_from_body("+z", "m"), V), F)
+    big = folder / "million.ply"
+    write_ply(big, transform_points(file_from_body("+z", "m"), V), faces=F)
     write_scan_file(folder / "front.obj", make_body_scene(options, CameraOptions(680.0, 5.0, 0.0, wall_mm=None)),
                     "mm", "+y")
     wrapped, frontal = median_times(lambda: both(big), lambda: both(folder / "front.obj"), repeats)
@@ -111,7 +92,8 @@ def main() -> None:
         for args in BODIES:
             rows.append(closed_body(folder, *args))
             r = rows[-1]
-            print(f"{r['name']}: up found {r['up_found']}, nipples {r['nipple_mm'][0]:.1f} / {r['nipple_mm'][1]:.1f} mm,"
+            nipples = " / ".join(f"{e:.1f}" for e in r["nipple_mm"])
+            print(f"{r['name']}: up found {r['up_found']}, nipples {nipples} mm,"
                   " volumes " + ", ".join(f"{s} {w:.0f} vs {f:.0f} ± {u:.0f} cc" for s, (w, f, u) in
                                            r["volumes"].items()), flush=True)
         speed = million(folder, repeats)
@@ -134,7 +116,8 @@ def main() -> None:
     spread = ", ".join(f"{m:+.1%}" for m in figures["volume_more_than_frontal"])
     print(f"| volume against the frontal export's: least, median, most | {spread} | — | |")
     print(f"| read + both breasts, {speed['vertices']:,} vertices (frontal OBJ in the same run) | "
-          f"{speed['seconds']:.2f} s ({speed['frontal_seconds']:.2f} s) | ≤ 3 s | {'✔' if speed['seconds'] <= 3 else '✗'} |")
+          f"{speed['seconds']:.2f} s ({speed['frontal_seconds']:.2f} s) | ≤ 3 s | "
+          f"{'✔' if speed['seconds'] <= 3 else '✗'} |")
     print(json.dumps({k: (round(v, 3) if isinstance(v, float) else v) for k, v in figures.items()}))
 
 

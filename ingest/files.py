@@ -302,7 +302,8 @@ def _texture_rgb(mesh) -> np.ndarray | None:
     return _corner_rgb(len(mesh.vertices), vertex, uv, corner, images)
 
 
-def _corner_rgb(n_vertices: int, vertex: np.ndarray, uv: np.ndarray, corner: np.ndarray, images: list) -> np.ndarray | None:
+def _corner_rgb(n_vertices: int, vertex: np.ndarray, uv: np.ndarray, corner: np.ndarray,
+                images: list) -> np.ndarray | None:
     """(V, 3) uint8 at each of `n_vertices`: the mean over the triangle corners on it (`vertex`, (3M,)) of the texel
     each corner's `uv` (3M, 2) falls in, of the image `corner` (3M,) indexes in `images` (arrays whose rows run
     with v; None: unreadable); None when no corner falls in a readable image."""

@@ -181,6 +181,15 @@ assert set(UP_ROTATIONS) == set(UP_AXES)
 _BODY_DIRECTIONS = {(0, 1): "left", (0, -1): "right", (1, 1): "up", (1, -1): "down", (2, 1): "front", (2, -1): "back"}
 
 
+def turned(deg: float) -> np.ndarray:
+    """(4, 4) the body frame turned `deg` about her vertical axis (Y; positive: her left side forward)."""
+    a = np.radians(deg)
+    T = np.eye(4)
+    T[0, 0] = T[2, 2] = np.cos(a)
+    T[0, 2], T[2, 0] = np.sin(a), -np.sin(a)
+    return T
+
+
 def file_from_body(up: str, units: str) -> np.ndarray:
     """(4, 4) body frame (mm) → a scan file's frame: turned so that the body's up (Y) lies on `up`
     (one of options.UP_AXES), scaled to `units` (mm or m)."""
@@ -302,6 +311,27 @@ def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: s
             + ("f {}/{} {}/{} {}/{}\n" * (faces.size // 3)).format(*np.repeat(faces.ravel() + 1, 2)))
     stage(path).write_bytes(text.encode("ascii"))
     return {"points": len(V), "faces": faces.size // 3}
+
+
+def write_closed_scan(path: str | Path, body: Body, to_file: np.ndarray) -> Path:
+    """Her whole closed body mesh — front, sides and back, as a 360° scanner exports it — in the file frame
+    `to_file` (4, 4; from the body frame, mm), as PLY (binary), OBJ (text) or GLB (open3d's writer)."""
+    path = Path(path)
+    V, F = transform_points(to_file, body.vertices), body.faces
+    if path.suffix == ".ply":
+        write_ply(path, V, faces=F)
+    elif path.suffix == ".glb":
+        import open3d as o3d
+
+        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
+        if not o3d.io.write_triangle_mesh(str(path), mesh):
+            raise OSError(f"{path}: open3d could not write it")
+    elif path.suffix == ".obj":
+        path.write_text(("v {:.6f} {:.6f} {:.6f}\n" * len(V)).format(*V.ravel())
+                        + ("f {} {} {}\n" * len(F)).format(*(F.ravel() + 1)))
+    else:
+        raise OptionError("path", f"a closed scan ends in .ply, .obj or .glb, not '{path.suffix}'")
+    return path
 
 
 def _write_glb(path: Path, vertices: np.ndarray, faces: np.ndarray, camera_mm: np.ndarray, scene: BodyScene) -> dict:

@@ -10,18 +10,10 @@ from breastplan.ingest.pipeline import upright_frame
 from breastplan.options import UP_AXES
 from breastplan.point_order import canonical_order
 from breastplan.scenes.makehuman import BodyOptions, make_body
-from breastplan.scenes.realistic import file_from_body
+from breastplan.scenes.realistic import file_from_body, turned
 
 TURN_DEG = -30.0
 """Her turn about her vertical axis in the files (her right side forward)."""
-
-
-def _turned(deg: float) -> np.ndarray:
-    a = np.radians(deg)
-    T = np.eye(4)
-    T[0, 0] = T[2, 2] = np.cos(a)
-    T[0, 2], T[2, 0] = np.sin(a), -np.sin(a)
-    return T
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +28,7 @@ def surface():
 
 def _found(points: np.ndarray, up: str):
     """upright_frame of `points` (body frame) written with the body's up on the file's `up`, turned TURN_DEG."""
-    to_file = file_from_body(up, "mm") @ _turned(TURN_DEG)
+    to_file = file_from_body(up, "mm") @ turned(TURN_DEG)
     inside = transform_points(to_file, points)
     return upright_frame(inside[canonical_order(inside)]), to_file
 

@@ -2,15 +2,15 @@
 GLB) read as well as a frontal view of her: the front a camera would see is chosen from the scan itself, whatever
 the file's axes, units or her turn in it, her up axis found from her body."""
 import numpy as np
-import open3d as o3d
 import pytest
 
-from breastplan import transform_points, write_ply
+from breastplan import transform_points
 from breastplan.ingest.scan import ingest_sides
 from breastplan.options import IngestOptions
 from breastplan.plan.compute import measure_scans
 from breastplan.scenes.makehuman import BodyOptions, make_body
-from breastplan.scenes.realistic import CameraOptions, file_from_body, make_body_scene, write_scan_file
+from breastplan.scenes.realistic import (CameraOptions, file_from_body, make_body_scene, turned, write_closed_scan,
+                                        write_scan_file)
 
 WRAPPED = {   # her body, her turn about her vertical axis in the file (°, +: her left forward), its up, units, format
     "cup 0.8, her back to the file's +z (turned 180°)": (BodyOptions(cup=0.8), 180.0, "+y", "mm", ".obj"),
@@ -19,28 +19,6 @@ WRAPPED = {   # her body, her turn about her vertical axis in the file (°, +: h
     "cup 0.9, soft, A-pose, turned −40°, −X up, a GLB in metres": (BodyOptions(cup=0.9, firmness=0.2), -40.0, "-x",
                                                                     "m", ".glb"),
 }
-
-
-def _turned(deg: float) -> np.ndarray:
-    """(4, 4) her body turned `deg` about her vertical axis (MakeHuman's Y)."""
-    a = np.radians(deg)
-    T = np.eye(4)
-    T[0, 0] = T[2, 2] = np.cos(a)
-    T[0, 2], T[2, 0] = np.sin(a), -np.sin(a)
-    return T
-
-
-def _write_closed(path, body, to_file: np.ndarray) -> None:
-    """Her whole closed body mesh, every triangle (front, sides and back), in the file frame `to_file`."""
-    V, F = transform_points(to_file, body.vertices), body.faces
-    if path.suffix == ".ply":
-        write_ply(path, V, faces=F)
-    elif path.suffix == ".glb":
-        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
-        assert o3d.io.write_triangle_mesh(str(path), mesh)
-    else:
-        path.write_text(("v {:.6f} {:.6f} {:.6f}\n" * len(V)).format(*V.ravel())
-                        + ("f {} {} {}\n" * len(F)).format(*(F.ravel() + 1)))
 
 
 def _read(path) -> dict:
@@ -54,8 +32,8 @@ def wrapped(request, tmp_path_factory):
     options, deg, up, units, suffix = WRAPPED[request.param]
     folder = tmp_path_factory.mktemp("wrapped")
     body = make_body(options)
-    to_file = file_from_body(up, units) @ _turned(deg)
-    _write_closed(folder / f"closed{suffix}", body, to_file)
+    to_file = file_from_body(up, units) @ turned(deg)
+    write_closed_scan(folder / f"closed{suffix}", body, to_file)
     scans = _read(folder / f"closed{suffix}")
     assert f"up {up} (found: her head" in scans["left"].source.description
     mm = 1000.0 if units == "m" else 1.0
