@@ -190,7 +190,8 @@ def _cause(exc: BaseException) -> str:
 @contextlib.contextmanager
 def _cluster(scheduler: str | None, jobs: int):
     """A quiet LocalCluster of `jobs` single-threaded worker processes (DASK_WORKER_CONFIG), unless a
-    scheduler is given (None then)."""
+    scheduler is given (None then). Its logs are silenced below CRITICAL: a worker whose heartbeat meets the
+    scheduler closing at the batch's end logs a traceback at ERROR, and a batch reports its cases itself."""
     if scheduler is not None:
         yield None
         return
@@ -199,7 +200,8 @@ def _cluster(scheduler: str | None, jobs: int):
 
     one_thread_environment()                      # inherited by the worker processes
     with dask.config.set(DASK_WORKER_CONFIG), LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
-                                                           dashboard_address=None, silence_logs=logging.ERROR) as cluster:
+                                                           dashboard_address=None,
+                                                           silence_logs=logging.CRITICAL) as cluster:
         yield cluster
 
 
