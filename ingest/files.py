@@ -412,8 +412,9 @@ def _read_polygons(path: Path, materials: bool = False) -> ScanArrays | None:
     import pymeshlab
 
     ms = pymeshlab.MeshSet()
+    gltf = {"load_in_a_single_layer": True} if path.suffix.lower() in (".glb", ".gltf") else {}
     try:
-        ms.load_new_mesh(str(path))
+        ms.load_new_mesh(str(path), **gltf)                   # a glTF's nodes as one mesh, each placed
     except pymeshlab.PyMeshLabException:
         return None
     colours, note = None, ""

@@ -11,9 +11,9 @@ FLOAT, UINT = 5126, 5125
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 
 
-def write_glb(path, vertices, faces, colours=None, uv=None, image=None) -> None:
+def write_glb(path, vertices, faces, colours=None, uv=None, image=None, places=((0.0, 0.0, 0.0),)) -> None:
     """vertices (N, 3); faces (M, 3); colours (N, 3) in 0..1; uv (N, 2), glTF's (0, 0) the image's top left,
-    with `image` (H, W, 3) uint8."""
+    with `image` (H, W, 3) uint8; the mesh placed once per translation in `places` (a node each)."""
     from PIL import Image
 
     chunks, views, accessors = [], [], []
@@ -34,7 +34,8 @@ def write_glb(path, vertices, faces, colours=None, uv=None, image=None) -> None:
     primitive = {"attributes": attributes,
                  "indices": add(F.tobytes(), ELEMENT_ARRAY_BUFFER, {"componentType": UINT, "count": len(F),
                                                                     "type": "SCALAR"})}
-    gltf = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+    gltf = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": list(range(len(places)))}],
+            "nodes": [{"mesh": 0, "translation": [float(v) for v in t]} for t in places],
             "meshes": [{"primitives": [primitive]}]}
     if colours is not None:
         attributes["COLOR_0"] = add(np.asarray(colours, np.float32).tobytes(), ARRAY_BUFFER,

@@ -4,7 +4,7 @@ import open3d as o3d
 import pytest
 
 from breastplan import BadInputError, write_ply
-from breastplan.ingest.files import read_scan_file
+from breastplan.ingest.files import read_scan_arrays, read_scan_file
 
 from gltf import write_glb
 
@@ -60,6 +60,15 @@ def test_sphere_in_metres_comes_back_in_mm_on_its_surface(tmp_path, ext):
     assert scan.points.dtype == np.float64 and scan.points.shape[1] == 3
     assert scan.frame_hint is None
     assert f"sphere{ext}" in scan.description and "units m" in scan.description
+
+
+def test_a_gltf_of_several_nodes_is_read_as_one_mesh_each_node_in_its_place(tmp_path):
+    """A phone app's glTF may hold a scan in pieces, one node each with its own translation."""
+    square = np.array([[0, 0, 0], [100, 0, 0], [0, 100, 0], [100, 100, 0]], float)
+    write_glb(tmp_path / "two.glb", square, [[0, 1, 2], [1, 3, 2]], places=((0, 0, 0), (300, 0, 0)))
+    read = read_scan_arrays(tmp_path / "two.glb")
+    assert len(read.points) == 8 and len(read.faces) == 4
+    assert sorted(map(tuple, read.points.round(3))) == sorted(map(tuple, np.vstack([square, square + [300, 0, 0]])))
 
 
 def test_box_points_lie_on_its_faces_with_face_normals(tmp_path):
