@@ -526,7 +526,7 @@ def _check_stl(path: Path) -> None:
 
 def _check_gltf(path: Path) -> None:
     """Refuse a glTF whose JSON (a .gltf's text, a GLB's first chunk) cannot be read, a GLB whose header does not
-    match its size, and one whose meshes hold more vertices than any body scan."""
+    match its size, and one whose meshes, as its nodes place them, hold more vertices than any body scan."""
     data = path.read_bytes()
     if path.suffix.lower() == ".glb":
         magic, _, length = struct.unpack_from("<4sII", data.ljust(20, b"\0"))
@@ -538,8 +538,10 @@ def _check_gltf(path: Path) -> None:
         data = data[20: 20 + chunk]
     try:
         gltf = json.loads(data)
-        positions = [p["attributes"]["POSITION"] for m in gltf.get("meshes", []) for p in m["primitives"]]
-        vertices = sum(int(gltf["accessors"][k]["count"]) for k in positions)
+        meshes = [sum(int(gltf["accessors"][p["attributes"]["POSITION"]]["count"]) for p in m["primitives"])
+                  for m in gltf.get("meshes", [])]
+        placed = [n["mesh"] for n in gltf.get("nodes", []) if "mesh" in n]     # a mesh counts once per node
+        vertices = sum(meshes[k] for k in placed) if placed else sum(meshes)
     except (ValueError, KeyError, IndexError, TypeError):
         raise _not_valid(path, "(its JSON is not a glTF's meshes and accessors)") from None
     if vertices > MAX_POINTS:

@@ -1,4 +1,6 @@
 """Scan files → mm point clouds (ingest/files.py): formats, surface sampling, units, bad input."""
+import json
+
 import numpy as np
 import open3d as o3d
 import pytest
@@ -272,6 +274,9 @@ def _bad_files(tmp_path):
     (d / "truncated.glb").write_bytes((d / "whole.glb").read_bytes()[:-40])
     (d / "zip.glb").write_bytes(b"PK\x03\x04" + bytes(64))
     (d / "text.gltf").write_text('{"asset": {"version": "2.0"}, "meshes": [{"primitives": [{}]}]}')
+    (d / "placed.gltf").write_text('{"asset": {"version": "2.0"}, "meshes": [{"primitives": [{"attributes": '
+                                   '{"POSITION": 0}}]}], "accessors": [{"count": 100000, "type": "VEC3"}], '
+                                   '"nodes": ' + json.dumps([{"mesh": 0}] * 300) + '}')
     (d / "huge.gltf").write_text('{"asset": {"version": "2.0"}, "meshes": [{"primitives": [{"attributes": '
                                  '{"POSITION": 0}}]}], "accessors": [{"count": 300000000, "type": "VEC3"}]}')
     (d / "truncated.ply").write_bytes(write_ply(d / "whole.ply", grid_points_mm()).read_bytes()[:-10])
@@ -308,6 +313,7 @@ def _bad_files(tmp_path):
         "zip as glb": (d / "zip.glb", "is not a valid GLB file: it is a ZIP or NPZ archive"),
         "gltf without positions": (d / "text.gltf", "is not a valid GLTF file (its JSON is not a glTF's meshes"),
         "gltf of 300 M vertices": (d / "huge.gltf", "holds 300,000,000 vertices, more than any body scan"),
+        "gltf placing a mesh 300 times": (d / "placed.gltf", "holds 30,000,000 vertices, more than any body scan"),
     }
 
 
