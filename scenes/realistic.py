@@ -296,8 +296,11 @@ def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: s
     used, faces = np.unique(scene.body.faces[visible_faces(scene)], return_inverse=True)
     V = transform_points(file_from_body(up, units), scene.body.vertices[used])
     if suffix == ".glb":
-        return _write_glb(stage(path), V, faces.reshape(-1, 3), transform_points(scene.camera_from_body,
-                                                                                 scene.body.vertices[used]), scene)
+        from breastplan.ingest.depth import colours_at
+
+        seen_at = transform_points(scene.camera_from_body, scene.body.vertices[used])
+        _write_glb(stage(path), V, faces.reshape(-1, 3), colours_at(seen_at, scene.camera.K, scene.colour))
+        return {"points": len(V), "faces": faces.size // 3}
     seen = transform_points(scene.camera_from_body, scene.body.vertices[used]) @ scene.camera.K.T
     w, h = scene.camera.size
     texture = (seen[:, :2] / seen[:, 2:] + 0.5) / [w, h]                # pixel centres at (i + ½) / size
@@ -321,11 +324,7 @@ def write_closed_scan(path: str | Path, body: Body, to_file: np.ndarray) -> Path
     if path.suffix == ".ply":
         write_ply(path, V, faces=F)
     elif path.suffix == ".glb":
-        import open3d as o3d
-
-        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
-        if not o3d.io.write_triangle_mesh(str(path), mesh):
-            raise OSError(f"{path}: open3d could not write it")
+        _write_glb(path, V, F)
     elif path.suffix == ".obj":
         path.write_text(("v {:.6f} {:.6f} {:.6f}\n" * len(V)).format(*V.ravel())
                         + ("f {} {} {}\n" * len(F)).format(*(F.ravel() + 1)))
@@ -334,20 +333,19 @@ def write_closed_scan(path: str | Path, body: Body, to_file: np.ndarray) -> Path
     return path
 
 
-def _write_glb(path: Path, vertices: np.ndarray, faces: np.ndarray, camera_mm: np.ndarray, scene: BodyScene) -> dict:
-    """A binary glTF of the triangles `faces` over `vertices` (file frame), each vertex coloured as the camera sees
-    it at `camera_mm` (its camera frame); the counts written."""
+def _write_glb(path: Path, vertices: np.ndarray, faces: np.ndarray, rgb: np.ndarray | None = None) -> None:
+    """A binary glTF (open3d's writer) of the triangles `faces` over `vertices`, each vertex of colour `rgb`
+    ((V, 3) uint8) if given, at `path` whatever its name ends in (open3d goes by the extension)."""
     import open3d as o3d
-    from breastplan.ingest.depth import colours_at
 
     mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(faces))
-    mesh.vertex_colors = o3d.utility.Vector3dVector(colours_at(camera_mm, scene.camera.K, scene.colour) / 255.0)
-    with tempfile.TemporaryDirectory(prefix="breastplan-glb-") as folder:      # open3d goes by the extension
+    if rgb is not None:
+        mesh.vertex_colors = o3d.utility.Vector3dVector(np.asarray(rgb) / 255.0)
+    with tempfile.TemporaryDirectory(prefix="breastplan-glb-") as folder:
         glb = Path(folder) / "scan.glb"
         if not o3d.io.write_triangle_mesh(str(glb), mesh):
             raise OSError(f"{path}: open3d could not write it")
         Path(path).write_bytes(glb.read_bytes())
-    return {"points": len(vertices), "faces": len(faces)}
 
 
 def save_body_truth(path: str | Path, scene: BodyScene, frames: int) -> Path:
