@@ -162,6 +162,19 @@ def test_a_torso_that_shows_too_little_chest_around_the_breasts_is_refused_in_a_
         measure_breasts(Body(torso[near | neck], view_from, plumb), nipples)
 
 
+def test_skin_that_stands_two_metres_in_front_of_her_chest_is_no_breast_and_is_refused_in_a_sentence():
+    """Her breasts' skin moved 2 m towards the camera (a forged or mis-merged scan): some 15 litres stand in
+    front of her chest wall, more than any breast holds; said (BadInputError), never a volume."""
+    from breastplan import BadInputError
+
+    torso, nipples, view_from, plumb, _ = scanned(SYMMETRIC)
+    towards = -view_from[2, :3] * 2000.0                      # the viewing frame's z runs away from the camera
+    near = np.min([np.linalg.norm(torso - n, axis=1) for n in nipples.values()], axis=0) < 70.0
+    moved = torso + near[:, None] * towards
+    with pytest.raises(BadInputError, match="more than any breast holds"):
+        measure_breasts(Body(moved, view_from, plumb), {s: n + towards for s, n in nipples.items()})
+
+
 @pytest.mark.parametrize("cc, problem", [(float("nan"), "not a number"), (-1.0, "a negative volume"),
                                          (12_001.0, "more than any breast holds (12,000 cc)"), (0.0, None),
                                          (4_500.0, None), (12_000.0, None)])
