@@ -131,10 +131,16 @@ BALL_RADII_MM = (1.6 * TORSO_MM, 2.4 * TORSO_MM)
 cannot cross), mm."""
 
 
+CRACK_EDGES = 60
+"""Holes of that surface bounded by at most this many edges are closed (pymeshlab's hole filling): the cracks a
+wrapped scan's front leaves where her chest just below a breast was hidden from the viewer behind it."""
+
+
 def surface_triangles(points_view: np.ndarray) -> np.ndarray:
     """(F, 3) vertex indices of a triangle surface over points of her skin (viewing frame, mm) that need not be one
     camera's view (a scan file's): pymeshlab's ball pivoting (BALL_RADII_MM) over their normals (turned towards
-    the viewer), each triangle wound so that its normal faces the viewer, without those with an edge over GAP_MM."""
+    the viewer), cracks closed (CRACK_EDGES; the pivoted surface as it is where pymeshlab cannot close them), each
+    triangle wound so that its normal faces the viewer, without those with an edge over GAP_MM."""
     import pymeshlab
 
     ms = pymeshlab.MeshSet()
@@ -142,7 +148,15 @@ def surface_triangles(points_view: np.ndarray) -> np.ndarray:
     ms.compute_normal_for_point_clouds(k=10, viewpos=np.zeros(3))
     for radius in BALL_RADII_MM:
         ms.generate_surface_reconstruction_ball_pivoting(ballradius=pymeshlab.PureValue(radius))
-    faces = ms.current_mesh().face_matrix().astype(np.int64)
+    pivoted = ms.current_mesh().face_matrix().astype(np.int64)
+    try:                                                   # faces only: her points stay the mesh's vertices
+        ms.meshing_repair_non_manifold_edges()
+        ms.meshing_close_holes(maxholesize=CRACK_EDGES)
+        faces = ms.current_mesh().face_matrix().astype(np.int64)
+    except pymeshlab.PyMeshLabException:
+        faces = pivoted
+    if ms.current_mesh().vertex_number() != len(points_view):
+        faces = pivoted
     tri = points_view[faces]
     away = np.einsum("ij,ij->i", np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), tri.mean(axis=1)) > 0
     faces[away] = faces[away][:, ::-1]
