@@ -95,6 +95,17 @@ def file(name: str, header: bytes = b"", size: int = GB2) -> Callable[[Path], Pa
     return lambda d: sparse(d / name, header, size)
 
 
+def placed_glb(d: Path) -> Path:
+    """A GLB whose JSON declares a mesh of 100,000 vertices placed by 300 nodes (30 M vertices), no data behind."""
+    text = json.dumps({"asset": {"version": "2.0"}, "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+                       "accessors": [{"count": 100_000, "type": "VEC3"}], "nodes": [{"mesh": 0}] * 300}).encode()
+    text += b" " * (-len(text) % 4)
+    path = d / "placed.glb"
+    path.write_bytes(b"glTF" + (2).to_bytes(4, "little") + (28 + len(text)).to_bytes(4, "little")
+                     + len(text).to_bytes(4, "little") + b"JSON" + text + bytes(8))
+    return path
+
+
 ROOT_READS = os.geteuid() == 0 and shutil.which("setpriv") is not None
 UNPRIVILEGED = ("setpriv", "--bounding-set=-dac_override,-dac_read_search") if ROOT_READS else ()
 """Root reads a chmod-000 file; without these capabilities it cannot."""
@@ -122,6 +133,9 @@ CASES = [
     Case("2 GB of zeros as .obj (ingest)", ingest(file("zero.obj"))),
     Case("2 GB of zeros as .stl (ingest)", ingest(file("zero.stl"))),
     Case("2 GB of zeros as .pcd (ingest)", ingest(file("zero.pcd"))),
+    Case("2 GB of zeros as .glb (ingest)", ingest(file("zero.glb"))),
+    Case("2 GB of zeros as .gltf (ingest)", ingest(file("zero.gltf"))),
+    Case("GLB whose JSON places a mesh of 100 000 vertices 300 times (ingest)", ingest(placed_glb)),
     Case("2 GB of zeros as .npz (dataset)", dataset(file("zero.npz"))),
     Case("PLY of 100 vertices and 2 GB more (fit)", fit(file("tail.ply", ply_header(100)))),
     Case("ascii PLY of 100 vertices and 2 GB more (ingest)", ingest(file("tail.ply", ply_header(100, "ascii")))),

@@ -45,6 +45,9 @@ MM_EXTENT = (50.0, SCAN_EXTENT_MM)
 the room around her."""
 MIN_CLOUD_POINTS = 500
 """A point cloud with fewer points cannot hold a breast (ingest keeps at least as many of one)."""
+GLTF_TEXT_BYTES = 1 << 28
+"""The largest .gltf text read whole (its JSON is parsed at once): a scan of some 3 M vertices with normals and
+colours, embedded in base64; a larger one comes as GLB, whose binary chunk is not parsed as text."""
 _CHUNK = 1 << 24
 _MAX_LINE = 1 << 16
 """Bytes scanned at a time, and the longest line a text scan file may hold."""
@@ -526,16 +529,23 @@ def _check_stl(path: Path) -> None:
 
 def _check_gltf(path: Path) -> None:
     """Refuse a glTF whose JSON (a .gltf's text, a GLB's first chunk) cannot be read, a GLB whose header does not
-    match its size, and one whose meshes, as its nodes place them, hold more vertices than any body scan."""
-    data = path.read_bytes()
-    if path.suffix.lower() == ".glb":
-        magic, _, length = struct.unpack_from("<4sII", data.ljust(20, b"\0"))
-        chunk, kind = struct.unpack_from("<I4s", data.ljust(20, b"\0"), 12)
-        if magic != b"glTF" or kind != b"JSON":
-            raise _not_valid(path, "(it does not start as a binary glTF does)")
-        if length != len(data) or 20 + chunk > len(data):
-            raise _not_valid(path, f"(it declares {length:,} bytes but holds {len(data):,})")
-        data = data[20: 20 + chunk]
+    match its size, a .gltf text larger than GLTF_TEXT_BYTES, and one whose meshes, as its nodes place them, hold
+    more vertices than any body scan. A GLB's binary chunk is not read here."""
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        if path.suffix.lower() == ".glb":
+            head = fh.read(20).ljust(20, b"\0")
+            (magic, _, length), (chunk, kind) = struct.unpack_from("<4sII", head), struct.unpack_from("<I4s", head, 12)
+            if magic != b"glTF" or kind != b"JSON":
+                raise _not_valid(path, "(it does not start as a binary glTF does)")
+            if length != size or 20 + chunk > size:
+                raise _not_valid(path, f"(it declares {length:,} bytes but holds {size:,})")
+            data = fh.read(chunk)
+        elif size > GLTF_TEXT_BYTES:
+            raise BadInputError(path, f"is a glTF text of {size:,} bytes, more than any body scan's "
+                                      f"({GLTF_TEXT_BYTES:,}): export it as GLB")
+        else:
+            data = fh.read()
     try:
         gltf = json.loads(data)
         meshes = [sum(int(gltf["accessors"][p["attributes"]["POSITION"]]["count"]) for p in m["primitives"])
