@@ -1,7 +1,7 @@
 """Scanners' wrapped meshes read as well as a frontal view of her, with a frontal export of the same body as the
 baseline in the same run.
 
-1. Closed bodies: MakeHuman bodies (`scenes.makehuman`) of varied cup, firmness, weight and pose, each written as
+1. Closed bodies: seven MakeHuman bodies (`scenes.makehuman`) of varied cup, firmness, weight and pose, each written as
    its whole closed mesh (front, sides and back, as Artec and 3dMD export) in a file format (OBJ, PLY, GLB), in
    units (mm, m), with her up on one of the file's six signed axes and her turned about her vertical axis, and
    read with no --up (`ingest_sides`, her up found from her body). Per body: was the up found right; both
@@ -45,6 +45,7 @@ BODIES = [  # (name, body, her turn about her vertical axis (°), up in the file
     ("slim, muscular", BodyOptions(cup=0.6, weight=0.3, muscle=0.7), -15.0, "-z", "mm", ".ply"),
     ("asymmetric, arms down", BodyOptions(cup=0.7, modifiers={"asymmetry": 0.5}, pose="arms-down"), 45.0, "+x",
      "m", ".glb"),
+    ("cup 0.7, hands on hips", BodyOptions(cup=0.7, pose="hands-on-hips"), 0.0, "-y", "m", ".ply"),
 ]
 MILLION = 1_000_000
 
@@ -56,7 +57,8 @@ def both(path: Path) -> dict:
 def closed_body(folder: Path, name, options, deg, up, units, suffix) -> dict:
     body = make_body(options)
     to_file = file_from_body(up, units) @ turned(deg)
-    scans = both(write_closed_scan(folder / f"closed{suffix}", body, to_file))
+    write_closed_scan(folder / f"closed{suffix}", body, units, up, turn_deg=deg)
+    scans = both(folder / f"closed{suffix}")
     mm = 1000.0 if units == "m" else 1.0
     errors = [float(np.linalg.norm(s.nipple_camera_mm - mm * transform_points(to_file, body.nipples[side][None])[0]))
               for side, s in scans.items()]

@@ -70,6 +70,9 @@ def scan_synth(
     units: Optional[str] = typer.Option(None, "--units", help="Units of the --scan-file: mm (default) or m."),
     up: Optional[str] = typer.Option(None, "--up", help="The --scan-file axis the body's up lies on: +x, -x, +y "
                                      "(default), -y, +z or -z."),
+    closed: bool = typer.Option(False, "--closed", help="makehuman: the --scan-file holds her whole closed body "
+                                "(front, sides and back, as a 360° scanner exports it) instead of what the camera "
+                                "sees: .ply, .obj or .glb."),
     as_json: bool = JSON,
 ):
     """Render depth frames of a synthetic patient and record them through depthai (RecordMessage); for a
@@ -82,13 +85,13 @@ def scan_synth(
     realistic_only = {"--cup": cup, "--firmness": firmness, "--weight": weight, "--muscle": muscle,
                       "--modifier": modifier or None, "--pose": pose, "--yaw": yaw, "--resolution": resolution,
                       "--wall": wall, "--no-wall": no_wall or None, "--scan-file": scan_file, "--units": units,
-                      "--up": up}
+                      "--up": up, "--closed": closed or None}
     if body == "makehuman":
         return _scan_makehuman(clock, as_json, out=out, truth=truth, frames=frames, seed=seed, pitch=tilt,
                                distance=distance, noise=noise, side_params=side_params, cup=cup, firmness=firmness,
                                weight=weight, muscle=muscle, modifier=modifier, pose=pose, yaw=yaw,
                                resolution=resolution, wall=wall, no_wall=no_wall, scan_file=scan_file, units=units,
-                               up=up)
+                               up=up, closed=closed)
     given = [flag for flag, value in realistic_only.items() if value is not None]
     if given:
         raise usage_error(f"{given[0]} applies to --body makehuman only", given[0])
@@ -126,14 +129,14 @@ def scan_synth(
 
 def _scan_makehuman(clock: Clock, as_json: bool, *, out, truth, frames, seed, pitch, distance, noise, side_params,
                     cup, firmness, weight, muscle, modifier, pose, yaw, resolution, wall, no_wall, scan_file, units,
-                    up) -> None:
+                    up, closed) -> None:
     """`scan-synth --body makehuman`: check the options, then record, write the scan file and the truth."""
     if side_params:
         raise usage_error("--side-params applies to --body chen only", "--side-params")
     if out is None and scan_file is None:
         raise usage_error("--body makehuman needs --out (a recording), --scan-file (a scan file) or both", "--out")
-    if scan_file is None and (units is not None or up is not None):
-        raise usage_error("--units and --up describe a --scan-file, and none is given", "--units/--up")
+    if scan_file is None and (units is not None or up is not None or closed):
+        raise usage_error("--units, --up and --closed describe a --scan-file, and none is given", "--units/--up")
     if up is not None and up not in UP_AXES:
         raise usage_error(f"--up must be one of {' '.join(UP_AXES)}, not '{up}'", "--up")
     if wall is not None and no_wall:
@@ -180,9 +183,10 @@ def _scan_makehuman(clock: Clock, as_json: bool, *, out, truth, frames, seed, pi
             result.update(recording=str(out), frames=frames, valid_pixels=round(float(np.mean(depth > 0)), 4),
                           megabytes=round(staged.stat().st_size / 1e6, 2))
         if scan_file is not None:
-            counts = realistic.write_scan_file(scan_file, scene, units or "mm", up or "+y", stage)
+            counts = (realistic.write_closed_scan(scan_file, scene.body, units or "mm", up or "+y", stage) if closed
+                      else realistic.write_scan_file(scan_file, scene, units or "mm", up or "+y", stage))
             result.update(scan_file=str(scan_file), scan_points=counts["points"], scan_faces=counts["faces"],
-                          units=units or "mm", up=up or "+y")
+                          units=units or "mm", up=up or "+y", closed=closed)
         realistic.save_body_truth(stage(truth), scene, frames if out is not None else 0)
     volumes = scene.body.half_volumes_cc()
     result.update(truth=str(truth), size=list(camera.size), distance_mm=camera.distance_mm, pitch_deg=camera.pitch_deg,

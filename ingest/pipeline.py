@@ -40,6 +40,8 @@ UP_TRIED = ("+y", "+z", "+x")
 convention of most scanners' files)."""
 UP_SEARCH_MM = 5.0
 """Voxel size of the cloud the up axes are tried on."""
+RELIEF_MM = 130.0
+"""Her breasts lie within this far of her midline; her trunk's sides, which curve away, lie farther."""
 BEHIND_STRIDE = 4
 """Every this-many-th pixel row and column beyond the depth slab is looked at for a wall behind her
 (a wall's 20 mm voxels, 1–2 m away, span more pixels than that)."""
@@ -236,13 +238,34 @@ def _principal_axes(points: np.ndarray) -> np.ndarray:
 
 
 def _facing(points: np.ndarray, axis: np.ndarray, up: str) -> tuple[np.ndarray, BodyInView] | None:
-    """The viewing frame looking along ±`axis` from which the nearest body's trunk bulges most
-    towards the viewer, and that body; None when neither sense shows a trunk."""
+    """The viewing frame looking along ±`axis` from which the nearest body's trunk bulges most towards the viewer
+    (a frontal scan's inside is hollow), or, when both senses see a body that wraps round (more than
+    WRAPPED_HIDDEN of its points hidden: her front and her back are both convex), from which her chest stands out
+    most (`_chest_relief`: breasts, not shoulder blades); and that body. None when neither sense shows a trunk."""
     frames = [_frame(sense * axis, up) for sense in (1.0, -1.0)]
     found = [_body_or_none(transform_points(T, points)) for T in frames]
-    bulge = [_trunk_bulge(body) for body in found]
-    k = int(np.argmax(bulge))
-    return None if bulge[k] == -np.inf else (frames[k], found[k])
+    seen = [None if body is None else seen_from(body.points, body.points.mean(0) - [0.0, 0.0, 2000.0])
+            for body in found]
+    wraps = all(s is not None and 1.0 - s.mean() > WRAPPED_HIDDEN for s in seen)
+    score = ([_chest_relief(body, s) for body, s in zip(found, seen)] if wraps else
+             [_trunk_bulge(body) for body in found])
+    k = int(np.argmax(score))
+    return None if score[k] == -np.inf else (frames[k], found[k])
+
+
+def _chest_relief(body: BodyInView, seen: np.ndarray) -> float:
+    """How far (mm) the chest a viewer sees of a body's trunk (below her shoulders, within RELIEF_MM of her midline)
+    stands out towards it from a smooth surface fitted to it (quartic down her body, quadratic across), at its 99th
+    percentile: her breasts on her front, her shoulder blades on her back (viewing frame)."""
+    P = body.points
+    below_shoulders = (P[:, 1] > body.trunk.top_y) & body.trunk.chest(P)
+    chest = P[body.trunk.mask & below_shoulders & seen & (np.abs(P[:, 0] - body.trunk.midline_x) < RELIEF_MM)]
+    if len(chest) < 10:
+        return -np.inf
+    x, y, z = ((chest - chest.mean(0)) / 100.0).T
+    A = np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y, y ** 3, x * x * y, y ** 4])
+    coef, *_ = np.linalg.lstsq(A, z, rcond=None)
+    return 100.0 * float(np.percentile(A @ coef - z, 99))
 
 
 def _body_or_none(points: np.ndarray) -> BodyInView | None:

@@ -316,21 +316,29 @@ def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: s
     return {"points": len(V), "faces": faces.size // 3}
 
 
-def write_closed_scan(path: str | Path, body: Body, to_file: np.ndarray) -> Path:
-    """Her whole closed body mesh — front, sides and back, as a 360° scanner exports it — in the file frame
-    `to_file` (4, 4; from the body frame, mm), as PLY (binary), OBJ (text) or GLB (open3d's writer)."""
+def write_closed_scan(path: str | Path, body: Body, units: str = "mm", up: str = "+y",
+                      stage: Stage | None = None, turn_deg: float = 0.0) -> dict:
+    """Write her whole closed body mesh — front, sides and back, as a 360° scanner exports it — as PLY (binary),
+    OBJ (text) or GLB (open3d's writer), to `stage(path)` or in a set of its own. Coordinates: the body frame
+    turned `turn_deg` about her vertical axis (`turned`), then by `file_from_body(up, units)`, as `write_scan_file`'s
+    for no turn. Returns the counts written (vertices, faces)."""
     path = Path(path)
-    V, F = transform_points(to_file, body.vertices), body.faces
-    if path.suffix == ".ply":
-        write_ply(path, V, faces=F)
-    elif path.suffix == ".glb":
-        _write_glb(path, V, F)
-    elif path.suffix == ".obj":
-        path.write_text(("v {:.6f} {:.6f} {:.6f}\n" * len(V)).format(*V.ravel())
-                        + ("f {} {} {}\n" * len(F)).format(*(F.ravel() + 1)))
+    if stage is None:
+        with atomic_set() as own:
+            return write_closed_scan(path, body, units, up, own, turn_deg)
+    suffix = path.suffix.lower()
+    if suffix not in SCAN_SUFFIXES:
+        raise OptionError("path", f"a scan file ends in {' or '.join(SCAN_SUFFIXES)}, not '{suffix}'")
+    V, F = transform_points(file_from_body(up, units) @ turned(turn_deg), body.vertices), body.faces
+    if suffix == ".ply":
+        write_ply(stage(path), V, faces=F, comments=["breastplan scan-synth: realistic body, its whole closed mesh",
+                                                     f"units {units}; body frame turned so that its up lies on {up}"])
+    elif suffix == ".glb":
+        _write_glb(stage(path), V, F)
     else:
-        raise OptionError("path", f"a closed scan ends in .ply, .obj or .glb, not '{path.suffix}'")
-    return path
+        stage(path).write_text(("v {:.6f} {:.6f} {:.6f}\n" * len(V)).format(*V.ravel())
+                               + ("f {} {} {}\n" * len(F)).format(*(F.ravel() + 1)))
+    return {"points": len(V), "faces": len(F)}
 
 
 def _write_glb(path: Path, vertices: np.ndarray, faces: np.ndarray, rgb: np.ndarray | None = None) -> None:

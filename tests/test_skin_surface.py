@@ -10,7 +10,7 @@ from breastplan.plan.job import run_plan
 from breastplan.plan.pictures import before_after
 from breastplan.plan.views import build_views
 from breastplan.scenes.makehuman import BodyOptions, make_body
-from breastplan.scenes.realistic import (CameraOptions, file_from_body, make_body_scene, turned, write_closed_scan,
+from breastplan.scenes.realistic import (CameraOptions, file_from_body, make_body_scene, write_closed_scan,
                                         write_scan_file)
 from test_colour import _dark
 
@@ -55,8 +55,7 @@ def test_her_skin_from_a_scanners_mesh_shows_no_background_through_her(tmp_path,
 def test_her_skin_from_a_closed_body_scan_shows_no_crack_under_her_breasts(tmp_path):
     """A 360° scan's front: her chest just below each breast, hidden from a viewer in front of her by the breast, left
     cracks there that showed the background (up to 0.06 % of her pixels) until the surface's cracks were closed."""
-    write_closed_scan(tmp_path / "her.glb", make_body(BodyOptions(cup=0.9, firmness=0.2)),
-                      file_from_body("-x", "m") @ turned(-40.0))
+    write_closed_scan(tmp_path / "her.glb", make_body(BodyOptions(cup=0.9, firmness=0.2)), "m", "-x", turn_deg=-40.0)
     plan = run_plan(tmp_path / "her.glb", tmp_path / "case", PlanOptions.parse(["ptosis:3"]))
     views = build_views(plan)
     for name, (before, _) in before_after(views, views.states[0]).items():

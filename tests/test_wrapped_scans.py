@@ -1,6 +1,8 @@
 """A scan that wraps round her (a scanner's closed or 180° mesh, as Artec, 3dMD and Vectra export, or a phone app's
 GLB) read as well as a frontal view of her: the front a camera would see is chosen from the scan itself, whatever
 the file's axes, units or her turn in it, her up axis found from her body."""
+import json
+
 import numpy as np
 import pytest
 
@@ -11,6 +13,8 @@ from breastplan.plan.compute import measure_scans
 from breastplan.scenes.makehuman import BodyOptions, make_body
 from breastplan.scenes.realistic import (CameraOptions, file_from_body, make_body_scene, turned, write_closed_scan,
                                         write_scan_file)
+
+from clitools import run
 
 WRAPPED = {   # her body, her turn about her vertical axis in the file (°, +: her left forward), its up, units, format
     "cup 0.8, her back to the file's +z (turned 180°)": (BodyOptions(cup=0.8), 180.0, "+y", "mm", ".obj"),
@@ -33,7 +37,7 @@ def wrapped(request, tmp_path_factory):
     folder = tmp_path_factory.mktemp("wrapped")
     body = make_body(options)
     to_file = file_from_body(up, units) @ turned(deg)
-    write_closed_scan(folder / f"closed{suffix}", body, to_file)
+    write_closed_scan(folder / f"closed{suffix}", body, units, up, turn_deg=deg)
     scans = _read(folder / f"closed{suffix}")
     assert f"up {up} (found: her head" in scans["left"].source.description
     mm = 1000.0 if units == "m" else 1.0
@@ -60,3 +64,19 @@ def test_a_wrapped_scan_measures_her_breasts_as_a_frontal_one_does_or_a_little_m
         more = volumes[side].volume_cc - front[side].volume_cc
         assert -front[side].uncertainty_cc <= more <= SEES_MORE * front[side].volume_cc, \
             (side, volumes[side].volume_cc, front[side].volume_cc, front[side].uncertainty_cc)
+
+
+def test_scan_synth_writes_her_closed_body_and_ingest_reads_it_from_her_front_without_up(cli, tmp_path):
+    """`scan-synth --closed`: her whole body as a 360° scanner exports it (here a PLY in metres, her up on −y); read
+    with no --up, her nipple is found where the truth puts it in the file's frame."""
+    res = run(cli, "scan-synth", "--body", "makehuman", "--cup", "0.7", "--pose", "hands-on-hips", "--scan-file",
+              tmp_path / "her.ply", "--closed", "--units", "m", "--up", "-y", "--truth", tmp_path / "truth.npz", "--json")
+    assert res.returncode == 0, res.stderr
+    nipple = np.array(json.loads(res.stdout)["nipples_camera_mm"]["right"])
+    with np.load(tmp_path / "truth.npz", allow_pickle=False) as truth:
+        to_file = file_from_body("-y", "m") @ np.linalg.inv(truth["camera_from_body"])
+    res = run(cli, "ingest", tmp_path / "her.ply", "--side", "right", "--out", tmp_path / "right", "--json")
+    assert res.returncode == 0, res.stderr
+    found = json.loads(res.stdout)
+    assert "up -y (found" in found["source"]
+    assert np.linalg.norm(np.array(found["nipple_camera_mm"]) - 1000.0 * transform_points(to_file, nipple[None])[0]) < 3.0
