@@ -272,13 +272,7 @@ def write_scan_file(path: str | Path, scene: BodyScene, units: str = "mm", up: s
     if stage is None:
         with atomic_set() as own:
             return write_scan_file(path, scene, units, up, own)
-    suffix = path.suffix.lower()
-    if suffix not in SCAN_SUFFIXES:
-        raise OptionError("path", f"a scan file ends in {' or '.join(SCAN_SUFFIXES)}, not '{suffix}'")
-    if units not in SCAN_UNITS:
-        raise OptionError("units", f"the units of a scan file are {' or '.join(SCAN_UNITS)}, not '{units}'")
-    if up not in UP_ROTATIONS:
-        raise OptionError("up", f"the up axis is one of {' '.join(UP_AXES)}, not '{up}'")
+    suffix = _checked_suffix(path, units, up)
     frame = f"units {units}; body frame turned so that its up lies on {up}: {file_axes(up)}"
     if suffix == ".ply":
         from breastplan.ingest.depth import colours_at
@@ -326,9 +320,7 @@ def write_closed_scan(path: str | Path, body: Body, units: str = "mm", up: str =
     if stage is None:
         with atomic_set() as own:
             return write_closed_scan(path, body, units, up, own, turn_deg)
-    suffix = path.suffix.lower()
-    if suffix not in SCAN_SUFFIXES:
-        raise OptionError("path", f"a scan file ends in {' or '.join(SCAN_SUFFIXES)}, not '{suffix}'")
+    suffix = _checked_suffix(path, units, up)
     V, F = transform_points(file_from_body(up, units) @ turned(turn_deg), body.vertices), body.faces
     if suffix == ".ply":
         write_ply(stage(path), V, faces=F, comments=["breastplan scan-synth: realistic body, its whole closed mesh",
@@ -339,6 +331,19 @@ def write_closed_scan(path: str | Path, body: Body, units: str = "mm", up: str =
         stage(path).write_text(("v {:.6f} {:.6f} {:.6f}\n" * len(V)).format(*V.ravel())
                                + ("f {} {} {}\n" * len(F)).format(*(F.ravel() + 1)))
     return {"points": len(V), "faces": len(F)}
+
+
+def _checked_suffix(path: Path, units: str, up: str) -> str:
+    """A scan file's suffix (SCAN_SUFFIXES), OptionError naming what is not one of a scan file's suffix, units
+    (SCAN_UNITS) or up axis (UP_AXES)."""
+    suffix = path.suffix.lower()
+    if suffix not in SCAN_SUFFIXES:
+        raise OptionError("path", f"a scan file ends in {' or '.join(SCAN_SUFFIXES)}, not '{suffix}'")
+    if units not in SCAN_UNITS:
+        raise OptionError("units", f"the units of a scan file are {' or '.join(SCAN_UNITS)}, not '{units}'")
+    if up not in UP_ROTATIONS:
+        raise OptionError("up", f"the up axis is one of {' '.join(UP_AXES)}, not '{up}'")
+    return suffix
 
 
 def _write_glb(path: Path, vertices: np.ndarray, faces: np.ndarray, rgb: np.ndarray | None = None) -> None:
