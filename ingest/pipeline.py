@@ -35,6 +35,8 @@ WRAPPED_HIDDEN = 0.08
 """A scan file of which more than this share of the points is hidden from a viewer in front of her wraps round
 her body (a 180° scan hides 12–14 % of its points, a closed one about half; a camera's view, 1–4 %: what lies
 behind her)."""
+VIEWER_MM = 2000.0
+"""A scan file's viewer stands this far in front of its points' mean (`_viewer`), along the viewing axis."""
 UP_TRIED = ("+y", "+z", "+x")
 """The axes tried in turn as a scan file's up when it is not given (its sense from her head; +y first, the
 convention of most scanners' files)."""
@@ -158,7 +160,7 @@ def cloud_body(cloud: ScanCloud, up: str, clock: Clock) -> BodyScan:
         else:
             view, found = viewing_frame(ordered, up)
         points = transform_points(view, ordered)
-        viewer = points.mean(0) - [0.0, 0.0, 2000.0]
+        viewer = _viewer(points)
     with clock("seen from the front"):
         seen = seen_from(points, viewer)
         if 1.0 - seen.mean() > WRAPPED_HIDDEN:        # a scan that wraps round her: its front, as a camera sees it
@@ -244,13 +246,17 @@ def _facing(points: np.ndarray, axis: np.ndarray, up: str) -> tuple[np.ndarray, 
     most (`_chest_relief`: breasts, not shoulder blades); and that body. None when neither sense shows a trunk."""
     frames = [_frame(sense * axis, up) for sense in (1.0, -1.0)]
     found = [_body_or_none(transform_points(T, points)) for T in frames]
-    seen = [None if body is None else seen_from(body.points, body.points.mean(0) - [0.0, 0.0, 2000.0])
-            for body in found]
+    seen = [None if body is None else seen_from(body.points, _viewer(body.points)) for body in found]
     wraps = all(s is not None and 1.0 - s.mean() > WRAPPED_HIDDEN for s in seen)
     score = ([_chest_relief(body, s) for body, s in zip(found, seen)] if wraps else
              [_trunk_bulge(body) for body in found])
     k = int(np.argmax(score))
     return None if score[k] == -np.inf else (frames[k], found[k])
+
+
+def _viewer(points: np.ndarray) -> np.ndarray:
+    """(3,) where a scan file's viewer stands, in the viewing frame of its `points` (VIEWER_MM in front of them)."""
+    return points.mean(0) - [0.0, 0.0, VIEWER_MM]
 
 
 def _chest_relief(body: BodyInView, seen: np.ndarray) -> float:
