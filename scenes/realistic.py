@@ -324,7 +324,8 @@ def write_closed_scan(path: str | Path, body: Body, units: str = "mm", up: str =
     V, F = transform_points(file_from_body(up, units) @ turned(turn_deg), body.vertices), body.faces
     if suffix == ".ply":
         write_ply(stage(path), V, faces=F, comments=["breastplan scan-synth: realistic body, its whole closed mesh",
-                                                     f"units {units}; body frame turned so that its up lies on {up}"])
+                                                     f"units {units}; body frame turned {turn_deg:g}° about her "
+                                                     f"vertical, then so that its up lies on {up}"])
     elif suffix == ".glb":
         _write_glb(stage(path), V, F)
     else:
