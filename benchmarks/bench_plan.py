@@ -11,6 +11,9 @@ tests/browser.py; seconds from navigation start, medians of at least 5 opens aft
 - shown: the page's first view painted — the front-view poster of the plan, the title and the
   measures (performance mark `breastplan-shown`); target ≤ 2 s;
 - drawn: the interactive 3-D view painted in its place (mark `breastplan-ready`);
+- a slider moved: from its input event to the state it names drawn (SLIDES moves, ptosis and turn in turn), and
+  the page's states (every combination of the three kinds' degrees), the modes they are stored as and their worst
+  drawn error;
 - baseline for both: a page of plotly.js alone drawing one 3-D scatter of as many points, drawn
   (the same mark, set the same way: after the frame that follows Plotly.newPlot), opened in turn.
 
@@ -85,6 +88,28 @@ def open_times(report: Path, baseline: Path, opens: int) -> tuple[dict[str, floa
     return tuple({name: statistics.median(v) for name, v in times.items()} for times in runs.values())
 
 
+SLIDES = 12
+"""Slider moves timed in the report (after one), alternating ptosis and turn between two degrees each."""
+SLIDE = """const [kind, to, done] = arguments; const s = document.getElementById('slider-' + kind);
+const before = window.breastplanDrawn, t0 = performance.now();
+s.value = to; s.dispatchEvent(new Event('input'));
+(function wait() { if (window.breastplanDrawn !== before) requestAnimationFrame(() => done(performance.now() - t0));
+                   else requestAnimationFrame(wait); })();"""
+"""Move a slider and call back with the milliseconds until the state it names is drawn and the next frame painted."""
+
+
+def slide_times(report: Path) -> tuple[list[float], dict]:
+    """Seconds from a slider moved (as a hand moves it: an input event) to the state it names drawn, over SLIDES
+    moves after one; and the page's states: their number, the modes they are stored as, the worst drawn error."""
+    with chromium() as b:
+        b.open(report, wait_for_js=READY)
+        b.driver.set_script_timeout(60)
+        moves = [("ptosis", 7)] + [(("ptosis", "turn")[i % 2], (i // 2) % 2 * 7) for i in range(SLIDES)]
+        times = [b.driver.execute_async_script(SLIDE, kind, to) / 1000.0 for kind, to in moves]
+        grid = b.js("JSON.parse(document.getElementById('plan-data').textContent).grid")
+    return times[1:], {"states": len(grid["keys"]), "modes": len(grid["scales"]), "worst_mm": grid["worst_mm"]}
+
+
 def main() -> None:
     repeats = repeats_argument(__doc__.splitlines()[0], 3, 1)
     from breastplan.plan.job import sample_recording
@@ -100,8 +125,10 @@ def main() -> None:
             base_times.append(timed(lambda: separate_commands(sample, root / f"separate{i}")))
         report = root / "case0" / "report.html"
         size_mb = report.stat().st_size / 2**20
+        slides, grid = [], {}
         if missing_chromium() is None:
             page, base_page = open_times(report, baseline_page(root / "baseline.html", BASELINE_POINTS), opens)
+            slides, grid = slide_times(report)
     finally:
         shutil.rmtree(root, ignore_errors=True)
     plan_s, base_s = statistics.median(plan_times), statistics.median(base_times)
@@ -123,12 +150,17 @@ def main() -> None:
                       f"≤ {fmt(target)}", "" if target is None else "yes" if value <= target else "no")
     table.add_row("report.html size", f"{size_mb:.2f} MB", "", "", "", f"≤ {TARGETS['report_mb']:g} MB",
                   "yes" if size_mb <= TARGETS["report_mb"] else "no")
+    slide_s = statistics.median(slides) if slides else None
+    if slides:
+        table.add_row(f"a slider moved: its state drawn ({grid['states']} states as {grid['modes']} modes, "
+                      f"worst {grid['worst_mm']:.3f} mm)", fmt(slide_s), "", "", "", "", "")
     Console().print(table)
     print(json.dumps(rounded({"benchmark": "plan", "repeats": repeats, "opens": opens if page else 0,
                               "plan_s": plan_s, "baseline_separate_commands_s": base_s, "ratio": plan_s / base_s,
                               "report_mb": size_mb, "shown_s": shown_s, "drawn_s": drawn_s,
                               "first_contentful_paint_s": page.get("first-contentful-paint"),
-                              "baseline_plotly_page_drawn_s": base_drawn_s, "targets": TARGETS})))
+                              "baseline_plotly_page_drawn_s": base_drawn_s, "slider_drawn_s": slide_s,
+                              "slider_drawn_max_s": max(slides) if slides else None, **grid, "targets": TARGETS})))
 
 
 if __name__ == "__main__":

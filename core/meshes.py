@@ -7,8 +7,13 @@ import numpy as np
 def mesh_volume(vertices, faces) -> float:
     """Enclosed volume of a closed, outward-oriented triangle mesh (units of vertices³): the sum of the signed
     volumes of the tetrahedra each triangle makes with the origin, (v0 · (v1 × v2)) / 6 (as libigl's centroid)."""
-    tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
-    return float(np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0)
+    return float(mesh_volumes(np.asarray(vertices, dtype=np.float64)[None], faces)[0])
+
+
+def mesh_volumes(vertices, faces) -> np.ndarray:
+    """(S,) `mesh_volume` of each of S meshes sharing `faces`: vertices (S, V, 3)."""
+    tri = np.asarray(vertices, dtype=np.float64)[:, np.asarray(faces, dtype=np.int64)]       # (S, F, 3, 3)
+    return np.einsum("sij,sij->s", tri[:, :, 0], np.cross(tri[:, :, 1], tri[:, :, 2])) / 6.0
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -45,17 +50,26 @@ def volume_below_base(vertices, faces, floor) -> float:
 
 
 def positive_part_mean(f: np.ndarray) -> np.ndarray:
-    """(T,) mean over each triangle of max(f, 0), f linear with vertex values f (T, 3) (exact)."""
-    s = np.sort(f, axis=1)[:, ::-1]                 # f1 ≥ f2 ≥ f3
+    """(...) mean over each triangle of max(f, 0), f linear with vertex values f (..., 3) (exact)."""
+    f = np.asarray(f, dtype=float)
+    return corners_positive_part_mean(f[..., 0], f[..., 1], f[..., 2])
+
+
+def corners_positive_part_mean(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """`positive_part_mean` of triangles whose corners' values are a, b and c (arrays of one shape)."""
+    lo, hi = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+    out = np.where(lo >= 0, (a + b + c) / 3.0, 0.0)
+    mixed = (lo < 0) & (hi > 0)                     # the triangles the zero level crosses
+    s = np.sort(np.stack([a[mixed], b[mixed], c[mixed]], axis=-1), axis=-1)[:, ::-1]   # f1 > 0 > f3
     f1, f2, f3 = s.T
-    out = s.mean(1)
+    part = s.mean(1)
     # f1³ / (3 (f1 − f2)(f1 − f3)) and its twin, written as f/3 times two edge fractions in (0, 1]:
     # cubes and their products under- or overflow (tiny or huge values gave NaN)
-    one = (f1 > 0) & (f2 <= 0)                      # only the largest is positive
+    one = f2 <= 0                                   # only the largest is positive
     a = f1[one]
-    out[one] = a / 3.0 * (a / (a - f2[one])) * (a / (a - f3[one]))
-    two = (f2 > 0) & (f3 < 0)                       # the smallest is negative
+    part[one] = a / 3.0 * (a / (a - f2[one])) * (a / (a - f3[one]))
+    two = ~one                                      # the smallest is negative
     g = -f3[two]
-    out[two] += g / 3.0 * (g / (f1[two] + g)) * (g / (f2[two] + g))
-    out[f1 <= 0] = 0.0
+    part[two] += g / 3.0 * (g / (f1[two] + g)) * (g / (f2[two] + g))
+    out[mixed] = part
     return out

@@ -3,6 +3,7 @@ the measures (`plan.result.Plan`). Writes nothing: `plan.record` writes what thi
 """
 from __future__ import annotations
 
+import itertools
 from dataclasses import replace
 from importlib import metadata
 from pathlib import Path
@@ -17,8 +18,8 @@ from breastplan.options import PlanOptions
 
 from .breast_volume import BreastVolumes, change_on_earlier_wall, measure_breasts
 from .changes import Change, Method, change_name, combine, solve_change
-from .measures import asymmetry, breast_measures
-from .result import COMBINED, Measures, Plan, PlanState, SidePlan, SkinChange, planned_states
+from .measures import asymmetry, breast_measures, breast_measures_each
+from .result import COMBINED, Measures, Plan, PlanState, SidePlan, SkinChange, StateGrid, planned_states
 from .surface import PlannedChange
 from .symmetry import bcct_measures, ptosis_from_cells
 
@@ -41,16 +42,15 @@ def compute_plan(source: Path, fitted: dict[str, SidePlan], options: PlanOptions
     body = shared_body({s: sp.scan.body for s, sp in sides.items()}, source)
     with clock("volumes on her skin"):
         volumes = measure_breasts(body, {s: sp.scan.nipple_camera_mm for s, sp in sides.items()})
+    with clock("every slider state"):
+        grid = state_grid(sides, states, options, volumes)
     with clock("measures"):
         requested = planned_states(states, next(iter(sides.values())))
         torsos = tuple(planned_torso(body, sides, st) for st in requested)
-        measures = plan_measures(sides, volumes, requested[-1], torsos[-1])
+        measures = plan_measures(sides, volumes, requested[-1], torsos[-1], grid.measures_at(grid.planned_index))
         skin = {} if earlier is None else skin_changes(body, sides, volumes, earlier)
-        sliders = slider_states(sides, states, options)
-        shown = shown_measures(sides, volumes, {st.key: st for st in sliders}.values())
     return Plan(source, options, body, sides, volumes, states, torsos, measures, earlier, skin,
-                None if source.is_dir() else sha256(source), versions(), clock.ms, slider_states=sliders,
-                shown_measures=shown)
+                None if source.is_dir() else sha256(source), versions(), clock.ms, grid=grid)
 
 
 def versions() -> dict[str, str]:
@@ -72,8 +72,8 @@ def solve_changes(side: SidePlan, options: PlanOptions, method: Method) -> tuple
 
 
 def _states(sides: dict[str, SidePlan], options: PlanOptions, method: Method):
-    """Every state the plan shows: each requested kind at each of its slider's degrees (the requested
-    degree being the change solved for the plan), then the combination as planned."""
+    """Each requested kind alone at each of its slider's degrees (the requested degree being the change solved for
+    the plan), then the combination as planned: the changes `state_grid` combines."""
     for kind, requested in options.changes:
         for degree in slider_degrees(requested):
             name = change_name(kind, degree)
@@ -85,46 +85,33 @@ def _states(sides: dict[str, SidePlan], options: PlanOptions, method: Method):
         yield _state(sides, COMBINED, None, None, {s: sp.changes[-1] for s, sp in sides.items()})
 
 
-def slider_states(sides: dict[str, SidePlan], states: tuple[PlanState, ...],
-                  options: PlanOptions) -> tuple[PlanState, ...]:
-    """What each kind's slider shows at each of its degrees, in the order of `states`: with one requested
-    change, that change at the degree; with several, their combination with this kind at the degree and every
-    other at its requested degree (the combination as planned at the requested degree)."""
-    if len(options.changes) == 1:
-        return states
-    requested, by_key = dict(options.changes), {st.key: st for st in states}
-    out = []
-    for st in (st for st in states if st.kind is not None):
-        if st.degree == requested[st.kind]:
-            out.append(by_key[COMBINED])
-            continue
-        parts = {k: by_key[change_name(k, d)] for k, d in requested.items()} | {st.kind: st}
-        changes = {s: replace(combine([parts[k].changes[s] for k in requested]), name=f"{COMBINED}-{st.key}")
-                   for s in sides}
-        out.append(_state(sides, f"{COMBINED}-{st.key}", st.kind, st.degree, changes))
-    return tuple(out)
-
-
-def shown_measures(sides: dict[str, SidePlan], volumes: BreastVolumes, states) -> dict[str, dict]:
-    """State key → side → her breast's measures in that state (`breast_measures` of the planned breast; her
-    volume on her skin changed by as much as the fitted model's)."""
-    before = {s: _model_measures(volumes, sp) for s, sp in sides.items()}
-    return {state.key: {s: _as_planned(volumes, sp, state.planned[s], before[s]) for s, sp in sides.items()}
-            for state in states}
+def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], options: PlanOptions,
+               volumes: BreastVolumes) -> StateGrid:
+    """Every combination of the kinds' slider degrees (`states` holds each kind's change at each), each side's
+    fitted model so planned, and her measures on it (`breast_measures_each`; her volume on her skin changed by as
+    much as the fitted model's)."""
+    kinds = tuple(k for k, _ in options.changes)
+    requested = tuple(d for _, d in options.changes)
+    degrees = tuple(tuple(slider_degrees(d)) for d in requested)
+    combos = list(itertools.product(*degrees))
+    by_key = {st.key: st for st in states}
+    changes, planned, models, measures = {}, {}, {}, {}
+    for s, sp in sides.items():
+        singles = [[by_key[change_name(k, d)].changes[s] for k, d in zip(kinds, combo)] for combo in combos]
+        changes[s] = tuple(one[0] if len(one) == 1 else combine(one) for one in singles)
+        planned[s] = tuple(PlannedChange.of(sp, c) for c in changes[s])
+        moved = PlannedChange.models(planned[s], np.vstack([sp.surface_input, sp.scan.nipple_camera_mm]))
+        measures[s] = breast_measures_each(volumes.landmarks, moved[:, -1], moved[:, :-1], sp.fit.faces)
+        models[s] = moved[:, :-1].astype(np.float32)
+        measures[s]["volume_cc"] += volumes.sides[s].volume_cc - _model_measures(volumes, sp)["volume_cc"]
+    keys = tuple(COMBINED if len(kinds) > 1 and combo == requested else
+                 "+".join(change_name(k, d) for k, d in zip(kinds, combo)) for combo in combos)
+    return StateGrid(kinds, degrees, requested, keys, changes, planned, models, measures)
 
 
 def _model_measures(volumes: BreastVolumes, sp: SidePlan) -> dict[str, float]:
     """A side's measures on its fitted breast as scanned (the volume the fitted model's)."""
     return breast_measures(volumes.landmarks, sp.scan.nipple_camera_mm, sp.surface_input, sp.fit.faces)
-
-
-def _as_planned(volumes: BreastVolumes, sp: SidePlan, planned: PlannedChange, before: dict[str, float]) -> dict:
-    """A side's measures on its breast as `planned` moves it; the volume hers, measured on her skin, changed by
-    as much as the fitted model's (`before`: `_model_measures`)."""
-    after = breast_measures(volumes.landmarks, planned.model(sp.scan.nipple_camera_mm[None])[0],
-                            planned.model(sp.surface_input), sp.fit.faces)
-    after["volume_cc"] = volumes.sides[sp.side].volume_cc + after["volume_cc"] - before["volume_cc"]
-    return after
 
 
 def _state(sides: dict[str, SidePlan], key: str, kind, degree, changes: dict[str, Change]) -> PlanState:
@@ -146,17 +133,16 @@ def planned_torso(body: Body, sides: dict[str, SidePlan], state: PlanState) -> n
     return moved
 
 
-def plan_measures(sides: dict[str, SidePlan], volumes: BreastVolumes, shown: PlanState,
-                  torso: np.ndarray) -> Measures:
-    """Each side's measures before and as planned (`shown`, her torso so: `torso`, input frame, mm), and
-    their asymmetry (left − right). The volume is hers, measured on her skin; as planned, it changes by
-    as much as the fitted model's does."""
-    before, after, nipples = {}, {}, {"before": {}, "after": {}}
+def plan_measures(sides: dict[str, SidePlan], volumes: BreastVolumes, shown: PlanState, torso: np.ndarray,
+                  after: dict[str, dict[str, float]]) -> Measures:
+    """Each side's measures before and as planned (`shown`, her torso so: `torso`, input frame, mm; `after`: its
+    measures, `StateGrid.measures_at`), and their asymmetry (left − right). The volume is hers, measured on her
+    skin."""
+    before, nipples = {}, {"before": {}, "after": {}}
     for side, sp in sides.items():
         nipple, planned = sp.scan.nipple_camera_mm, shown.planned[side]
         nipples["before"][side], nipples["after"][side] = nipple, planned.model(nipple[None])[0]
         before[side] = _model_measures(volumes, sp)
-        after[side] = _as_planned(volumes, sp, planned, before[side])
         before[side]["volume_cc"] = volumes.sides[side].volume_cc
     asym = {when: {k: v["left_minus_right"] for k, v in asymmetry(m).items()} for when, m in
             (("before", before), ("after", after))}

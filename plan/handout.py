@@ -9,7 +9,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from .pictures import SHOT_PX, VIEWS, font
-from .result import Plan
+from .result import Plan, StateGrid
 
 PAGE_PX = (1754, 1240)
 """An A4 page, landscape, at DPI."""
@@ -25,20 +25,22 @@ PLAIN = {"volume_cc": ("breast volume", "cc"),
 """The measures the summary and the handout give, in plain words, and their units."""
 
 
-def state_words(plan: Plan, kind: str | None, degree: float | None) -> str:
-    """What a state of the plan shows, in words: `kind` at `degree` (the other changes as planned), or (kind
-    None) their combination."""
-    if kind is None:
+def state_words(grid: StateGrid, i: int) -> str:
+    """What state i of the plan's slider states shows, in words: each kind's degree, or their combination as
+    planned."""
+    degrees = grid.combination(i)
+    if len(grid.kinds) == 1:
+        return f"{grid.kinds[0]}, degree {degrees[0]:g}"
+    if degrees == grid.requested:
         return "all planned changes combined"
-    if len(plan.options.changes) == 1:
-        return f"{kind}, degree {degree:g}"
-    return f"{kind} at degree {degree:g}, the other changes as planned"
+    return ", ".join(f"{k} degree {d:g}" + (" (planned)" if d == r else "")
+                     for k, d, r in zip(grid.kinds, degrees, grid.requested))
 
 
 def shown_words(plan: Plan) -> str:
     """What the pictures as planned show, in words, the changes named."""
-    words = state_words(plan, plan.shown.kind, plan.shown.degree)
-    if plan.shown.kind is None:
+    words = state_words(plan.grid, plan.grid.planned_index)
+    if len(plan.grid.kinds) > 1:
         words += " (" + ", ".join(f"{k} {d:g}" for k, d in plan.options.changes) + ")"
     return words
 

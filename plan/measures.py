@@ -44,7 +44,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from breastplan import BadInputError
-from breastplan.meshes import mesh_volume, positive_part_mean
+from breastplan.meshes import corners_positive_part_mean
 from breastplan.voxels import voxel_centroids
 
 MEASURES = ("volume_cc", "upper_pole_cc", "lower_pole_cc", "pole_ratio", "notch_to_nipple_mm",
@@ -277,34 +277,54 @@ def breast_measures(landmarks: BodyLandmarks, nipple_mm, vertices_mm, faces, bas
     * width_mm: extent of the base outline along the left–right axis;
     * projection_mm: height of the nipple above the base plane (least squares through the base
       outline)."""
-    nipple = np.asarray(nipple_mm, dtype=float).reshape(3)
     V = _finite_points(vertices_mm, "the breast mesh")
+    out = breast_measures_each(landmarks, np.asarray(nipple_mm, dtype=float).reshape(1, 3), V[None], faces, base)
+    return {k: float(v[0]) for k, v in out.items()}
+
+
+EACH_MESHES = 64
+"""`breast_measures_each` measures this many meshes at a time (their triangles held at once)."""
+
+
+def breast_measures_each(landmarks: BodyLandmarks, nipples_mm, vertices_mm, faces, base=None) -> dict[str, np.ndarray]:
+    """`breast_measures` of S meshes sharing `faces` (one breast as several plans move it): nipples_mm (S, 3),
+    vertices_mm (S, V, 3); measure name → (S,)."""
+    nipples, V = np.asarray(nipples_mm, dtype=float), np.asarray(vertices_mm, dtype=float)
     F = np.asarray(faces, dtype=np.int64)
-    ring = V[base_ring(F) if base is None else np.asarray(base, dtype=np.int64)]
+    ring = V[:, base_ring(F) if base is None else np.asarray(base, dtype=np.int64)]          # (S, R, 3)
     L, U, notch = landmarks.left_axis, landmarks.up_axis, landmarks.sternal_notch
-    volume = mesh_volume(V, F)
-    if not volume > 0:
+    across = np.linalg.svd(U[None], full_matrices=True)[2][1:]                       # two axes ⟂ up
+    across[1] *= np.sign(np.linalg.det(np.vstack([across, U])))                       # (across, up) right-handed
+    volume, upper = np.empty(len(V)), np.empty(len(V))
+    for at in range(0, len(V), EACH_MESHES):
+        chunk = slice(at, at + EACH_MESHES)
+        a, b = np.ascontiguousarray((V[chunk] @ across.T).transpose(2, 1, 0))             # (V, s) each
+        h = np.ascontiguousarray(((V[chunk] - nipples[chunk, None]) @ U).T)              # above the nipple's plane
+        a, b, h = ([x[F[:, k]] for k in range(3)] for x in (a, b, h))                    # (F, s) per corner
+        area_up = 0.5 * ((a[1] - a[0]) * (b[2] - b[0]) - (b[1] - b[0]) * (a[2] - a[0]))
+        # Σ (area along up) · (mean of a linear field) over a closed mesh is the field's gradient along up times the
+        # volume (divergence theorem): the height's is 1
+        volume[chunk] = np.einsum("fs,fs->s", area_up, (h[0] + h[1] + h[2]) / 3.0)
+        upper[chunk] = np.einsum("fs,fs->s", area_up, corners_positive_part_mean(*h))
+    if not (volume > 0).all():
         raise BadInputError(None, "gives a breast mesh that encloses no volume (not closed and outward-oriented)")
-    tri = V[F]
-    area_up = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]) @ U
-    height = (tri - nipple) @ U                                  # (F, 3) above the nipple's plane
-    upper, lower = area_up @ positive_part_mean(height), -(area_up @ positive_part_mean(-height))
-    centroid = ring.mean(0)
-    normal = np.linalg.svd(ring - centroid, full_matrices=False)[2][-1]
-    fold = ring[np.argmin(ring @ U)]
+    lower = volume - upper
+    centroid = ring.mean(axis=1)
+    normal = np.linalg.svd(ring - centroid[:, None], full_matrices=False)[2][:, -1]
+    fold = np.take_along_axis(ring, np.argmin(ring @ U, axis=1)[:, None, None], axis=1)[:, 0]
     out = {
         "volume_cc": volume / 1000.0,
         "upper_pole_cc": upper / 1000.0,
         "lower_pole_cc": lower / 1000.0,
-        "pole_ratio": upper / lower if lower > 0 else float("inf"),
-        "notch_to_nipple_mm": np.linalg.norm(nipple - notch),
-        "nipple_below_notch_mm": (notch - nipple) @ U,
-        "nipple_to_midline_mm": abs((nipple - landmarks.midline_point) @ L),
-        "nipple_to_fold_mm": np.linalg.norm(nipple - fold),
-        "width_mm": np.ptp(ring @ L),
-        "projection_mm": abs((nipple - centroid) @ normal),
+        "pole_ratio": np.divide(upper, lower, out=np.full_like(upper, np.inf), where=lower > 0),
+        "notch_to_nipple_mm": np.linalg.norm(nipples - notch, axis=1),
+        "nipple_below_notch_mm": (notch - nipples) @ U,
+        "nipple_to_midline_mm": np.abs((nipples - landmarks.midline_point) @ L),
+        "nipple_to_fold_mm": np.linalg.norm(nipples - fold, axis=1),
+        "width_mm": np.ptp(ring @ L, axis=1),
+        "projection_mm": np.abs(np.einsum("si,si->s", nipples - centroid, normal)),
     }
-    return {k: float(out[k]) for k in MEASURES}
+    return {k: out[k] for k in MEASURES}
 
 
 def measure_label(name: str) -> str:
@@ -315,12 +335,13 @@ def measure_label(name: str) -> str:
 
 def asymmetry(measures_by_side: dict) -> dict[str, dict[str, float]]:
     """Measure → {"left_minus_right", "abs_difference"} for the measures both sides have
-    (`breast_measures` of each); empty unless both sides are given."""
+    (`breast_measures` of each, or `breast_measures_each`: arrays); empty unless both sides are given."""
     if not {"left", "right"} <= set(measures_by_side):
         return {}
     left, right = measures_by_side["left"], measures_by_side["right"]
     out = {}
     for name in (k for k in left if k in right):
-        diff = float(left[name]) - float(right[name])
+        diff = np.asarray(left[name], dtype=float) - np.asarray(right[name], dtype=float)
+        diff = diff if diff.ndim else float(diff)                  # per state, for `StateGrid.measures`
         out[name] = {"left_minus_right": diff, "abs_difference": abs(diff)}
     return out

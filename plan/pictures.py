@@ -70,7 +70,7 @@ def camera(views: Views, states: list[State], azimuth_deg: float, size: tuple[in
 
 def before_after(views: Views, state: State, names=tuple(VIEWS)) -> dict[str, tuple[Image.Image, Image.Image]]:
     """View name → (her skin as scanned, as `state` plans it), SHOT_PX each, framed alike, unmarked."""
-    before = State("original", None, None, {s: m[0] for s, m in views.meshes.items()}, views.patch)
+    before = views.state("original")
     shots = {}
     for name in names:
         cam = camera(views, [state], VIEWS[name], SHOT_PX)

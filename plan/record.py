@@ -67,7 +67,7 @@ def write_plan(plan: Plan, folder: Path, parallel: bool = False) -> dict:
     return record
 
 
-SHOTS_BESIDE = 3
+SHOTS_BESIDE = 4
 """Of her five views, the pictures of this many are drawn by a forked child while the plan writes the report and
 draws the others: about as long."""
 

@@ -7,14 +7,15 @@ on demand each breast's scanned points and
 fitted model as planned (from the legend), for a follow-up the breast as fitted at the earlier visit (a
 translucent blue mesh), the landmarks the measures start from (the sternal notch, the midline and the
 nipples found, red), each breast's footprint (blue), the fold beneath each breast (purple) and her sides
-named on her. A degree slider per planned kind, the combination as planned, her skin before beside the state
-shown (one camera for both), the five standard views (her right side, her right oblique, front, her left
-oblique, her left side) and a top view.
+named on her. A degree slider per planned kind, each keeping its degree while another moves (every combination
+they reach, `Plan.grid`, computed by the plan: the page looks a state up, it computes none), the combination as
+planned, her skin before beside the state shown (one camera for both), the five standard views (her right side,
+her right oblique, front, her left oblique, her left side) and a top view.
 Below: the main measures in plain words for her, with the disclaimer and a link to her handout; the measures
 before and after with the asymmetry between sides, her volume, symmetry and a follow-up's change; and,
 folded away for the surgeon, the fits' quality, the changes' parameters, the inputs, options and versions.
-Geometry travels as base64 typed arrays (`views`); a small script decodes it and redraws the plot when a
-control changes.
+Geometry travels as base64 typed arrays (`views`), the states' displacements as shared modes (`plan.modes`); a
+small script decodes them and redraws the plot when a control changes.
 
 The page opens on a poster, a front view of the first state drawn here (a PNG), above its tables:
 plain HTML, painted before any heavy script runs. plotly.js and the data wait in inert blocks
@@ -42,7 +43,8 @@ from .handout import DISCLAIMER, PLAIN, plain_value, state_words
 from .measures import asymmetry, measure_label
 from .pictures import FOLD, FOOTPRINT, LANDMARK, LIGHT, VIEWS, camera, picture, skin_colour
 from .result import Plan
-from .views import State, Views, quantise
+from .modes import modes_of
+from .views import State, Views
 
 SCAN = "#2b2b2b"
 """Colour of a breast's scanned points (before the plan)."""
@@ -91,27 +93,9 @@ def _mesh(vertices: np.ndarray, faces: np.ndarray) -> dict:
 
 
 def page_data(plan: Plan, views: Views) -> dict:
-    """The JSON the page's script reads: geometry, states, sliders and the state it opens on."""
+    """The JSON the page's script reads: geometry, every slider state and the state it opens on."""
     sides = list(plan.sides)
-    patch = views.patch
-    states = []
-    for st in views.states:
-        entry = {"key": st.key, "words": state_words(plan, st.kind, st.degree), "mesh": {},
-                 "measures": {side: {k: round(float(v), 3) for k, v in m.items()}
-                              for side, m in plan.shown_measures[st.key].items()},
-                 "asymmetry": {k: round(v["left_minus_right"], 3)
-                               for k, v in asymmetry(plan.shown_measures[st.key]).items()}}
-        for s in sides:
-            values, scale = quantise(st.mesh[s] - views.meshes[s][0])
-            entry["mesh"][s] = {"d": _b64(values, "i1"), "scale": scale}
-        values, scale = quantise(st.torso - patch)
-        entry["torso"] = {"d": _b64(values, "i1"), "scale": scale}
-        states.append(entry)
-    stops = [(st.kind, st.degree, shown.key) for st, shown in zip((st for st in plan.states if st.kind is not None),
-                                                                   plan.slider_states)]
-    sliders = [{"kind": kind, "requested": degree, "degrees": [d for k, d, _ in stops if k == kind],
-                "keys": [key for k, _, key in stops if k == kind]} for kind, degree in plan.options.changes]
-    return {"sides": sides, "torso": _points(views.torso), "patch": _points(patch),
+    return {"sides": sides, "torso": _points(views.torso), "patch": _points(views.patch),
             "skin_faces": {"faces": _b64(views.skin, "<i4"), "m": int(len(views.skin))},
             "scans": {s: _points(views.scans[s]) for s in sides},
             "meshes": {s: _mesh(*views.meshes[s]) for s in sides},
@@ -122,11 +106,27 @@ def page_data(plan: Plan, views: Views) -> dict:
                       for s, v in views.folds.items()},
             "before": {s: {k: round(float(v), 3) for k, v in plan.measures.before[s].items()} for s in sides},
             "asymmetry_before": {k: round(float(v), 3) for k, v in plan.measures.asymmetry.get("before", {}).items()},
-            "bounds": _bounds(views),
-            "footprints": {s: v.round(2).tolist() for s, v in views.footprints.items()},
-            "states": states, "sliders": sliders, "first": first_state(plan, views).key,
-            **_skin_colour(views), "light": list(LIGHT),
+            "bounds": _bounds(views), "footprints": {s: v.round(2).tolist() for s, v in views.footprints.items()},
+            "grid": _grid(plan, views), **_skin_colour(views), "light": list(LIGHT),
             "scan": SCAN, "model": MODEL, "landmark": LANDMARK, "footprint": FOOTPRINT, "fold": FOLD}
+
+
+def _grid(plan: Plan, views: Views) -> dict:
+    """Every slider state (`Plan.grid`): its name, words and measures, and its displacements of the patch then of
+    each side's breast mesh as shared modes (`plan.modes`), and the state planned."""
+    grid, sides = plan.grid, list(plan.sides)
+    moved = np.concatenate([views.moved - views.patch.astype(np.float32)] + [
+        views.planned_meshes[s] - views.meshes[s][0].astype(np.float32) for s in sides], axis=1)
+    stored = modes_of(moved)
+    rounded = lambda values: np.round(values, 3).tolist()  # noqa: E731
+    asym = asymmetry(grid.measures)
+    return {"kinds": list(grid.kinds), "degrees": [list(d) for d in grid.degrees], "requested": list(grid.requested),
+            "keys": list(grid.keys), "words": [state_words(grid, i) for i in range(len(grid))],
+            "planned": grid.planned_index,
+            "measures": {s: {k: rounded(v) for k, v in grid.measures[s].items()} for s in sides},
+            "asymmetry": {k: rounded(v["left_minus_right"]) for k, v in asym.items()},
+            "coefficients": _b64(stored.coefficients, "<f4"), "modes": _b64(stored.modes, "<i2"),
+            "scales": stored.scales.astype(float).tolist(), "worst_mm": stored.worst_mm}
 
 
 def _skin_colour(views: Views) -> dict:
@@ -140,7 +140,7 @@ def _skin_colour(views: Views) -> dict:
 def _bounds(views: Views) -> list[list[float]]:
     """[[lo, hi]] of x, y, z (display frame, mm) holding her skin in every state and the landmarks: one box for
     every scene, so that before and as planned side by side share a scale."""
-    every = np.concatenate([views.torso, views.patch, *(st.torso for st in views.states),
+    every = np.concatenate([views.torso, views.patch, views.moved.reshape(-1, 3),
                             *views.landmarks.values(), *views.footprints.values()])
     lo, hi = every.min(axis=0), every.max(axis=0)
     pad = 0.03 * (hi - lo).max()
@@ -149,7 +149,7 @@ def _bounds(views: Views) -> list[list[float]]:
 
 def first_state(plan: Plan, views: Views) -> State:
     """The state the page opens on: the combination as planned, or the one planned change."""
-    return next(st for st in views.states if st.key == plan.shown.key)
+    return views.state(plan.shown.key)
 
 
 def poster_png(views: Views, state: State) -> bytes:
@@ -370,8 +370,7 @@ _SCRIPT = r"""
 function b64(s, T){const b=atob(s);const u=new Uint8Array(b.length);for(let i=0;i<b.length;i++)u[i]=b.charCodeAt(i);return new T(u.buffer);}
 function split(f,n,T){T=T||Float32Array;const x=new T(n),y=new T(n),z=new T(n);for(let i=0;i<n;i++){x[i]=f[3*i];y[i]=f[3*i+1];z[i]=f[3*i+2];}return [x,y,z];}
 function pts(p){return split(b64(p.xyz,Float32Array),p.n);}
-function moved(base,n,d){const q=b64(d.d,Int8Array);const f=new Float32Array(3*n);   // base + the int8 displacement
- for(let i=0;i<3*n;i++)f[i]=base[i]+q[i]*d.scale;return split(f,n);}
+function moved(base,d,at,n){const f=new Float32Array(3*n);for(let i=0;i<3*n;i++)f[i]=base[i]+d[at+i];return split(f,n);}
 const painted=()=>new Promise(r=>requestAnimationFrame(()=>setTimeout(r,0)));   // after the next frame is painted
 const shown=document.querySelector('#poster img').decode().catch(()=>{}).then(painted)
  .then(()=>{window.breastplanShown=true;performance.mark('breastplan-shown');});   // poster and tables painted
@@ -449,25 +448,39 @@ const views={'right-side':around(-90),'right-oblique':around(-45),front:around(0
 const layout={margin:{l:0,r:0,t:0,b:0},showlegend:true,legend:{x:0,y:1},hovermode:false,   // the legend beside the body, not over it
  scene:{domain:{x:[0.26,1],y:[0,1]},aspectmode:'data',xaxis:{visible:false},yaxis:{visible:false},zaxis:{visible:false},camera:views.front}};
 const gd=document.getElementById('plot');
+const G=P.grid, K=G.scales.length, coef=b64(G.coefficients,Float32Array), modes=b64(G.modes,Int16Array);
+const M=K?modes.length/K:0;   // every slider state: its displacements of the patch, then each side's mesh, K modes
+function displacement(i){const d=new Float64Array(M);
+ for(let k=0;k<K;k++){const w=coef[i*K+k]*G.scales[k];if(!w)continue;for(let j=0,o=k*M;j<M;j++)d[j]+=w*modes[o+j];}
+ return d;}
+function stateAt(i){   // slider state i as the plan computed it: its name, words and measures
+ const pick=m=>Object.fromEntries(Object.entries(m).map(([k,v])=>[k,v[i]]));
+ return {index:i,key:G.keys[i],words:G.words[i],asymmetry:pick(G.asymmetry),
+  measures:Object.fromEntries(P.sides.map(s=>[s,pick(G.measures[s])]))};}
 function arrays(state){   // the moving traces' coordinates in `state`; null: the original
  const upd={x:[],y:[],z:[]};
- const pos=state?moved(patchBase,nP,state.torso):split(patchBase,nP);
+ const d=state?displacement(state.index):null;
+ const pos=d?moved(patchBase,d,0,nP):split(patchBase,nP);
  for(let a=0;a<3;a++){const o=new Float32Array(nT+nP);o.set(still[a]);o.set(pos[a],nT);upd['xyz'[a]].push(o);}
- for(const s of P.sides){const v=state?moved(meshBase[s],P.meshes[s].n,state.mesh[s]):split(meshBase[s],P.meshes[s].n);
+ let at=3*nP;
+ for(const s of P.sides){const n=P.meshes[s].n,v=d?moved(meshBase[s],d,at,n):split(meshBase[s],n);at+=3*n;
   upd.x.push(v[0]);upd.y.push(v[1]);upd.z.push(v[2]);}
  return upd;
 }
 const ids=[idx.skin].concat(P.sides.map(s=>idx[s]));
 const fmt=(v,forHer)=>!isFinite(v)?'—':forHer?(Math.abs(v)>=10?v.toFixed(0):v.toFixed(2)):(Math.abs(v)>=10?v.toFixed(1):String(Number(v.toPrecision(3))));
+function digits(i){   // each kind's slider position in state i
+ const out=[];for(let k=G.kinds.length-1;k>=0;k--){const n=G.degrees[k].length;out[k]=i%n;i=Math.floor(i/n);}
+ return out;}
 function label(state){   // what is shown, in words; the sliders and the measures' "as planned" cells follow it
  window.breastplanState=state?state.key:'original';
  document.getElementById('state').textContent='Showing: '+(state?state.words:'the original breasts');
- for(const sl of P.sliders){const inp=document.getElementById('slider-'+sl.kind);if(!inp)continue;
-  const at=state?sl.keys.indexOf(state.key):-1;
-  if(state&&at<0)inp.value=sl.degrees.indexOf(sl.requested);else if(at>=0)inp.value=at;
-  const d=sl.degrees[+inp.value];
-  inp.previousSibling.textContent=sl.kind+': degree '+d+(d===sl.requested?' (planned)':'')+(state?'':' (not shown)');
-  inp.previousSibling.classList.toggle('off',!state);}
+ const at=state?digits(state.index):null;
+ G.kinds.forEach((kind,k)=>{const inp=document.getElementById('slider-'+kind);
+  if(at)inp.value=at[k];
+  const d=G.degrees[k][+inp.value];
+  inp.previousSibling.textContent=kind+': degree '+d+(d===G.requested[k]?' (planned)':'')+(state?'':' (not shown)');
+  inp.previousSibling.classList.toggle('off',!state);});
  for(const c of document.querySelectorAll('[data-after]')){const [side,name]=c.dataset.after.split(' ');
   const v=state?state.measures[side][name]:P.before[side][name];c.textContent=fmt(v,c.dataset.forHer!==undefined);}
  for(const c of document.querySelectorAll('[data-asymmetry]')){const name=c.dataset.asymmetry;
@@ -515,24 +528,26 @@ function linked(ev){const cam=ev['scene.camera']||ev['scene2.camera'];if(!cam||s
 for(const [id,by] of [['colour-skin','skin'],['colour-moved','moved']])document.getElementById(id).onclick=()=>{
  colourBy=by;document.getElementById('colour-skin').classList.toggle('on',by==='skin');
  document.getElementById('colour-moved').classList.toggle('on',by==='moved');window.breastplanColour=by;return show(current);};
-const byKey={};for(const st of P.states)byKey[st.key]=st;
 const box=document.getElementById('sliders');
-for(const sl of P.sliders){
+function chosen(){   // the state every slider's degree names: each keeps its own
+ return stateAt(G.kinds.reduce((i,kind,k)=>i*G.degrees[k].length+(+document.getElementById('slider-'+kind).value),0));}
+G.kinds.forEach((kind,k)=>{
  const div=document.createElement('div');div.className='slider';
  const lab=document.createElement('label');const inp=document.createElement('input');
- inp.type='range';inp.min=0;inp.max=sl.degrees.length-1;inp.step=1;inp.value=sl.degrees.indexOf(sl.requested);inp.id='slider-'+sl.kind;
- inp.addEventListener('input',()=>show(byKey[sl.keys[+inp.value]]));
+ inp.type='range';inp.min=0;inp.max=G.degrees[k].length-1;inp.step=1;inp.id='slider-'+kind;
+ inp.value=G.degrees[k].indexOf(G.requested[k]);
+ inp.addEventListener('input',()=>show(chosen()));
  div.appendChild(lab);div.appendChild(inp);box.appendChild(div);
-}
+});
 document.getElementById('original').onclick=()=>show(null);
 const comb=document.getElementById('combined');
-if(byKey['combined']){comb.onclick=()=>show(byKey['combined']);}else{comb.style.display='none';}
+if(G.kinds.length>1){comb.onclick=()=>show(stateAt(G.planned));}else{comb.style.display='none';}
 const named=v=>sides.map(s=>v.endsWith('-side')&&!v.startsWith(s)?'':'her '+s);   // a side view names its own side only
 for(const b of document.querySelectorAll('button[data-view]'))b.onclick=()=>{const v=b.dataset.view;
  traces[idx.sides]=Object.assign({},traces[idx.sides],{text:named(v)});
  const layout=scenes(gd.layout);layout.scene.camera=views[v];if(beside)layout.scene2.camera=views[v];
  return Plotly.react(gd,drawn(),layout);};
-const first=byKey[P.first];
+const first=stateAt(G.planned);
 current=first;
 put(arrays(first));
 label(first);

@@ -142,6 +142,51 @@ class PlanState:
     planned: dict[str, PlannedChange]         # side → that change placed in the input frame
 
 
+@dataclass(frozen=True, eq=False)
+class StateGrid:
+    """Every state the report's sliders reach: each requested kind at each of its slider's degrees, in every
+    combination (the kinds' changes as each was solved alone, applied together). State i takes the kinds'
+    degrees at the digits of i in mixed radix, the last kind's digit the fastest (`combination`)."""
+
+    kinds: tuple[str, ...]
+    degrees: tuple[tuple[float, ...], ...]        # per kind: its slider's degrees, ascending
+    requested: tuple[float, ...]                  # per kind: the degree planned
+    keys: tuple[str, ...]                         # per state: its name (COMBINED: every kind as planned)
+    changes: dict[str, tuple[Change, ...]]        # side → per state: the change as combined
+    planned: dict[str, tuple[PlannedChange, ...]]  # side → per state: that change placed in the input frame
+    models: dict[str, np.ndarray]                 # side → (S, V, 3) float32 the fitted model as planned, input
+                                                  # frame, mm
+    measures: dict[str, dict[str, np.ndarray]]    # side → measure → (S,) her breast as planned (her volume on
+                                                  # her skin, changed by as much as the fitted model's)
+
+    def __len__(self) -> int:
+        return len(self.keys)
+
+    def index(self, degrees) -> int:
+        """The state of these degrees (one per kind, each one of its slider's)."""
+        i = 0
+        for offered, d in zip(self.degrees, degrees):
+            i = i * len(offered) + offered.index(float(d))
+        return i
+
+    def combination(self, i: int) -> tuple[float, ...]:
+        """The kinds' degrees in state i."""
+        out = []
+        for offered in reversed(self.degrees):
+            i, digit = divmod(i, len(offered))
+            out.append(offered[digit])
+        return tuple(reversed(out))
+
+    @property
+    def planned_index(self) -> int:
+        """The state of the degrees planned."""
+        return self.index(self.requested)
+
+    def measures_at(self, i: int) -> dict[str, dict[str, float]]:
+        """Side → measure → value in state i."""
+        return {s: {k: float(v[i]) for k, v in m.items()} for s, m in self.measures.items()}
+
+
 @dataclass(frozen=True)
 class SkinChange:
     """A follow-up's change of one breast's volume on her skin (cc, %): on the earlier visit's wall and
@@ -197,9 +242,10 @@ class Patient:
 
 @dataclass(frozen=True, eq=False)
 class Plan:
-    """A computed plan: its input and options, her body, each breast, her volumes measured on her skin, every
-    state (the requested changes, their combination and the slider's degrees), her torso as planned,
-    the measures, and for a follow-up the earlier visit's volumes and each side's change since."""
+    """A computed plan: its input and options, her body, each breast, her volumes measured on her skin, the
+    states (the requested changes, their combination, each kind alone at its slider's degrees), every state the
+    sliders reach (`grid`), her torso as planned, the measures, and for a follow-up the earlier visit's volumes
+    and each side's change since."""
 
     input: Path
     options: PlanOptions
@@ -215,9 +261,7 @@ class Plan:
     versions: dict[str, str] = field(default_factory=dict)   # package → version, as planned
     timings_ms: dict = field(default_factory=dict)
     patient: Patient = field(default_factory=Patient)
-    slider_states: tuple[PlanState, ...] = ()    # what the report's sliders show: each kind at each degree,
-                                                 # the other kinds at their requested degrees
-    shown_measures: dict = field(default_factory=dict)   # state key → side → her measures in that state
+    grid: StateGrid | None = None             # every state the report's sliders reach
 
     @property
     def input_kind(self) -> str:

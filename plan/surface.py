@@ -14,6 +14,7 @@ itself keeps the model's formula, on which degrees are defined.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
@@ -69,15 +70,23 @@ class PlannedChange:
 
     def displacement(self, points_mm) -> np.ndarray:
         """(N, 3) blended displacement of input-frame points, mm, input frame."""
+        return PlannedChange.displacements([self], points_mm)[0]
+
+    @staticmethod
+    def displacements(changes: Sequence["PlannedChange"], points_mm) -> np.ndarray:
+        """(S, N, 3) `displacement` of input-frame points by each of `changes`, all of one breast (one primitive,
+        frame and band): the points placed and weighed once, each top-shape applied once."""
+        first = _one_breast(changes)
         pts = np.asarray(points_mm, dtype=float).reshape(-1, 3)
-        local = transform_points(self.to_primitive, pts)
-        w = self._weights(local)
-        out = np.zeros_like(pts)
+        local = transform_points(first.to_primitive, pts)
+        w = first._weights(local)
         moving = w > 0
-        if moving.any():
-            near = local[moving]
-            moved = self._lattices(to_mm(self._seamless(to_model_units(near))))
-            out[moving] = (moved - near) * w[moving, None] @ self.to_primitive[:3, :3]   # back by Rᵀ
+        out = np.zeros((len(changes), len(pts), 3))
+        near, lifted = local[moving], {}
+        near_mu = to_model_units(near)
+        for i, change in enumerate(changes):
+            moved = change._lattices(to_mm(change._seamless(near_mu, lifted)))
+            out[i, moving] = (moved - near) * w[moving, None] @ first.to_primitive[:3, :3]   # back by Rᵀ
         return out
 
     def __call__(self, points_mm) -> np.ndarray:
@@ -85,14 +94,16 @@ class PlannedChange:
         pts = np.asarray(points_mm, dtype=float)
         return pts + self.displacement(pts).reshape(pts.shape)
 
-    def _seamless(self, p_mu: np.ndarray) -> np.ndarray:
-        """The deformation of primitive-frame points (model units), top-shape faded in above y = 0."""
+    def _seamless(self, p_mu: np.ndarray, lifted: dict) -> np.ndarray:
+        """The deformation of primitive-frame points (model units), top-shape faded in above y = 0; `lifted` keeps
+        the faded top-shape of these points by its parameters, for the next change of the same breast."""
         top, rest = self.deformation.split("flatten-side")
-        if not top.active():
-            return self.deformation.apply(p_mu, self.primitive)
-        lifted = top.apply(p_mu, self.primitive)
-        fade = 1.0 - smoothstep(p_mu[:, 1] / (SEAM * self.primitive.a3))
-        return rest.apply(p_mu + (lifted - p_mu) * fade[:, None], self.primitive)
+        key = top.params("top-shape")
+        if key not in lifted:
+            moved = top.apply(p_mu, self.primitive)
+            fade = 1.0 - smoothstep(p_mu[:, 1] / (SEAM * self.primitive.a3))
+            lifted[key] = p_mu + (moved - p_mu) * fade[:, None]
+        return rest.apply(lifted[key], self.primitive)
 
     def _lattices(self, local_mm: np.ndarray) -> np.ndarray:
         for lattice in self.fields:
@@ -101,6 +112,30 @@ class PlannedChange:
 
     def model(self, vertices_mm) -> np.ndarray:
         """Input-frame vertices of the fitted model moved by the full change (no blending)."""
-        local = transform_points(self.to_primitive, np.asarray(vertices_mm, dtype=float))
-        moved = self._lattices(to_mm(self.deformation.apply(to_model_units(local), self.primitive)))
-        return transform_points(np.linalg.inv(self.to_primitive), moved)
+        return PlannedChange.models([self], vertices_mm)[0]
+
+    @staticmethod
+    def models(changes: Sequence["PlannedChange"], vertices_mm) -> np.ndarray:
+        """(S, V, 3) `model` of input-frame vertices by each of `changes`, all of one breast (one primitive and
+        frame): each top-shape applied once."""
+        first = _one_breast(changes)
+        local = to_model_units(transform_points(first.to_primitive, np.asarray(vertices_mm, dtype=float)))
+        out, topped = np.empty((len(changes), len(local), 3)), {}
+        back = np.linalg.inv(first.to_primitive)
+        for i, change in enumerate(changes):
+            top, rest = change.deformation.split("flatten-side")
+            key = top.params("top-shape")
+            if key not in topped:
+                topped[key] = top.apply(local, first.primitive)
+            out[i] = transform_points(back, change._lattices(to_mm(rest.apply(topped[key], first.primitive))))
+        return out
+
+
+def _one_breast(changes: Sequence[PlannedChange]) -> PlannedChange:
+    """The first of `changes`; ValueError unless all are of one breast (primitive, frame and band)."""
+    first = changes[0]
+    if any(c.primitive != first.primitive or c.band != first.band or not np.array_equal(c.to_primitive,
+                                                                                        first.to_primitive)
+           for c in changes[1:]):
+        raise ValueError("the changes are not all of one breast (its primitive, frame and band)")
+    return first

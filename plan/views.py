@@ -6,11 +6,9 @@ scan's viewing frame (x right, y down, z away). Her torso is drawn as one triang
 centroids of its points in TORSO_MM cubes: one camera's view (a recording) triangulated as its pixels lie
 (`skin_triangles`), a scan file's points, which need not be one view's, reconstructed in 3-D
 (`surface_triangles`); its points near the breasts
-(the patch) move with the plan. A state is one the report's sliders show (`Plan.slider_states`: each
-requested kind at the degrees 1..8 and the requested one, with the other kinds at their requested
-degrees), drawn: the planned breast meshes and the moved patch, each stored as a displacement from the
-original, quantised to int8 with its own scale (at most 1/254 of the largest displacement: well
-under a millimetre), so a report of some thirty states stays small.
+(the patch) move with the plan. Every state the report's sliders reach (`Plan.grid`) is drawn: the planned
+breast meshes and the moved patch, as arrays over the states (`Views.moved`, `Views.planned_meshes`), from which
+`Views.state` gives one.
 """
 from __future__ import annotations
 
@@ -23,7 +21,8 @@ from breastplan import transform_points
 from breastplan.ingest.cloud import voxel_colours, voxel_downsample
 
 from .measures import midline_profile
-from .result import Plan, PlanState
+from .result import Plan
+from .surface import PlannedChange
 
 TORSO_MM = 5.0
 """Her torso is drawn through the centroids of its points in cubes of this side (mm)."""
@@ -39,11 +38,10 @@ from this far above the sternal notch to this far below it (along the up axis), 
 
 @dataclass(frozen=True)
 class State:
-    """One drawn plan state: its label, the kind whose slider shows it (None: combined), its degree."""
+    """One drawn plan state: its label, its index in `Plan.grid` (None: her skin as scanned)."""
 
     key: str
-    kind: str | None
-    degree: float | None
+    index: int | None
     mesh: dict[str, np.ndarray]       # side → (V, 3) planned breast vertices, display frame
     torso: np.ndarray                  # (P, 3) the moved torso patch, display frame
 
@@ -59,15 +57,24 @@ class Views:
     skin: np.ndarray                    # (F, 3) her skin's triangles over the torso points then the patch's
     scans: dict[str, np.ndarray]        # side → (N, 3) scan points
     meshes: dict[str, tuple[np.ndarray, np.ndarray]]   # side → fitted (V, 3), (F, 3)
-    states: list[State]
     earlier: dict[str, tuple[np.ndarray, np.ndarray]]  # side → a follow-up's earlier fitted breast (V, 3), (F, 3)
     landmarks: dict[str, np.ndarray]    # what the measures start from: "sternal notch" (1, 3), "midline" (K, 3)
                                         # her skin on the mid-sagittal plane, "nipples" (sides, 3) as found
     footprints: dict[str, np.ndarray]   # side → (K, 3) the closed outline her volume is measured inside
     side_labels: dict[str, np.ndarray]  # side → (3,) where her side is named: SIDE_LABEL_MM from its nipple
     folds: dict[str, np.ndarray]        # side → (K, 3) her inframammary fold under the breast, as measured
+    keys: tuple[str, ...] = ()          # per state of `Plan.grid`: its name
+    moved: np.ndarray | None = None     # (S, P, 3) float32 the patch in each state
+    planned_meshes: dict[str, np.ndarray] | None = None   # side → (S, V, 3) float32 the planned breast in each state
     skin_rgb: np.ndarray | None = None  # (T + P, 3) uint8 her skin's recorded colour at the torso then the patch's
                                         # points (the mean over each TORSO_MM cube); None: none was recorded
+
+    def state(self, key: str) -> State:
+        """The drawn state named `key` ("original": her skin as scanned)."""
+        if key == "original":
+            return State(key, None, {s: m[0] for s, m in self.meshes.items()}, self.patch)
+        i = self.keys.index(key)
+        return State(key, i, {s: m[i] for s, m in self.planned_meshes.items()}, self.moved[i])
 
 
 def build_views(plan: Plan) -> Views:
@@ -88,8 +95,8 @@ def build_views(plan: Plan) -> Views:
                                                                                            drawn)),
                  scans={s: show(transform_points(sp.frames.breast_to_input, sp.scan.points))
                         for s, sp in plan.sides.items()},
-                 meshes=meshes, states=[_state(plan, st, patch_in, show)
-                                        for st in {st.key: st for st in plan.slider_states}.values()],
+                 meshes=meshes, keys=plan.grid.keys, moved=_moved(plan, patch_in, show),
+                 planned_meshes={s: show(m).astype(np.float32) for s, m in plan.grid.models.items()},
                  earlier={s: (show(sp.follow_up.earlier_surface_input), sp.follow_up.earlier_faces)
                           for s, sp in plan.sides.items() if sp.follow_up is not None},
                  landmarks=_landmarks(plan, show),
@@ -97,6 +104,12 @@ def build_views(plan: Plan) -> Views:
                              for s, v in plan.volumes.sides.items()},
                  side_labels=_side_labels(plan, show), folds=_folds(plan, show),
                  skin_rgb=None if rgb is None else np.concatenate([rgb[~near], rgb[near]]))
+
+
+def _moved(plan: Plan, patch_in: np.ndarray, show) -> np.ndarray:
+    """(S, P, 3) float32 the patch (input frame) moved by both sides in each state of `Plan.grid`, display frame."""
+    moved = patch_in + sum(PlannedChange.displacements(plan.grid.planned[s], patch_in) for s in plan.sides)
+    return show(moved).astype(np.float32)
 
 
 DRAWN_MM = (80.0, -650.0)
@@ -218,20 +231,3 @@ def _landmarks(plan: Plan, show) -> dict[str, np.ndarray]:
     profile = offset * left + np.outer(height[keep], up) + np.outer(front[keep], np.cross(left, up))
     return {"sternal notch": show(notch[None]), "midline": show(profile[::-1]),
             "nipples": show(np.array([sp.scan.nipple_camera_mm for sp in plan.sides.values()]))}
-
-
-def _state(plan: Plan, state: PlanState, patch_in: np.ndarray, show) -> State:
-    moved = patch_in.copy()
-    mesh = {}
-    for s, sp in plan.sides.items():
-        planned = state.planned[s]
-        moved += planned.displacement(patch_in)
-        mesh[s] = show(planned.model(sp.surface_input))
-    return State(state.key, state.kind, state.degree, mesh, show(moved))
-
-
-def quantise(displacement: np.ndarray) -> tuple[np.ndarray, float]:
-    """(int8 values, scale mm): displacement ≈ values · scale."""
-    largest = float(np.abs(displacement).max()) if displacement.size else 0.0
-    scale = largest / 127.0 if largest > 0 else 1.0
-    return np.round(displacement / scale).astype(np.int8), scale

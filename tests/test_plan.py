@@ -521,6 +521,21 @@ def test_the_report_opens_on_a_picture_of_the_plan_and_its_measures_without_any_
         assert b.requests() == [] and b.console_errors() == []
 
 
+def _slide(b, kind: str, to) -> None:
+    """Move `kind`'s slider to the index `to` ("max": its last) as a hand would (an input event)."""
+    b.js(f"(s => {{ s.value = {'s.max' if to == 'max' else int(to)}; s.dispatchEvent(new Event('input')); }})"
+         f"(document.getElementById('slider-{kind}'))")
+
+
+def _drawn(b, key: str) -> bool:
+    """Whether the page draws the state `key` within 30 s."""
+    for _ in range(600):
+        if b.js("window.breastplanDrawn") == key:
+            return True
+        time.sleep(0.05)
+    return False
+
+
 @requires_chromium
 def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(planned, tmp_path):
     """Headless Chromium opens report.html from disk, draws it without a single request leaving the
@@ -537,12 +552,8 @@ def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(pl
         assert len(np.unique(first.reshape(-1, 3), axis=0)) > 200          # a 3-D drawing, not a blank canvas
         body = first[:, box[2] - box[0] - int(0.7 * (box[2] - box[0])):]    # her body, right of the legend
         assert _skin_share(body) > 0.85                                     # her skin as a surface, not dots
-        b.js("(s => { s.value = s.max; s.dispatchEvent(new Event('input')); })(document.getElementById('slider-ptosis'))")
-        for _ in range(600):
-            if b.js("window.breastplanDrawn") == "combined-ptosis-8":
-                break
-            time.sleep(0.05)
-        assert b.js("window.breastplanDrawn") == "combined-ptosis-8"             # with the others as planned
+        _slide(b, "ptosis", "max")
+        assert _drawn(b, "ptosis-8+turn-2.5+top-shape-4")                    # with the others as planned
         labels = [b.js(f"document.getElementById('slider-{k}').previousSibling.textContent") for k in ("ptosis", "turn")]
         assert labels == ["ptosis: degree 8", "turn: degree 2.5 (planned)"]
         notch_to_nipple = b.js("document.querySelector('[data-after=\"left notch_to_nipple_mm\"]').textContent")
@@ -579,6 +590,93 @@ def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(pl
     assert np.linalg.norm(midline[0] - midline[-1]) > 300.0               # down her sternum
     skin = transform_points(np.linalg.inv(truth["camera_from_body"]), truth["vertices"])
     assert np.median(cKDTree(skin).query(midline)[0]) < 10.0             # on her skin (vertices ~10 mm apart)
+
+
+@requires_chromium
+def test_each_slider_keeps_its_degree_and_the_page_draws_and_measures_the_plans_state(planned, computed):
+    """Two sliders moved in turn (ptosis to 8, then turn to 1; top-shape left as planned): the page shows the
+    state of `Plan.grid` with those three degrees, and draws it as the plan computed it (`plan.views`): her skin
+    near the breasts and each breast's model within `plan.modes.TOLERANCE_MM` of the plan's coordinates (and
+    float32's rounding), the rest of her skin where it was; its measures table gives that state's measures. The
+    original keeps the sliders where they are, marked not shown; the combination as planned puts them back."""
+    from breastplan.plan.modes import TOLERANCE_MM
+    from breastplan.plan.views import build_views
+
+    case, _, _ = planned
+    views, grid = build_views(computed), computed.grid
+    i = grid.index((8.0, 1.0, 4.0))
+    key = grid.keys[i]
+    assert key == "ptosis-8+turn-1+top-shape-4"
+    label = "document.getElementById('slider-{}').previousSibling.textContent"
+    with chromium(1280, 900) as b:
+        b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
+        _slide(b, "ptosis", "max")
+        assert _drawn(b, "ptosis-8+turn-2.5+top-shape-4")
+        _slide(b, "turn", 0)
+        assert _drawn(b, key)
+        assert [b.js(label.format(k)) for k in ("ptosis", "turn", "top-shape")] == [
+            "ptosis: degree 8", "turn: degree 1", "top-shape: degree 4 (planned)"]
+        drawn = b.js("Object.fromEntries(document.getElementById('plot').data.filter(t => t.type === 'mesh3d' && "
+                     "!t.scene).map(t => [t.name, [Array.from(t.x), Array.from(t.y), Array.from(t.z)]]))")
+        cells = {name: b.js(f"document.querySelector('table.measures [data-after=\"left {name}\"]').textContent")
+                 for name in ("volume_cc", "notch_to_nipple_mm", "nipple_to_fold_mm")}
+        b.driver.find_element("css selector", "#original").click()
+        assert _drawn(b, "original")
+        assert b.js(label.format("ptosis")) == "ptosis: degree 8 (not shown)"
+        b.driver.find_element("css selector", "#combined").click()
+        assert _drawn(b, "combined")
+        assert [b.js(label.format(k)) for k in ("ptosis", "turn")] == ["ptosis: degree 3 (planned)",
+                                                                       "turn: degree 2.5 (planned)"]
+        assert b.requests() == [] and b.console_errors() == []
+    state, slack = views.state(key), TOLERANCE_MM + 1e-3
+    skin = np.array(drawn["her skin"]).T
+    still = len(views.torso)
+    assert np.linalg.norm(skin[:still] - views.torso, axis=1).max() < 1e-3
+    assert np.linalg.norm(skin[still:] - state.torso, axis=1).max() <= slack
+    assert np.linalg.norm(skin[still:] - views.patch, axis=1).max() > 5.0          # moved: ptosis 8 drops her breast
+    for side in ("left", "right"):
+        model = np.array(drawn[f"{side} breast (model)"]).T
+        assert np.linalg.norm(model - state.mesh[side], axis=1).max() <= slack, side
+    measures = grid.measures_at(i)["left"]
+    for name, text in cells.items():
+        assert float(text) == pytest.approx(measures[name], abs=0.051), name
+
+
+def _touch(b, *points) -> None:
+    """A finger down at the first of `points` (page px), moved through the others, lifted (Chromium's touch input)."""
+    kinds = ["touchStart"] + ["touchMove"] * (len(points) - 1)
+    for kind, (x, y) in zip(kinds, points):
+        b.driver.execute_cdp_cmd("Input.dispatchTouchEvent", {"type": kind, "touchPoints": [{"x": x, "y": y}]})
+        time.sleep(0.05)
+    b.driver.execute_cdp_cmd("Input.dispatchTouchEvent", {"type": "touchEnd", "touchPoints": []})
+
+
+@requires_chromium
+def test_the_report_is_usable_by_touch(planned):
+    """On a touch screen (Chromium's touch emulation, no mouse): a tap on a view button turns her to that view, a
+    finger drawn along a slider sets its degree and the state drawn follows, and a finger drawn across her picture
+    turns the 3-D view."""
+    case, _, _ = planned
+    camera = "JSON.stringify(document.getElementById('plot')._fullLayout.scene._scene.getCamera().eye)"   # as drawn
+    with chromium(1024, 900) as b:
+        b.driver.execute_cdp_cmd("Emulation.setTouchEmulationEnabled", {"enabled": True, "maxTouchPoints": 1})
+        b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
+        assert b.js("navigator.maxTouchPoints") == 1
+        front = b.js(camera)
+        left, top, right, bottom = b.rect("button[data-view='left-side']")
+        _touch(b, ((left + right) / 2, (top + bottom) / 2))
+        time.sleep(0.5)
+        side = b.js(camera)
+        assert side != front
+        left, top, right, bottom = b.rect("#slider-ptosis")
+        _touch(b, (left + 8, (top + bottom) / 2), *[(x, (top + bottom) / 2) for x in np.linspace(left + 20, right, 8)])
+        assert _drawn(b, "ptosis-8+turn-2.5+top-shape-4")
+        left, top, right, bottom = b.rect("#plot")
+        y = (top + bottom) / 2
+        _touch(b, *[(x, y) for x in np.linspace(left + 0.55 * (right - left), left + 0.85 * (right - left), 8)])
+        time.sleep(0.5)
+        assert b.js(camera) != side
+        assert b.console_errors() == []
 
 
 def test_a_side_case_of_an_older_schema_is_named_as_such(planned, cli, tmp_path):
@@ -680,7 +778,7 @@ def test_a_left_plan_for_a_named_patient_gives_her_summary_and_handout_her_left_
 
     left_only = run_plan(out, out, PlanOptions.parse(list(CHANGES), side="left"))   # reused: the plan as a value
     views = build_views(left_only)
-    shown = next(st for st in views.states if st.key == left_only.shown.key)
+    shown = views.state(left_only.shown.key)
     page = np.asarray(Image.open(out / "summary.png").convert("RGB")).astype(int)
     w, h = SHOT_PX
     assert page.shape[1] == LABEL_PX + len(COLUMNS) * w and page.shape[0] > HEAD_PX + 2 * h

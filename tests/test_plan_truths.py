@@ -188,56 +188,73 @@ def test_every_slider_state_reaches_its_degree_by_the_reference_model(sample):
     assert beyond < len(plan.states)                        # most degrees lie on the line
 
 
+def _some_states(grid) -> list[int]:
+    """A deterministic sample of the grid's states: its corners, the state planned and every 23rd."""
+    return sorted({0, len(grid) - 1, grid.planned_index, *range(0, len(grid), 23)})
+
+
 def test_the_reports_drawing_of_every_state_is_the_reference_deformation(sample):
-    """`plan.views.build_views`: each drawn state, each side, is the reference deformation of her fitted
-    breast at that state's parameters, in the display frame (the viewing frame's (x, y, z) → (x, z, −y));
-    the torso drawn near the breasts is moved by both sides' blended displacements."""
+    """`plan.views.build_views`: each drawn state (a sample of every slider state), each side, is the reference
+    deformation of her fitted breast at that state's parameters, in the display frame (the viewing frame's (x, y,
+    z) → (x, z, −y)); the torso drawn near the breasts is moved by both sides' blended displacements. Drawn in
+    float32: within 1e-3 mm."""
     from breastplan.plan.views import build_views
 
     plan, _, _ = sample
     views = build_views(plan)
-    drawn_states = list({st.key: st for st in plan.slider_states}.values())
-    assert [s.key for s in views.states] == [st.key for st in drawn_states]
+    grid = plan.grid
+    assert views.keys == grid.keys and views.moved.shape[0] == len(grid)
     breasts = {s: Breast(sp) for s, sp in plan.sides.items()}
     to_display = VIEW_TO_DISPLAY @ np.asarray(plan.first.scan.input_to_view, float)
     patch = transform_points(np.linalg.inv(to_display), views.patch)         # her torso near the breasts, input frame
     assert len(patch) > 1000
-    for drawn, st in zip(views.states, drawn_states):
-        assert (drawn.kind, drawn.degree) == (st.kind, st.degree)
+    for i in _some_states(grid):
+        drawn = views.state(grid.keys[i])
         torso = patch.copy()
         for side, b in breasts.items():
-            want = transform_points(to_display, b.model(b.fitted_input, vector_of(st.changes[side])))
-            assert np.abs(drawn.mesh[side] - want).max() < TOL_MM, (st.key, side)
-            torso += b.blended_local(b.local(patch), vector_of(st.changes[side])) @ b.input_to_local[:3, :3]
-        assert np.abs(drawn.torso - transform_points(to_display, torso)).max() < TOL_MM, st.key
+            vector = vector_of(grid.changes[side][i])
+            want = transform_points(to_display, b.model(b.fitted_input, vector))
+            assert np.abs(drawn.mesh[side] - want).max() < 1e-3, (grid.keys[i], side)
+            torso += b.blended_local(b.local(patch), vector) @ b.input_to_local[:3, :3]
+        assert np.abs(drawn.torso - transform_points(to_display, torso)).max() < 1e-3, grid.keys[i]
 
 
-def test_each_slider_shows_its_kind_at_its_degree_with_the_other_changes_as_planned(sample):
-    """`Plan.slider_states`: for each kind, in order, each slider degree (1..8 and the requested one); at the
-    requested degree the combination as planned, elsewhere the reference deformation with this kind at the
-    degree and every other kind at its requested degree; and `Plan.shown_measures` of the combination is
-    the plan's measures as planned."""
+def test_the_sliders_reach_every_combination_of_the_kinds_degrees_each_as_solved_alone(sample):
+    """`Plan.grid`: every combination of each kind's slider degrees (1..8 and the requested one), state i at the
+    mixed-radix digits of i; each state's change is every kind at its degree with the parameters it was solved
+    with alone, its planned breast the reference deformation; its measures are the reference breast's (her volume
+    on her skin changed by as much as the reference model's, computed here by the divergence theorem; the nipple's
+    chord to the notch); and the state planned is named "combined" and measures as the plan does."""
     plan, _, _ = sample
-    want = [(k, d) for k in KINDS for d in sorted({*range(1, 9), REQUESTED[k]})]
-    assert len(plan.slider_states) == len(want)
+    grid = plan.grid
+    degrees = [sorted({*map(float, range(1, 9)), REQUESTED[k]}) for k in KINDS]
+    assert grid.kinds == KINDS and [list(d) for d in grid.degrees] == degrees
+    assert len(grid) == len(set(grid.keys)) == np.prod([len(d) for d in degrees])
+    assert grid.keys[grid.planned_index] == "combined"
+    assert grid.combination(grid.planned_index) == tuple(REQUESTED[k] for k in KINDS)
+    singles = {(st.kind, st.degree): st for st in plan.states if st.kind is not None}
     breasts = {s: Breast(sp) for s, sp in plan.sides.items()}
-    for (kind, degree), st in zip(want, plan.slider_states):
-        if degree == REQUESTED[kind]:
-            assert st.key == "combined"
-            continue
-        assert (st.key, st.kind, st.degree) == (f"combined-{kind}-{degree:g}", kind, degree)
+    notch = plan.volumes.landmarks.sternal_notch
+    for i in _some_states(grid):
+        combo = grid.combination(i)
+        assert grid.index(combo) == i
+        assert grid.keys[i] == ("combined" if combo == tuple(REQUESTED[k] for k in KINDS)
+                                else "+".join(f"{k}-{d:g}" for k, d in zip(KINDS, combo)))
+        measures = grid.measures_at(i)
         for side, b in breasts.items():
-            details = st.changes[side].details
-            assert [(d["kind"], d["degree"]) for d in details] == [(k, degree if k == kind else REQUESTED[k])
-                                                                   for k in KINDS]
-            singles = {c.kind: c.changes[side].details[0] for c in plan.states if c.kind is not None
-                       and c.degree == (degree if c.kind == kind else REQUESTED[c.kind])}
-            assert [d["params"] for d in details] == [singles[k]["params"] for k in KINDS]   # each as solved alone
-            got = st.planned[side].model(plan.sides[side].surface_input)
-            want_mm = b.model(b.fitted_input, vector_of(st.changes[side]))
-            assert np.abs(got - want_mm).max() < TOL_MM, (st.key, side)
+            change = grid.changes[side][i]
+            assert [(d["kind"], d["degree"]) for d in change.details] == list(zip(KINDS, combo))
+            assert [d["params"] for d in change.details] == [singles[k, d].changes[side].details[0]["params"]
+                                                             for k, d in zip(KINDS, combo)]
+            vector = vector_of(change)
+            moved = b.model(b.fitted_input, vector)
+            assert np.abs(grid.models[side][i] - moved).max() < 1e-3, (grid.keys[i], side)
+            grown = divergence_volume_cc(moved, b.faces) - divergence_volume_cc(b.fitted_input, b.faces)
+            assert measures[side]["volume_cc"] == pytest.approx(plan.volumes.sides[side].volume_cc + grown, abs=1e-6)
+            nipple = b.model(plan.sides[side].scan.nipple_camera_mm[None], vector)[0]
+            assert measures[side]["notch_to_nipple_mm"] == pytest.approx(np.linalg.norm(nipple - notch), abs=1e-6)
     for side in plan.sides:
-        assert plan.shown_measures["combined"][side] == pytest.approx(plan.measures.after[side], abs=1e-9)
+        assert grid.measures_at(grid.planned_index)[side] == pytest.approx(plan.measures.after[side], abs=1e-9)
 
 
 # --- what is written ---------------------------------------------------------------------------

@@ -35,7 +35,7 @@ def test_her_skin_from_a_scanners_mesh_shows_no_background_through_her(tmp_path,
     write_scan_file(tmp_path / "her.obj", scene, "mm", "+y")
     plan = run_plan(tmp_path / "her.obj", tmp_path / "case", PlanOptions.parse(["ptosis:3"]))
     views = build_views(plan)
-    for name, (before, after) in before_after(views, views.states[0]).items():
+    for name, (before, after) in before_after(views, views.state(views.keys[0])).items():
         for drawn in (before, after):
             share, pixels = holes(drawn)
             assert share < 0.005, (name, share, pixels)
@@ -48,7 +48,7 @@ def test_her_skin_from_a_scanners_mesh_shows_no_background_through_her(tmp_path,
                                   axis=1).argsort()[:5]
             assert all(_dark(c) == dark for c in rgb[near]), (side, offset, rgb[near])
     monkeypatch.setattr(views_module, "surface_triangles", views_module.skin_triangles)
-    before, _ = before_after(build_views(plan), views.states[0], names=("front",))["front"]
+    before, _ = before_after(build_views(plan), views.state(views.keys[0]), names=("front",))["front"]
     assert holes(before)[0] > 0.01
 
 
@@ -58,6 +58,6 @@ def test_her_skin_from_a_closed_body_scan_shows_no_crack_under_her_breasts(tmp_p
     write_closed_scan(tmp_path / "her.glb", make_body(BodyOptions(cup=0.9, firmness=0.2)), "m", "-x", turn_deg=-40.0)
     plan = run_plan(tmp_path / "her.glb", tmp_path / "case", PlanOptions.parse(["ptosis:3"]))
     views = build_views(plan)
-    for name, (before, _) in before_after(views, views.states[0]).items():
+    for name, (before, _) in before_after(views, views.state(views.keys[0])).items():
         share, pixels = holes(before)
         assert share < 0.0002, (name, share, pixels)

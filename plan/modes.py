@@ -1,0 +1,74 @@
+"""Many states of one surface stored compactly: their displacements as a few shared modes.
+
+The report carries every state its sliders reach (hundreds), each a displacement of the same points. Those
+displacements span few dimensions (a handful of deformation parameters move them), so they are stored as K
+modes shared by every state and K coefficients per state: state i ≈ Σₖ coefficients[i, k] · scales[k] ·
+modes[k], the modes quantised to int16. K starts at the number of modes whose singular value exceeds
+TOLERANCE_MM and grows, one mode at a time, until the reconstruction, quantised as stored, puts no point of any
+state farther than TOLERANCE_MM from where the plan computed it (checked, not estimated).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+TOLERANCE_MM = 0.05
+"""No point of any state is drawn farther than this from where the plan put it (mm): a fifth of a pixel of the
+report's view of her torso, and a tenth of the scan's noise."""
+
+
+@dataclass(frozen=True, eq=False)
+class Modes:
+    """States' displacements (S states of N points) as K shared modes: `decode` gives them back."""
+
+    coefficients: np.ndarray    # (S, K) float32
+    modes: np.ndarray           # (K, N, 3) int16
+    scales: np.ndarray          # (K,) float32, mm per step of each mode
+    worst_mm: float             # the largest distance of a decoded point from its state's
+
+    def decode(self, i: int | slice = slice(None)) -> np.ndarray:
+        """The displacements of state(s) i as stored ((N, 3) or (S', N, 3), mm), as the page rebuilds them."""
+        weights = self.coefficients[i].astype(np.float64) * self.scales
+        return np.tensordot(weights, self.modes.astype(np.float64), axes=(-1, 0))
+
+
+STATES_AT_ONCE = 64
+"""States decoded at a time when checking the modes (their displacements held at once)."""
+
+
+def modes_of(displacements: np.ndarray) -> Modes:
+    """`displacements` (S, N, 3) (mm) as modes that hold every state within TOLERANCE_MM."""
+    S, shape = len(displacements), displacements.shape[1:]
+    X = np.asarray(displacements).reshape(S, -1)
+    gram = np.zeros((S, S))
+    for at in range(0, X.shape[1], 4096):                       # the states' Gram matrix, in float64
+        part = X[:, at:at + 4096].astype(np.float64)
+        gram += part @ part.T
+    values, vectors = np.linalg.eigh(gram)
+    order = np.argsort(values)[::-1]
+    values, vectors = np.clip(values[order], 0.0, None), vectors[:, order]
+    k = int(np.sum(np.sqrt(values) > TOLERANCE_MM))              # the modes that can move a point by the tolerance
+    while True:
+        out = _quantised(X, vectors[:, :k], shape)
+        if out.worst_mm <= TOLERANCE_MM or k >= S:
+            return out
+        k += 1
+
+
+def _quantised(X: np.ndarray, vectors: np.ndarray, shape) -> Modes:
+    """X's projection onto the K state-space `vectors` (orthonormal), its modes quantised to int16, and the worst
+    error of the result."""
+    basis = np.zeros((vectors.shape[1], X.shape[1]))                                  # (K, M): each mode with its σ
+    for at in range(0, len(X), STATES_AT_ONCE):
+        basis += vectors[at:at + STATES_AT_ONCE].T @ X[at:at + STATES_AT_ONCE].astype(np.float64)
+    steps = np.abs(basis).max(axis=1) / 32767.0 if basis.size else np.zeros(len(basis))
+    steps = np.where(steps > 0, steps, 1.0).astype(np.float32)
+    out = Modes(vectors.astype(np.float32), np.round(basis / steps[:, None]).astype(np.int16).reshape(-1, *shape),
+                steps, 0.0)
+    worst = 0.0
+    for at in range(0, len(X), STATES_AT_ONCE):
+        chunk = slice(at, at + STATES_AT_ONCE)
+        error = (out.decode(chunk) - X[chunk].reshape(-1, *shape)) ** 2
+        worst = max(worst, float(np.sqrt(error.sum(axis=-1).max())) if error.size else 0.0)
+    return Modes(out.coefficients, out.modes, out.scales, worst)
