@@ -18,7 +18,7 @@ def transform_points(T, points) -> np.ndarray:
     points = np.asarray(points, dtype=float)
     if np.array_equal(T, np.eye(4)):
         return points.copy()
-    return points @ T[:3, :3].T + T[:3, 3]
+    return (points.reshape(-1, 3) @ T[:3, :3].T + T[:3, 3]).reshape(points.shape)   # one product, not one per row
 
 
 def is_rigid(T, tol: float = 1e-5) -> bool:

@@ -282,7 +282,7 @@ def breast_measures(landmarks: BodyLandmarks, nipple_mm, vertices_mm, faces, bas
     return {k: float(v[0]) for k, v in out.items()}
 
 
-EACH_MESHES = 64
+EACH_MESHES = 32
 """`breast_measures_each` measures this many meshes at a time (their triangles held at once)."""
 
 

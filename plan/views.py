@@ -95,8 +95,8 @@ def build_views(plan: Plan) -> Views:
                                                                                            drawn)),
                  scans={s: show(transform_points(sp.frames.breast_to_input, sp.scan.points))
                         for s, sp in plan.sides.items()},
-                 meshes=meshes, keys=plan.grid.keys, moved=_moved(plan, patch_in, show),
-                 planned_meshes={s: show(m).astype(np.float32) for s, m in plan.grid.models.items()},
+                 meshes=meshes, keys=plan.grid.keys, moved=_moved(plan, patch_in, to_display),
+                 planned_meshes={s: _shown32(to_display, m) for s, m in plan.grid.models.items()},
                  earlier={s: (show(sp.follow_up.earlier_surface_input), sp.follow_up.earlier_faces)
                           for s, sp in plan.sides.items() if sp.follow_up is not None},
                  landmarks=_landmarks(plan, show),
@@ -106,10 +106,20 @@ def build_views(plan: Plan) -> Views:
                  skin_rgb=None if rgb is None else np.concatenate([rgb[~near], rgb[near]]))
 
 
-def _moved(plan: Plan, patch_in: np.ndarray, show) -> np.ndarray:
+def _moved(plan: Plan, patch_in: np.ndarray, to_display: np.ndarray) -> np.ndarray:
     """(S, P, 3) float32 the patch (input frame) moved by both sides in each state of `Plan.grid`, display frame."""
-    moved = patch_in + sum(PlannedChange.displacements(plan.grid.planned[s], patch_in) for s in plan.sides)
-    return show(moved).astype(np.float32)
+    moved = None
+    for s in plan.sides:
+        shift = PlannedChange.displacements(plan.grid.planned[s], patch_in)
+        moved = shift if moved is None else np.add(moved, shift, out=moved)
+    return _shown32(to_display, np.add(moved, patch_in, out=moved))
+
+
+def _shown32(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Points (..., 3) mapped by the rigid T in float32 (the page draws in float32): many states at once."""
+    out = np.asarray(points, dtype=np.float32).reshape(-1, 3) @ T[:3, :3].T.astype(np.float32)
+    out += T[:3, 3].astype(np.float32)
+    return out.reshape(np.shape(points))
 
 
 DRAWN_MM = (80.0, -650.0)

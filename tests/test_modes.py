@@ -3,6 +3,7 @@ a known rank come back in that many modes, every state within TOLERANCE_MM of it
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from breastplan.plan.modes import TOLERANCE_MM, modes_of
 
@@ -22,7 +23,7 @@ def test_states_of_a_known_rank_come_back_in_that_many_modes_within_the_toleranc
     stored = modes_of(displacements)
     assert stored.coefficients.shape == (300, 4) and stored.modes.shape == (4, 2000, 3)
     assert stored.modes.dtype == np.int16 and stored.worst_mm <= TOLERANCE_MM
-    assert _worst(stored, displacements) == stored.worst_mm
+    assert _worst(stored, displacements) == pytest.approx(stored.worst_mm, abs=1e-4)   # checked in float32
     assert np.allclose(stored.decode(123), stored.decode()[123])
 
 
