@@ -219,16 +219,23 @@ def _folds(plan: Plan, show) -> dict[str, np.ndarray]:
 
 SIDE_LABEL_MM = (30.0, 120.0, 30.0)
 """Her sides are named this far outside each nipple (along her left–right axis), below it (along her up axis)
-and in front of it, mm: on her skin under the breast, inside any view of her."""
+and in front of her (of the nipple, or of her skin there where that stands further forward), mm: on her skin
+under the breast, inside any view of her, and not hidden behind her."""
+LABEL_REACH_MM = 25.0
+"""Her skin within this distance of a side's label, across her front, is what the label stands in front of."""
 
 
 def _side_labels(plan: Plan, show) -> dict[str, np.ndarray]:
     marks = plan.volumes.landmarks
+    torso, ahead = np.asarray(plan.body.torso_input, float), marks.anterior_axis
     out = {}
     for s, sp in plan.sides.items():
         outward = marks.left_axis if s == "left" else -marks.left_axis
-        out[s] = show((sp.scan.nipple_camera_mm + SIDE_LABEL_MM[0] * outward - SIDE_LABEL_MM[1] * marks.up_axis
-                       + SIDE_LABEL_MM[2] * marks.anterior_axis)[None])[0]
+        place = sp.scan.nipple_camera_mm + SIDE_LABEL_MM[0] * outward - SIDE_LABEL_MM[1] * marks.up_axis
+        depth = (torso - place) @ ahead
+        near = np.linalg.norm(torso - place - np.outer(depth, ahead), axis=1) < LABEL_REACH_MM
+        skin = max(float(depth[near].max()), 0.0) if near.any() else 0.0
+        out[s] = show((place + (skin + SIDE_LABEL_MM[2]) * ahead)[None])[0]
     return out
 
 

@@ -642,6 +642,27 @@ def test_each_slider_keeps_its_degree_and_the_page_draws_and_measures_the_plans_
         assert float(text) == pytest.approx(measures[name], abs=0.051), name
 
 
+def test_everything_drawn_on_her_lies_inside_the_reports_box_and_her_sides_are_named_in_front_of_her(computed):
+    """The report's 3-D box (`bounds`; plotly draws nothing outside it) holds her skin in every state, the
+    landmarks, footprints, folds and the names of her sides (her right was once drawn 0.7 mm outside it, and not
+    at all); each side's name stands at least 25 mm in front of her skin within 40 mm of it across her front."""
+    from breastplan.plan.report import page_data
+    from breastplan.plan.views import build_views
+
+    views = build_views(computed)
+    box = np.array(page_data(computed, views)["bounds"])
+    drawn = [views.torso, views.moved.reshape(-1, 3), *views.landmarks.values(), *views.footprints.values(),
+             *views.folds.values(), np.array(list(views.side_labels.values()))]
+    for points in drawn:
+        assert ((points >= box[:, 0]) & (points <= box[:, 1])).all()
+    to_display = VIEW_TO_DISPLAY[:3, :3] @ np.asarray(computed.body.input_to_view, float)[:3, :3]
+    front, skin = to_display @ computed.volumes.landmarks.anterior_axis, np.vstack([views.torso, views.patch])
+    for side, label in views.side_labels.items():
+        depth = (skin - label) @ front
+        across = np.linalg.norm(skin - label - np.outer(depth, front), axis=1)
+        assert np.max(depth[across < 40.0], initial=-np.inf) <= -25.0, side
+
+
 def _touch(b, *points) -> None:
     """A finger down at the first of `points` (page px), moved through the others, lifted (Chromium's touch input)."""
     kinds = ["touchStart"] + ["touchMove"] * (len(points) - 1)
