@@ -4,7 +4,9 @@ Measured as her volume is (`plan.breast_volume`: her skin as a height field over
 above one chest wall, inside each breast's footprint):
 
 1. **Where**: the implant's base lies on the chest wall, centred under her nipple across her body and with its
-   lower rim on her inframammary fold (the fold's height as her ptosis measure finds it), as a surgeon places it.
+   lower rim on her inframammary fold (the fold's height as her ptosis measure finds it), lowered where the
+   implant needs it: a surgeon sets the new fold FOLD_BELOW_WIDTH_MM less than the implant's base width below
+   the nipple (the rule of thumb of tissue-based implant selection: an 11 cm implant, 7 cm from nipple to fold).
 2. **How thick**: the implant's thickness over each cell; behind the muscle (`pocket` "submuscular") the
    pectoralis flattens its upper half, by up to SUBMUSCULAR at its upper rim.
 3. **Draped**: her gland and skin do not follow the implant's steep rim: the thickness is spread by a Gaussian of
@@ -35,6 +37,8 @@ SUBMUSCULAR = 0.5
 """Behind the muscle, the implant's thickness is cut by this share at its upper rim (linearly from its centre)."""
 DRAPE_MM = 10.0
 """σ of the Gaussian her gland and skin spread the implant's rim over (mm)."""
+FOLD_BELOW_WIDTH_MM = 40.0
+"""The new fold lies the implant's base width less this below the nipple, unless hers lies lower already (mm)."""
 MEDIAL_MM = 15.0
 """An implant's base stays this far from her midline: the edge of her sternum (mm)."""
 
@@ -81,7 +85,8 @@ def augmentation(volumes: BreastVolumes, side: str, nipple_mm, fold_below_nipple
     cells, T = volumes.cells, volumes.body_from_input
     nipple = transform_points(T, np.asarray(nipple_mm, float)[None])[0]
     R = implant.width_mm / 2.0
-    centre = np.array([nipple[0], nipple[1] - fold_below_nipple_mm + R])
+    fold = max(fold_below_nipple_mm, implant.width_mm - FOLD_BELOW_WIDTH_MM)
+    centre = np.array([nipple[0], nipple[1] - fold + R])
     X, Y = np.meshgrid(cells.x - centre[0], cells.y - centre[1], indexing="ij")
     thick = implant.thickness(X, Y)
     if pocket == "submuscular":

@@ -109,3 +109,17 @@ def test_an_implant_that_would_reach_over_her_sternum_is_refused_in_a_sentence()
 def test_a_pocket_that_is_neither_in_front_of_nor_behind_the_muscle_is_an_option_error():
     with pytest.raises(OptionError, match="subglandular or submuscular"):
         _placed("small", "left", Implant.of(300, "moderate"), "subcutaneous")
+
+
+def test_the_fold_is_lowered_as_a_surgeon_lowers_it_for_a_wide_implant_and_kept_where_it_is_low_enough():
+    """An 11 cm implant under a small breast whose fold lies 40 mm below her nipple: its lower rim on a new fold
+    7 cm below the nipple (the rule of thumb: an 11 cm implant, 7 cm from nipple to fold), so its centre 15 mm
+    below the nipple, under it across her body. A fold 90 mm below the nipple stays where it is."""
+    torso, nipples, *_ = scanned("small")
+    m = measured("small")
+    nipple = transform_points(m.body_from_input, nipples["left"][None])[0]
+    implant = Implant.sized(110.0, 35.0)
+    low = augmentation(m, "left", nipples["left"], 40.0, implant)
+    assert low.centre_mm == pytest.approx([nipple[0], nipple[1] - 15.0])
+    kept = augmentation(m, "left", nipples["left"], 90.0, implant)
+    assert kept.centre_mm[1] == pytest.approx(nipple[1] - 90.0 + 55.0)

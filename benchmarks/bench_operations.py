@@ -1,0 +1,119 @@
+"""Operations checked against the body she would have: augmentation from one cup to another's volume.
+
+MakeHuman's world holds the truth of what an augmentation aims at: the same body with a larger cup. For each
+pair (cup c1 → c2 of one body: build, firmness, weight, muscle, pose varied), the c1 body is scanned as a clinic
+scans her (650 mm, pitch 5°, a wall 400 mm behind, 800×600, 8 frames) and ingested as `plan` ingests her (both
+sides); her breasts are measured on her skin (`measure_breasts`), her fold found (`ptosis_from_cells`), and under
+each breast the catalogue's moderate round implant of the true volume change (the half-body volumes of c2 less
+c1) is placed in front of the muscle (`plan.augmentation`). Her scanned skin moved by it is then compared with
+the true c2 body (its mesh in the same camera frame):
+
+* **surface**: each moved point over the breast (the scan points whose nearest c1 body vertex lies in
+  MakeHuman's breast region) to the c2 body's surface: mean and 95th percentile (targets 2.5 mm, 7 mm); the
+  baseline, measured the same way, is her scan as it is (no plan) against the c2 body;
+* **nipple**: the planned nipple (the one found on her scan, moved) to the c2 body's (target 6 mm);
+* **volume**: the planned change on her skin is the implant's, exactly (by construction), so it is the true
+  change.
+
+Run:  .venv/bin/python benchmarks/bench_operations.py     (about 1 minute)
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+from scipy.spatial import cKDTree
+from threadpoolctl import threadpool_limits
+
+from breastplan import transform_points
+from breastplan.body import Body
+from breastplan.fitting.closest import closest_points
+from breastplan.ingest.pipeline import ingest_frames
+from breastplan.ingest.recording import DepthFrames
+from breastplan.options import IngestOptions
+from breastplan.plan.augmentation import augmentation
+from breastplan.plan.breast_volume import measure_breasts
+from breastplan.plan.implants import Implant
+from breastplan.plan.symmetry import ptosis_from_cells
+from breastplan.scenes.makehuman import BodyOptions, breast_region, make_body
+from breastplan.scenes.realistic import BodyScene, CameraOptions, camera_pose
+
+PAIRS = [  # (name, the body before, its cup after)
+    ("cup 0.3 → 0.7", BodyOptions(cup=0.3, pose="a-pose"), 0.7),
+    ("slim, cup 0.2 → 0.6", BodyOptions(cup=0.2, weight=0.3), 0.6),
+    ("heavy, arms down, cup 0.4 → 0.8", BodyOptions(cup=0.4, weight=0.7, pose="arms-down"), 0.8),
+    ("firm, hands on hips, cup 0.3 → 0.9", BodyOptions(cup=0.3, firmness=0.8, pose="hands-on-hips"), 0.9),
+    ("soft, cup 0.5 → 0.9", BodyOptions(cup=0.5, firmness=0.3), 0.9),
+    ("muscular, cup 0.1 → 0.5", BodyOptions(cup=0.1, muscle=0.7), 0.5),
+]
+TARGETS = {"surface_mean_mm": 2.5, "surface_p95_mm": 7.0, "nipple_mm": 6.0}
+CAMERA = CameraOptions(650.0, 5.0, 0.0, "800x600", wall_mm=400.0)
+
+
+def scanned(body):
+    """(her torso, nipples, view frame, plumb, camera_from_body) of `body` scanned as a clinic scans her."""
+    target = 0.5 * (body.nipples["left"] + body.nipples["right"])
+    scene = BodyScene(body, CAMERA, camera_pose(target, CAMERA))
+    frames = DepthFrames(scene.frames(8, 0), CAMERA.K, "bench")
+    sides = {side: ingest_frames(frames, IngestOptions(side)) for side in ("left", "right")}
+    first = sides["left"]
+    return (first.torso_camera, {s: i.nipple_camera for s, i in sides.items()}, first.input_to_view,
+            first.plumb_camera, scene.camera_from_body)
+
+
+def pair(name: str, before: BodyOptions, cup: float) -> list[dict]:
+    small, large = make_body(before), make_body(replace(before, cup=cup))
+    torso, nipples, view, plumb, camera_from_body = scanned(small)
+    m = measure_breasts(Body(torso, view, plumb), nipples)
+    truth = {s: large.half_volumes_cc()[s] - small.half_volumes_cc()[s] for s in ("left", "right")}
+    large_mesh = transform_points(camera_from_body, large.vertices)
+    nearest = cKDTree(transform_points(camera_from_body, small.vertices)).query(torso)[1]
+    rows = []
+    for side in ("left", "right"):
+        nipple = transform_points(m.body_from_input, nipples[side][None])[0]
+        fold = ptosis_from_cells(nipple, m.cells, side)["nipple_to_fold_mm"]
+        implant = Implant.of(truth[side], "moderate")
+        aug = augmentation(m, side, nipples[side], fold, implant)
+        over = np.isin(nearest, breast_region(side))
+        planned = aug(torso[over])
+        dist = closest_points(large_mesh, large.faces, planned)[1]
+        base = closest_points(large_mesh, large.faces, torso[over])[1]
+        true_nipple = transform_points(camera_from_body, large.nipples[side][None])[0]
+        rows.append({"pair": name, "side": side, "true_change_cc": truth[side],
+                     "implant": f"{implant.volume_cc:.0f} cc, {implant.width_mm:.0f} × {implant.projection_mm:.0f} mm",
+                     "surface_mean_mm": float(dist.mean()), "surface_p95_mm": float(np.percentile(dist, 95)),
+                     "baseline_mean_mm": float(base.mean()), "baseline_p95_mm": float(np.percentile(base, 95)),
+                     "nipple_mm": float(np.linalg.norm(aug(nipples[side][None])[0] - true_nipple)),
+                     "nipple_baseline_mm": float(np.linalg.norm(nipples[side] - true_nipple)),
+                     "points": int(over.sum())})
+    return rows
+
+
+def main() -> None:
+    with threadpool_limits(1, "blas"):
+        rows = [r for name, before, cup in PAIRS for r in pair(name, before, cup)]
+    table = Table(title="bench_operations — augmentation to a larger cup's volume, against the larger body")
+    for col in ("pair", "side", "true change cc", "implant", "surface mean / p95 mm", "as scanned mean / p95 mm",
+                "nipple mm (as scanned)"):
+        table.add_column(col)
+    for r in rows:
+        table.add_row(r["pair"], r["side"], f"{r['true_change_cc']:.0f}", r["implant"],
+                      f"{r['surface_mean_mm']:.1f} / {r['surface_p95_mm']:.1f}",
+                      f"{r['baseline_mean_mm']:.1f} / {r['baseline_p95_mm']:.1f}",
+                      f"{r['nipple_mm']:.1f} ({r['nipple_baseline_mm']:.1f})")
+    Console().print(table)
+    worst = {k: max(r[k] for r in rows) for k in ("surface_mean_mm", "surface_p95_mm", "nipple_mm")}
+    median = {k: float(np.median([r[k] for r in rows])) for k in worst}
+    baseline = {k: (float(np.median([r[b] for r in rows])), max(r[b] for r in rows)) for k, b in
+                (("surface_mean_mm", "baseline_mean_mm"), ("surface_p95_mm", "baseline_p95_mm"),
+                 ("nipple_mm", "nipple_baseline_mm"))}
+    print(json.dumps({"benchmark": "operations", "augmentation": {"breasts": len(rows), "worst": worst,
+                      "median": median, "met": {k: worst[k] <= TARGETS[k] for k in worst},
+                      "baseline_median_worst": baseline}, "targets": TARGETS, "rows": rows}, default=float))
+
+
+if __name__ == "__main__":
+    main()
