@@ -13,24 +13,25 @@ above one chest wall, inside each breast's footprint):
    σ DRAPE_MM, kept to the skin that then stands FOOT_MM in front of the wall (her footprint grown over what the
    implant raises: `footprint`), and scaled so that her volume on her skin, measured inside that footprint
    (`heights`), grows by the implant's exactly.
-4. **Her skin moved**: each point of her skin at (x, y) moves forward along her anterior axis by the draped
-   thickness there (bilinear over the cells).
+4. **Her skin moved** (`plan.skin_lift`): each point of her skin at (x, y) moves forward along her anterior axis
+   by the draped thickness there (bilinear over the cells).
 
 An implant whose base would reach within MEDIAL_MM of her midline (over her sternum) is refused: it is wider
 than her chest leaves room for.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage, optimize
+from scipy import ndimage
 
 from breastplan import BadInputError, transform_points
 from breastplan.options import OptionError
 
 from .breast_volume import CELL_MM, FOOT_MM, BreastVolumes
 from .implants import Implant
+from .skin_lift import SkinLift, scaled
 
 POCKETS = ("subglandular", "submuscular")
 SUBMUSCULAR = 0.5
@@ -43,36 +44,15 @@ MEDIAL_MM = 15.0
 """An implant's base stays this far from her midline: the edge of her sternum (mm)."""
 
 
-@dataclass(frozen=True, eq=False)
-class Augmentation:
-    """An implant under one breast, and how far it lifts her skin: `lift_mm` over her skin's cells (body frame,
-    x her left, y up; cell centres `x`, `y`), along her anterior axis."""
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Augmentation(SkinLift):
+    """An implant under one breast, and how far it lifts her skin (`SkinLift`: the draped thickness over her
+    skin's cells; its footprint, hers grown over the skin the implant raises)."""
 
     implant: Implant
     pocket: str
     side: str
     centre_mm: np.ndarray            # (2,) the implant's base centre, (x, y) body frame
-    x: np.ndarray                    # (nx,) cell centres, mm
-    y: np.ndarray                    # (ny,)
-    lift_mm: np.ndarray              # (nx, ny) the draped thickness: her skin's rise over each cell
-    footprint: np.ndarray            # (nx, ny) bool: her footprint grown over the skin the implant raises
-    body_from_input: np.ndarray      # (4, 4)
-
-    def heights(self, height_mm: np.ndarray) -> np.ndarray:
-        """Her skin's heights above the chest wall over the cells (`SkinCells.height_mm`, mm) with the implant."""
-        return height_mm + self.lift_mm
-
-    def displacement(self, points_mm) -> np.ndarray:
-        """(N, 3) how far input-frame points of her skin move, input frame, mm."""
-        body = transform_points(self.body_from_input, np.asarray(points_mm, float).reshape(-1, 3))
-        at = np.stack([(body[:, 0] - self.x[0]) / CELL_MM, (body[:, 1] - self.y[0]) / CELL_MM])
-        lift = ndimage.map_coordinates(self.lift_mm, at, order=1, mode="constant", cval=0.0)
-        return np.outer(lift, self.body_from_input[2, :3])             # along her anterior axis, input frame
-
-    def __call__(self, points_mm) -> np.ndarray:
-        """Input-frame points (mm) as the implant would move them."""
-        points = np.asarray(points_mm, float)
-        return points + self.displacement(points).reshape(points.shape)
 
 
 def augmentation(volumes: BreastVolumes, side: str, nipple_mm, fold_below_nipple_mm: float, implant: Implant,
@@ -100,12 +80,5 @@ def augmentation(volumes: BreastVolumes, side: str, nipple_mm, fold_below_nipple
     lift = ndimage.gaussian_filter(thick, DRAPE_MM / CELL_MM, mode="constant") * half
     grown = ndimage.binary_propagation(cells.side(side), mask=cells.side(side) | (half & (cells.height_mm + lift
                                                                                              > FOOT_MM)))
-    lift *= grown
-    before = replace(cells, footprint=grown).volume_cc(side)
-
-    def added(k: float) -> float:                   # cc her volume grows by with k times the draped thickness
-        return replace(cells, height_mm=cells.height_mm + k * lift, footprint=grown).volume_cc(side) - before
-
-    k = optimize.brentq(lambda k: added(k) - implant.volume_cc, 0.0, 4.0 * implant.volume_cc / max(added(1.0), 1e-9),
-                        xtol=1e-12)
-    return Augmentation(implant, pocket, side, centre, cells.x, cells.y, k * lift, grown, T)
+    return Augmentation(cells.x, cells.y, scaled(cells, side, lift * grown, grown, implant.volume_cc), grown, T,
+                        implant=implant, pocket=pocket, side=side, centre_mm=centre)

@@ -1,0 +1,62 @@
+"""An operation's change of her skin, over the cells her volume is measured on (`plan.breast_volume`: her skin as
+a height field over 5 mm cells of her body frame, above one chest wall, inside each breast's footprint).
+
+The operations (`plan.augmentation`, `plan.lumpectomy`) each shape a rise (or a sinking) of her skin over the
+cells; `scaled` sizes it so that her volume on her skin changes by exactly the operation's volume, and
+`SkinLift` moves her skin by it: each point at (x, y) along her anterior axis, by the rise there (bilinear
+over the cells).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import ndimage, optimize
+
+from breastplan import transform_points
+
+from .breast_volume import CELL_MM, SkinCells
+
+
+@dataclass(frozen=True, eq=False)
+class SkinLift:
+    """How far an operation moves her skin along her anterior axis over her skin's cells (body frame, x her left,
+    y up; cell centres `x`, `y`), mm (< 0: it sinks), and the footprint her volume is then measured inside."""
+
+    x: np.ndarray                    # (nx,) cell centres, mm
+    y: np.ndarray                    # (ny,)
+    lift_mm: np.ndarray              # (nx, ny)
+    footprint: np.ndarray            # (nx, ny) bool
+    body_from_input: np.ndarray      # (4, 4)
+
+    def heights(self, height_mm: np.ndarray) -> np.ndarray:
+        """Her skin's heights above the chest wall over the cells (`SkinCells.height_mm`, mm) after it."""
+        return height_mm + self.lift_mm
+
+    def displacement(self, points_mm) -> np.ndarray:
+        """(N, 3) how far input-frame points of her skin move, input frame, mm."""
+        body = transform_points(self.body_from_input, np.asarray(points_mm, float).reshape(-1, 3))
+        at = np.stack([(body[:, 0] - self.x[0]) / CELL_MM, (body[:, 1] - self.y[0]) / CELL_MM])
+        lift = ndimage.map_coordinates(self.lift_mm, at, order=1, mode="constant", cval=0.0)
+        return np.outer(lift, self.body_from_input[2, :3])             # along her anterior axis, input frame
+
+    def __call__(self, points_mm) -> np.ndarray:
+        """Input-frame points (mm) as the operation would move them."""
+        points = np.asarray(points_mm, float)
+        return points + self.displacement(points).reshape(points.shape)
+
+
+def scaled(cells: SkinCells, side: str, shape_mm: np.ndarray, footprint: np.ndarray, change_cc: float) -> np.ndarray:
+    """`shape_mm` (nx, ny) scaled so that her `side` breast's volume on her skin (heights above the wall, those
+    above 0, over `footprint`) changes by `change_cc` exactly (< 0: falls)."""
+    before = replace(cells, footprint=footprint).volume_cc(side)
+
+    def changed(k: float) -> float:
+        return replace(cells, height_mm=cells.height_mm + k * shape_mm, footprint=footprint).volume_cc(side) - before
+
+    reach = abs(change_cc) / max(abs(changed(1.0)), 1e-9)
+    while abs(changed(reach)) < abs(change_cc):               # heights stop at the wall: a sinking saturates
+        reach *= 2.0
+        if reach > 1e6:
+            raise ValueError(f"her skin cannot change by {change_cc:g} cc over these cells")
+    return optimize.brentq(lambda k: changed(k) - change_cc, 0.0, reach, xtol=1e-12) * shape_mm
