@@ -1,4 +1,5 @@
-"""Operations checked against the body she would have: augmentation from one cup to another's volume.
+"""Operations checked against the body she would have: augmentation from one cup to another's volume, a lift
+to a firmer body's nipple height, a reduction to a smaller cup's volume; and lumpectomies of growing size.
 
 MakeHuman's world holds the truth of what an augmentation aims at: the same body with a larger cup. For each
 pair (cup c1 → c2 of one body: build, firmness, weight, muscle, pose varied), the c1 body is scanned as a clinic
@@ -15,7 +16,13 @@ the true c2 body (its mesh in the same camera frame):
 * **volume**: the planned change on her skin is the implant's, exactly (by construction), so it is the true
   change.
 
-Run:  .venv/bin/python benchmarks/bench_operations.py     (about 1 minute)
+Also: each breast of two hanging bodies lifted to the nipple height of the same body made firmer (its volume
+kept: the change should be 0 %), against that body; two cup-1.0 bodies reduced by the true change to cup 0.5,
+against that body; lumpectomies of 5–25 % of a breast at 3 o'clock, 35 mm from the nipple, on three bodies: the
+volume lost (target: within 5 % of V), her nipple's deviation towards the defect (growing with V), her other
+breast's change (0) and pBRA before and after.
+
+Run:  .venv/bin/python benchmarks/bench_operations.py     (about 2 minutes)
 """
 from __future__ import annotations
 
@@ -37,7 +44,10 @@ from breastplan.options import IngestOptions
 from breastplan.plan.augmentation import augmentation
 from breastplan.plan.breast_volume import measure_breasts
 from breastplan.plan.implants import Implant
-from breastplan.plan.symmetry import ptosis_from_cells
+from breastplan.plan.lumpectomy import lumpectomy
+from breastplan.plan.mastopexy import mastopexy
+from breastplan.plan.reduction import reduction
+from breastplan.plan.symmetry import bcct_measures, ptosis_from_cells
 from breastplan.scenes.makehuman import BodyOptions, breast_region, make_body
 from breastplan.scenes.realistic import BodyScene, CameraOptions, camera_pose
 
@@ -92,9 +102,79 @@ def pair(name: str, before: BodyOptions, cup: float) -> list[dict]:
     return rows
 
 
+LIFTS = [  # (name, a body whose breasts hang, firmer body of the same cup: the nipple height a lift aims at)
+    ("cup 0.8, firmness 0.1 → 0.9", BodyOptions(cup=0.8, firmness=0.1, pose="arms-down"), 0.9),
+    ("cup 0.6, firmness 0.0 → 1.0", BodyOptions(cup=0.6, firmness=0.0), 1.0),
+]
+REDUCTIONS = [("cup 1.0 → 0.5", BodyOptions(cup=1.0, firmness=0.5), 0.5),
+              ("heavy, cup 1.0 → 0.5", BodyOptions(cup=1.0, weight=0.8, pose="arms-down"), 0.5)]
+EXCISIONS = (0.05, 0.10, 0.15, 0.25)
+"""Shares of her breast excised at 3 o'clock, 35 mm from her nipple, in the lumpectomy rows."""
+
+
+def against(truth_body, camera_from_body, moved, torso, over, nipple_after, side) -> dict:
+    """Her skin over the breast, moved, against the true body's surface; her nipple against its nipple."""
+    mesh = transform_points(camera_from_body, truth_body.vertices)
+    dist = closest_points(mesh, truth_body.faces, moved[over])[1]
+    base = closest_points(mesh, truth_body.faces, torso[over])[1]
+    true_nipple = transform_points(camera_from_body, truth_body.nipples[side][None])[0]
+    return {"surface_mean_mm": float(dist.mean()), "baseline_mean_mm": float(base.mean()),
+            "nipple_mm": float(np.linalg.norm(nipple_after - true_nipple))}
+
+
+def lifted(name: str, before: BodyOptions, firmness: float) -> dict:
+    """The left breast lifted to the firmer body's nipple height (found on its own scan), against that body."""
+    low, firm = make_body(before), make_body(replace(before, firmness=firmness))
+    torso, nipples, view, plumb, camera_from_body = scanned(low)
+    m = measure_breasts(Body(torso, view, plumb), nipples)
+    aim = transform_points(m.body_from_input @ camera_from_body, firm.nipples["left"][None])[0]
+    lift = mastopexy(m, "left", nipples["left"], float(aim[1]))
+    over = np.isin(cKDTree(transform_points(camera_from_body, low.vertices)).query(torso)[1], breast_region("left"))
+    after = replace(m.cells, height_mm=lift.heights(m.cells.height_mm))
+    return {"pair": name, "rise_mm": lift.rise_mm, "volume_change_pct":
+            100.0 * (after.volume_cc("left") - m.cells.volume_cc("left")) / m.cells.volume_cc("left"),
+            **against(firm, camera_from_body, lift(torso), torso, over, lift(nipples["left"][None])[0], "left")}
+
+
+def reduced(name: str, before: BodyOptions, cup: float) -> dict:
+    """The left breast reduced by the true change to the smaller cup, against that body."""
+    big, small = make_body(before), make_body(replace(before, cup=cup))
+    torso, nipples, view, plumb, camera_from_body = scanned(big)
+    m = measure_breasts(Body(torso, view, plumb), nipples)
+    truth = big.half_volumes_cc()["left"] - small.half_volumes_cc()["left"]
+    cut = reduction(m, "left", nipples["left"], volume_cc=min(truth, 0.9 * m.sides["left"].volume_cc))
+    over = np.isin(cKDTree(transform_points(camera_from_body, big.vertices)).query(torso)[1], breast_region("left"))
+    after = replace(m.cells, height_mm=cut.heights(m.cells.height_mm))
+    return {"pair": name, "true_change_cc": truth, "planned_change_cc": after.volume_cc("left") - m.cells.volume_cc(
+        "left"), **against(small, camera_from_body, cut(torso), torso, over, cut(nipples["left"][None])[0], "left")}
+
+
+def excised(name: str, body_options: BodyOptions) -> list[dict]:
+    """Lumpectomies of EXCISIONS of her left breast: the volume lost, her nipple's deviation, pBRA."""
+    torso, nipples, view, plumb, _ = scanned(make_body(body_options))
+    m = measure_breasts(Body(torso, view, plumb), nipples)
+    T, out = m.body_from_input, []
+    for share in EXCISIONS:
+        volume = share * m.sides["left"].volume_cc
+        cut = lumpectomy(m, "left", nipples["left"], volume, 3, 35.0)
+        cells = replace(m.cells, height_mm=cut.heights(m.cells.height_mm))
+        moved = {s: transform_points(T, cut(nipples[s][None]))[0] for s in ("left", "right")}
+        before = {s: transform_points(T, nipples[s][None])[0] for s in ("left", "right")}
+        out.append({"pair": name, "share": share, "volume_cc": volume,
+                    "lost_cc": m.cells.volume_cc("left") - cells.volume_cc("left"),
+                    "right_change_cc": cells.volume_cc("right") - m.cells.volume_cc("right"),
+                    "nipple_towards_mm": float(moved["left"][0] - before["left"][0]),
+                    "pBRA_before": bcct_measures(before, m.cells)["pBRA_pct"],
+                    "pBRA_after": bcct_measures(moved, cells)["pBRA_pct"], "warned": cut.warning is not None})
+    return out
+
+
 def main() -> None:
     with threadpool_limits(1, "blas"):
         rows = [r for name, before, cup in PAIRS for r in pair(name, before, cup)]
+        lifts = [lifted(*case) for case in LIFTS]
+        reductions = [reduced(*case) for case in REDUCTIONS]
+        excisions = [r for name, options, _ in PAIRS[:3] for r in excised(name.split(",")[0], options)]
     table = Table(title="bench_operations — augmentation to a larger cup's volume, against the larger body")
     for col in ("pair", "side", "true change cc", "implant", "surface mean / p95 mm", "as scanned mean / p95 mm",
                 "nipple mm (as scanned)"):
@@ -105,6 +185,13 @@ def main() -> None:
                       f"{r['baseline_mean_mm']:.1f} / {r['baseline_p95_mm']:.1f}",
                       f"{r['nipple_mm']:.1f} ({r['nipple_baseline_mm']:.1f})")
     Console().print(table)
+    for title, found in (("lift", lifts), ("reduction", reductions), ("lumpectomy", excisions)):
+        more = Table(title=f"bench_operations — {title}")
+        for col in found[0]:
+            more.add_column(col)
+        for r in found:
+            more.add_row(*(f"{v:.2f}" if isinstance(v, float) else str(v) for v in r.values()))
+        Console().print(more)
     worst = {k: max(r[k] for r in rows) for k in ("surface_mean_mm", "surface_p95_mm", "nipple_mm")}
     median = {k: float(np.median([r[k] for r in rows])) for k in worst}
     baseline = {k: (float(np.median([r[b] for r in rows])), max(r[b] for r in rows)) for k, b in
@@ -112,7 +199,8 @@ def main() -> None:
                  ("nipple_mm", "nipple_baseline_mm"))}
     print(json.dumps({"benchmark": "operations", "augmentation": {"breasts": len(rows), "worst": worst,
                       "median": median, "met": {k: worst[k] <= TARGETS[k] for k in worst},
-                      "baseline_median_worst": baseline}, "targets": TARGETS, "rows": rows}, default=float))
+                      "baseline_median_worst": baseline}, "targets": TARGETS, "rows": rows, "lift": lifts,
+                      "reduction": reductions, "lumpectomy": excisions}, default=float))
 
 
 if __name__ == "__main__":

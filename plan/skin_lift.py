@@ -54,9 +54,12 @@ def scaled(cells: SkinCells, side: str, shape_mm: np.ndarray, footprint: np.ndar
     def changed(k: float) -> float:
         return replace(cells, height_mm=cells.height_mm + k * shape_mm, footprint=footprint).volume_cc(side) - before
 
-    reach = abs(change_cc) / max(abs(changed(1.0)), 1e-9)
+    if change_cc == 0.0:
+        return np.zeros_like(shape_mm)
+    one = changed(1.0)
+    reach = np.sign(change_cc) * np.sign(one) * abs(change_cc) / max(abs(one), 1e-9)   # k < 0 scales it the other way
     while abs(changed(reach)) < abs(change_cc):               # heights stop at the wall: a sinking saturates
         reach *= 2.0
-        if reach > 1e6:
+        if abs(reach) > 1e6:
             raise ValueError(f"her skin cannot change by {change_cc:g} cc over these cells")
-    return optimize.brentq(lambda k: changed(k) - change_cc, 0.0, reach, xtol=1e-12) * shape_mm
+    return optimize.brentq(lambda k: changed(k) - change_cc, min(0.0, reach), max(0.0, reach), xtol=1e-12) * shape_mm

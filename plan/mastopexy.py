@@ -1,0 +1,126 @@
+"""Lift (mastopexy): one breast raised so that its nipple comes to a chosen height, its volume kept.
+
+Measured as her volume is (`plan.breast_volume`, `plan.skin_lift`), in her body frame (x her left, y up, the
+sternal notch the origin):
+
+1. **The target**: the nipple's new height, chosen as a surgeon chooses it: a sternal-notch-to-nipple distance
+   (`to_notch_distance`), a height above her inframammary fold or her other nipple's height (`nipple_height`).
+2. **The breast raised**: over her footprint, her skin's heights above the chest wall are taken from δ · w lower
+   down (δ the nipple's rise): w is 1 from the nipple down (the lower pole and the nipple rise whole, which is
+   what tightens the lower pole against the fold) and falls to 0 at the footprint's upper border with a C² step
+   (the upper chest stays). The fold rises with the breast.
+3. **Volume kept**: the raised heights are then scaled so that her volume on her skin is as before, exactly.
+4. **Her skin moved**: each point of her skin moves up by δ · w where it lies, and forward or back by the change of
+   the surface's height between its old place and its new one, so that the areola travels with the nipple.
+
+A target at or below her nipple, or more than MAX_RISE of the way from her nipple to her footprint's upper border
+(beyond what a lift can reach: above it her breast has no skin left to bring), is refused in a sentence.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import ndimage
+
+from breastplan import BadInputError, transform_points
+
+from .breast_volume import CELL_MM, BreastVolumes
+from .skin_lift import SkinLift, scaled
+from .surface import smoothstep
+
+MAX_RISE = 0.6
+"""A lift raises the nipple at most this share of the way to her footprint's upper border above it."""
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Mastopexy(SkinLift):
+    """One breast lifted: her skin's change of height over the cells (`SkinLift`), how far each cell's skin rises
+    (`rise_mm`, along her up axis), and the cells' heights before and the wall, to move her skin."""
+
+    side: str
+    rise_mm: float                   # δ: the nipple's rise
+    weight: np.ndarray               # (nx, ny) w
+    height_mm: np.ndarray            # (nx, ny) her skin's heights above the wall before
+    wall_mm: np.ndarray              # (nx, ny)
+
+    def displacement(self, points_mm) -> np.ndarray:
+        """(N, 3) how far input-frame points of her skin move (up, and forward or back), input frame, mm."""
+        T = self.body_from_input
+        body = transform_points(T, np.asarray(points_mm, float).reshape(-1, 3))
+        up = self.rise_mm * self._at(self.weight, body, "constant")
+        moved = body[:, :2] + np.column_stack([np.zeros_like(up), up])
+        surface = self.wall_mm + self.height_mm
+        forward = (self._at(surface + self.lift_mm, moved, "nearest") - self._at(surface, body, "nearest")) * (up > 0)
+        return np.column_stack([np.zeros_like(up), up, forward]) @ T[:3, :3]          # body → input frame
+
+    def _at(self, field: np.ndarray, xy: np.ndarray, mode: str) -> np.ndarray:
+        """`field` over the cells, bilinear at body-frame (x, y) (0 off the cells for mode "constant")."""
+        at = np.stack([(xy[:, 0] - self.x[0]) / CELL_MM, (xy[:, 1] - self.y[0]) / CELL_MM])
+        return ndimage.map_coordinates(field, at, order=1, mode=mode, cval=0.0)
+
+
+def nipple_height(nipple_body, *, above_fold_mm: float | None = None, fold_below_nipple_mm: float | None = None,
+                  as_nipple_body=None) -> float:
+    """The nipple's new height (body frame y, mm) as a surgeon sets it: its height above her fold
+    (`fold_below_nipple_mm` below it now), or another nipple's height (`as_nipple_body`, her other side's). For a
+    sternal-notch-to-nipple distance, `to_notch_distance`."""
+    if above_fold_mm is not None:
+        return float(np.asarray(nipple_body, float)[1] - fold_below_nipple_mm + above_fold_mm)
+    return float(np.asarray(as_nipple_body, float)[1])
+
+
+NOTCH_TOLERANCE_MM = 0.1
+
+
+def to_notch_distance(volumes: BreastVolumes, side: str, nipple_mm, distance_mm: float) -> Mastopexy:
+    """Her `side` breast lifted until its nipple ((3,) input frame) lies `distance_mm` from her sternal notch, as
+    lifted (it comes forward as it rises onto her breast): secant steps on its height, to NOTCH_TOLERANCE_MM."""
+    T = volumes.body_from_input
+    nipple = transform_points(T, np.asarray(nipple_mm, float)[None])[0]
+
+    def chord(height: float) -> tuple[float, Mastopexy]:
+        lifted = mastopexy(volumes, side, nipple_mm, height)
+        return float(np.linalg.norm(transform_points(T, lifted(np.asarray(nipple_mm, float)[None]))[0])), lifted
+
+    y = [-float(np.sqrt(max(distance_mm ** 2 - nipple[0] ** 2 - nipple[2] ** 2, 0.0)))]   # raised straight up
+    try:
+        d = [chord(y[0])]
+        y.append(y[0] - (d[0][0] - distance_mm))
+        for _ in range(8):
+            d.append(chord(y[-1]))
+            if abs(d[-1][0] - distance_mm) <= NOTCH_TOLERANCE_MM:
+                break
+            slope = (d[-1][0] - d[-2][0]) / (y[-1] - y[-2]) if y[-1] != y[-2] else -1.0
+            y.append(y[-1] - (d[-1][0] - distance_mm) / (slope if slope < 0 else -1.0))
+    except BadInputError:
+        raise BadInputError(None, f"asks for her {side} nipple {distance_mm:g} mm from her sternal notch, which no "
+                                  f"lift of her breast reaches (it lies {np.linalg.norm(nipple):.0f} mm from it now)") \
+            from None
+    return d[-1][1]
+
+
+def mastopexy(volumes: BreastVolumes, side: str, nipple_mm, height_mm: float) -> Mastopexy:
+    """Her `side` breast lifted so that its nipple ((3,) input frame) comes to `height_mm` (body frame y,
+    `nipple_height`): module docstring."""
+    cells, T = volumes.cells, volumes.body_from_input
+    nipple = transform_points(T, np.asarray(nipple_mm, float)[None])[0]
+    rise = float(height_mm - nipple[1])
+    if rise <= 0.0:
+        raise BadInputError(None, f"gives her {side} nipple {-rise:.0f} mm above the height asked for a lift: "
+                                  "no lift raises it there")
+    mask = cells.side(side)
+    top = np.max(np.where(mask, cells.y[None, :], -np.inf), axis=1, keepdims=True)         # each column's border
+    column = int(np.argmin(np.abs(cells.x - nipple[0])))
+    if rise > MAX_RISE * (top[column, 0] - nipple[1]):
+        raise BadInputError(None, f"asks for her {side} nipple {rise:.0f} mm higher, beyond the "
+                                  f"{MAX_RISE * (top[column, 0] - nipple[1]):.0f} mm a lift reaches on her breast")
+    above = np.clip((cells.y[None, :] - nipple[1]) / np.maximum(top - nipple[1], CELL_MM), 0.0, 1.0)
+    weight = np.where(mask, smoothstep(above), 0.0)
+    X, Y = np.meshgrid(np.arange(len(cells.x)), np.arange(len(cells.y)), indexing="ij")
+    raised = ndimage.map_coordinates(cells.height_mm, [X, Y - rise * weight / CELL_MM], order=1, mode="nearest")
+    change = np.where(mask, raised - cells.height_mm, 0.0)
+    after = replace(cells, height_mm=cells.height_mm + change)
+    kept = scaled(after, side, np.where(mask, raised, 0.0), mask, cells.volume_cc(side) - after.volume_cc(side))
+    return Mastopexy(cells.x, cells.y, change + kept, mask, T, side=side, rise_mm=rise, weight=weight,
+                     height_mm=cells.height_mm, wall_mm=cells.wall_mm)
