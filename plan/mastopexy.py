@@ -48,16 +48,11 @@ class Mastopexy(SkinLift):
         """(N, 3) how far input-frame points of her skin move (up, and forward or back), input frame, mm."""
         T = self.body_from_input
         body = transform_points(T, np.asarray(points_mm, float).reshape(-1, 3))
-        up = self.rise_mm * self._at(self.weight, body, "constant")
+        up = self.rise_mm * self.sampled(self.weight, body)
         moved = body[:, :2] + np.column_stack([np.zeros_like(up), up])
         surface = self.wall_mm + self.height_mm
-        forward = (self._at(surface + self.lift_mm, moved, "nearest") - self._at(surface, body, "nearest")) * (up > 0)
-        return np.column_stack([np.zeros_like(up), up, forward]) @ T[:3, :3]          # body → input frame
-
-    def _at(self, field: np.ndarray, xy: np.ndarray, mode: str) -> np.ndarray:
-        """`field` over the cells, bilinear at body-frame (x, y) (0 off the cells for mode "constant")."""
-        at = np.stack([(xy[:, 0] - self.x[0]) / CELL_MM, (xy[:, 1] - self.y[0]) / CELL_MM])
-        return ndimage.map_coordinates(field, at, order=1, mode=mode, cval=0.0)
+        forward = (self.sampled(surface + self.lift_mm, moved, "nearest") - self.sampled(surface, body, "nearest"))
+        return np.column_stack([np.zeros_like(up), up, forward * (up > 0)]) @ T[:3, :3]   # body → input frame
 
 
 def nipple_height(nipple_body, *, above_fold_mm: float | None = None, fold_below_nipple_mm: float | None = None,

@@ -141,8 +141,9 @@ def _bounds(views: Views) -> list[list[float]]:
     """[[lo, hi]] of x, y, z (display frame, mm) holding her skin in every state and everything drawn on her (a
     point outside is not drawn): one box for every scene, so that before and as planned side by side share a
     scale."""
-    every = np.concatenate([views.torso, views.patch, views.moved.reshape(-1, 3), *views.landmarks.values(),
-                            *views.footprints.values(), *views.folds.values(), *(p[None] for p in views.side_labels.values())])
+    marks = [*views.landmarks.values(), *views.footprints.values(), *views.folds.values(),
+             *(p[None] for p in views.side_labels.values())]
+    every = np.concatenate([views.torso, views.patch, views.moved.reshape(-1, 3), *marks])
     lo, hi = every.min(axis=0), every.max(axis=0)
     pad = 0.03 * (hi - lo).max()
     return [[round(float(a - pad), 1), round(float(b + pad), 1)] for a, b in zip(lo, hi)]

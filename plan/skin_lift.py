@@ -36,9 +36,13 @@ class SkinLift:
     def displacement(self, points_mm) -> np.ndarray:
         """(N, 3) how far input-frame points of her skin move, input frame, mm."""
         body = transform_points(self.body_from_input, np.asarray(points_mm, float).reshape(-1, 3))
-        at = np.stack([(body[:, 0] - self.x[0]) / CELL_MM, (body[:, 1] - self.y[0]) / CELL_MM])
-        lift = ndimage.map_coordinates(self.lift_mm, at, order=1, mode="constant", cval=0.0)
-        return np.outer(lift, self.body_from_input[2, :3])             # along her anterior axis, input frame
+        return np.outer(self.sampled(self.lift_mm, body), self.body_from_input[2, :3])   # along her anterior axis
+
+    def sampled(self, field: np.ndarray, xy: np.ndarray, mode: str = "constant") -> np.ndarray:
+        """`field` (nx, ny) over the cells, bilinear at body-frame points' (x, y) ((N, 2+)); 0 off the cells, or
+        (mode "nearest") the nearest cell's."""
+        at = np.stack([(xy[:, 0] - self.x[0]) / CELL_MM, (xy[:, 1] - self.y[0]) / CELL_MM])
+        return ndimage.map_coordinates(field, at, order=1, mode=mode, cval=0.0)
 
     def __call__(self, points_mm) -> np.ndarray:
         """Input-frame points (mm) as the operation would move them."""
