@@ -20,7 +20,9 @@ Also: each breast of two hanging bodies lifted to the nipple height of the same 
 kept: the change should be 0 %), against that body; two cup-1.0 bodies reduced by the true change to cup 0.5,
 against that body; lumpectomies of 5–25 % of a breast at 3 o'clock, 35 mm from the nipple, on three bodies: the
 volume lost (target: within 5 % of V), her nipple's deviation towards the defect (growing with V), her other
-breast's change (0) and pBRA before and after.
+breast's change (0) and pBRA before and after; and each breast of two asymmetric bodies symmetrised to the other
+(`plan.symmetrising`): its volume against the other's (target 5 %), its nipple against the other's mirror image
+(target 5 mm).
 
 Run:  .venv/bin/python benchmarks/bench_operations.py     (about 2 minutes)
 """
@@ -47,8 +49,9 @@ from breastplan.plan.implants import Implant
 from breastplan.plan.lumpectomy import lumpectomy
 from breastplan.plan.mastopexy import mastopexy
 from breastplan.plan.reduction import reduction
+from breastplan.plan.symmetrising import symmetrising
 from breastplan.plan.symmetry import bcct_measures, ptosis_from_cells
-from breastplan.scenes.makehuman import BodyOptions, breast_region, make_body
+from breastplan.scenes.makehuman import BodyOptions, blended, breast_region, make_body
 from breastplan.scenes.realistic import BodyScene, CameraOptions, camera_pose
 
 PAIRS = [  # (name, the body before, its cup after)
@@ -169,12 +172,35 @@ def excised(name: str, body_options: BodyOptions) -> list[dict]:
     return out
 
 
+ASYMMETRIC = [("asymmetry target", lambda: make_body(BodyOptions(cup=0.85, firmness=0.2, modifiers={"asymmetry": 0.5},
+                                                                   pose="arms-down"))),
+              ("left a cup larger", lambda: blended(make_body(BodyOptions(cup=0.8, pose="a-pose")),
+                                                    make_body(BodyOptions(cup=0.4, pose="a-pose"))))]
+
+
+def symmetrised(name: str, make) -> list[dict]:
+    """Each breast of an asymmetric body symmetrised to the other (`plan.symmetrising`): its volume on her skin
+    against the other's, its nipple against the other's mirror image."""
+    torso, nipples, view, plumb, _ = scanned(make())
+    m = measure_breasts(Body(torso, view, plumb), nipples)
+    out = []
+    for side in ("left", "right"):
+        nipple = transform_points(m.body_from_input, nipples[side][None])[0]
+        p = symmetrising(m, nipples, side, ptosis_from_cells(nipple, m.cells, side)["nipple_to_fold_mm"])
+        out.append({"body": name, "side": side, "operations": "+".join(type(o).__name__.lower() for o in
+                                                                       p.operations) or "none",
+                    "volume_off_pct": 100.0 * (p.volume_cc - p.other_volume_cc) / p.other_volume_cc,
+                    "nipple_off_mm": p.nipple_off_mm, "note": p.note or ""})
+    return out
+
+
 def main() -> None:
     with threadpool_limits(1, "blas"):
         rows = [r for name, before, cup in PAIRS for r in pair(name, before, cup)]
         lifts = [lifted(*case) for case in LIFTS]
         reductions = [reduced(*case) for case in REDUCTIONS]
         excisions = [r for name, options, _ in PAIRS[:3] for r in excised(name.split(",")[0], options)]
+        symmetries = [r for name, make in ASYMMETRIC for r in symmetrised(name, make)]
     table = Table(title="bench_operations — augmentation to a larger cup's volume, against the larger body")
     for col in ("pair", "side", "true change cc", "implant", "surface mean / p95 mm", "as scanned mean / p95 mm",
                 "nipple mm (as scanned)"):
@@ -185,7 +211,8 @@ def main() -> None:
                       f"{r['baseline_mean_mm']:.1f} / {r['baseline_p95_mm']:.1f}",
                       f"{r['nipple_mm']:.1f} ({r['nipple_baseline_mm']:.1f})")
     Console().print(table)
-    for title, found in (("lift", lifts), ("reduction", reductions), ("lumpectomy", excisions)):
+    for title, found in (("lift", lifts), ("reduction", reductions), ("lumpectomy", excisions),
+                         ("symmetrising", symmetries)):
         more = Table(title=f"bench_operations — {title}")
         for col in found[0]:
             more.add_column(col)
@@ -200,7 +227,7 @@ def main() -> None:
     print(json.dumps({"benchmark": "operations", "augmentation": {"breasts": len(rows), "worst": worst,
                       "median": median, "met": {k: worst[k] <= TARGETS[k] for k in worst},
                       "baseline_median_worst": baseline}, "targets": TARGETS, "rows": rows, "lift": lifts,
-                      "reduction": reductions, "lumpectomy": excisions}, default=float))
+                      "reduction": reductions, "lumpectomy": excisions, "symmetrising": symmetries}, default=float))
 
 
 if __name__ == "__main__":
