@@ -78,7 +78,7 @@ def augmentation(volumes: BreastVolumes, side: str, nipple_mm, fold_below_nipple
                                   f"{MEDIAL_MM:g} mm): choose a narrower implant")
     half = (cells.x > 0 if side == "left" else cells.x < 0)[:, None]
     lift = ndimage.gaussian_filter(thick, DRAPE_MM / CELL_MM, mode="constant") * half
-    grown = ndimage.binary_propagation(cells.side(side), mask=cells.side(side) | (half & (cells.height_mm + lift
-                                                                                             > FOOT_MM)))
+    raised = half & (cells.height_mm + lift > FOOT_MM)                    # skin the implant brings off the wall
+    grown = ndimage.binary_propagation(cells.side(side), mask=cells.side(side) | raised)
     return Augmentation(cells.x, cells.y, scaled(cells, side, lift * grown, grown, implant.volume_cc), grown, T,
                         implant=implant, pocket=pocket, side=side, centre_mm=centre)
