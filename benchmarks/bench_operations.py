@@ -22,7 +22,8 @@ against that body; lumpectomies of 5–25 % of a breast at 3 o'clock, 35 mm from
 volume lost (target: within 5 % of V), her nipple's deviation towards the defect (growing with V), her other
 breast's change (0) and pBRA before and after; and each breast of two asymmetric bodies symmetrised to the other
 (`plan.symmetrising`): its volume against the other's (target 5 %), its nipple against the other's mirror image
-(target 5 mm).
+(target 5 mm). Each operation's time on one breast, her skin moved (target ≤ 1 s), against measuring her
+breasts on her skin in the same run.
 
 Run:  .venv/bin/python benchmarks/bench_operations.py     (about 2 minutes)
 """
@@ -194,6 +195,38 @@ def symmetrised(name: str, make) -> list[dict]:
     return out
 
 
+TIMED = 7
+"""Each operation is timed this many times on one breast (after a warm-up): the median."""
+
+
+def timed_operations() -> dict[str, float]:
+    """Median seconds of each operation on one breast of the first pair's smaller body, placed and her skin moved
+    (her torso's points): target ≤ 1 s each. The baseline: measuring her breasts on her skin, in the same run."""
+    import statistics
+    import time
+
+    torso, nipples, view, plumb, _ = scanned(make_body(PAIRS[0][1]))
+    m = measure_breasts(Body(torso, view, plumb), nipples)
+    nipple = transform_points(m.body_from_input, nipples["left"][None])[0]
+    fold = ptosis_from_cells(nipple, m.cells, "left")["nipple_to_fold_mm"]
+    cases = {"measure her breasts (baseline)": lambda: measure_breasts(Body(torso, view, plumb), nipples),
+             "augmentation": lambda: augmentation(m, "left", nipples["left"], fold, Implant.of(250, "moderate"))(torso),
+             "lift": lambda: mastopexy(m, "left", nipples["left"], nipple[1] + 15.0)(torso),
+             "reduction with a lift": lambda: reduction(m, "left", nipples["left"], volume_cc=40.0,
+                                                        nipple_height_mm=nipple[1] + 10.0)(torso),
+             "lumpectomy": lambda: lumpectomy(m, "left", nipples["left"], 20.0, 3, 30.0)(torso)}
+    out = {}
+    for name, run in cases.items():
+        run()
+        times = []
+        for _ in range(TIMED):
+            start = time.perf_counter()
+            run()
+            times.append(time.perf_counter() - start)
+        out[name] = statistics.median(times)
+    return out
+
+
 def main() -> None:
     with threadpool_limits(1, "blas"):
         rows = [r for name, before, cup in PAIRS for r in pair(name, before, cup)]
@@ -201,6 +234,7 @@ def main() -> None:
         reductions = [reduced(*case) for case in REDUCTIONS]
         excisions = [r for name, options, _ in PAIRS[:3] for r in excised(name.split(",")[0], options)]
         symmetries = [r for name, make in ASYMMETRIC for r in symmetrised(name, make)]
+        seconds = timed_operations()
     table = Table(title="bench_operations — augmentation to a larger cup's volume, against the larger body")
     for col in ("pair", "side", "true change cc", "implant", "surface mean / p95 mm", "as scanned mean / p95 mm",
                 "nipple mm (as scanned)"):
@@ -211,6 +245,12 @@ def main() -> None:
                       f"{r['baseline_mean_mm']:.1f} / {r['baseline_p95_mm']:.1f}",
                       f"{r['nipple_mm']:.1f} ({r['nipple_baseline_mm']:.1f})")
     Console().print(table)
+    timing = Table(title="bench_operations — seconds on one breast, her skin moved (median of 7)")
+    for col in ("operation", "seconds", "target"):
+        timing.add_column(col)
+    for name, value in seconds.items():
+        timing.add_row(name, f"{value:.3f}", "" if "baseline" in name else "≤ 1")
+    Console().print(timing)
     for title, found in (("lift", lifts), ("reduction", reductions), ("lumpectomy", excisions),
                          ("symmetrising", symmetries)):
         more = Table(title=f"bench_operations — {title}")
@@ -227,7 +267,8 @@ def main() -> None:
     print(json.dumps({"benchmark": "operations", "augmentation": {"breasts": len(rows), "worst": worst,
                       "median": median, "met": {k: worst[k] <= TARGETS[k] for k in worst},
                       "baseline_median_worst": baseline}, "targets": TARGETS, "rows": rows, "lift": lifts,
-                      "reduction": reductions, "lumpectomy": excisions, "symmetrising": symmetries}, default=float))
+                      "reduction": reductions, "lumpectomy": excisions, "symmetrising": symmetries,
+                      "seconds": seconds}, default=float))
 
 
 if __name__ == "__main__":
