@@ -1,0 +1,149 @@
+"""An operation as a surgeon writes it on the command line or in a plan file, and the operation it makes.
+
+    augmentation:VOLUME[:PROFILE][:SHAPE][:POCKET]    augmentation:300:moderate, augmentation:250:high:anatomical
+    augmentation:WIDTHxPROJECTION[:SHAPE][:POCKET]    augmentation:115x37:submuscular (mm)
+    lift:notch=MM | lift:fold=MM | lift:other         the nipple this far from the sternal notch, this far above
+                                                      her fold, or at her other nipple's height
+    reduction:VOLUME[:LIFT] | reduction:to=VOLUME[:LIFT]   cc resected, or the volume left; LIFT as for lift
+    lumpectomy:VOLUME:CLOCK:DISTANCE                  cc excised at a clock position (1–12, as the surgeon faces
+                                                      her) and a distance from the nipple (mm)
+
+`OperationSpec.parse` checks the words and numbers (an OptionError naming what is wrong: a usage error);
+`OperationSpec.operate` makes the operation on her breast (a BadInputError where her scan rules it out).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from breastplan import transform_points
+from breastplan.options import OptionError
+
+from .augmentation import POCKETS, augmentation
+from .breast_volume import BreastVolumes
+from .implants import PROFILES, SHAPES, Implant
+from .lumpectomy import lumpectomy
+from .mastopexy import mastopexy, nipple_height, to_notch_distance
+from .reduction import reduction
+from .skin_lift import SkinLift
+
+KINDS = ("augmentation", "lift", "reduction", "lumpectomy")
+
+
+@dataclass(frozen=True)
+class OperationSpec:
+    """One operation as written: its kind and its settings."""
+
+    kind: str
+    settings: dict = field(default_factory=dict)
+
+    @classmethod
+    def parse(cls, text: str) -> "OperationSpec":
+        """The operation `text` names (module docstring); OptionError in one sentence if it names none."""
+        kind, *words = [w.strip() for w in str(text).split(":")]
+        if kind not in KINDS:
+            raise OptionError("operation", f"'{text}' is no operation: write one of {', '.join(KINDS)} (e.g. "
+                                           "augmentation:300:moderate)")
+        return cls(kind, getattr(cls, f"_{kind}")(text, words))
+
+    @staticmethod
+    def _augmentation(text: str, words: list[str]) -> dict:
+        if not words:
+            raise OptionError("operation", f"'{text}': an augmentation needs the implant's volume (cc) or its width "
+                                           "and projection (e.g. augmentation:300 or augmentation:115x37)")
+        size, rest = words[0], words[1:]
+        out = {"profile": "moderate", "shape": "round", "pocket": "subglandular"}
+        if "x" in size:
+            out |= {"width_mm": _number(text, size.split("x")[0]), "projection_mm": _number(text, size.split("x")[1])}
+        else:
+            out["volume_cc"] = _number(text, size)
+        kinds = {**dict.fromkeys(PROFILES, "profile"), **dict.fromkeys(SHAPES, "shape"),
+                 **dict.fromkeys(POCKETS, "pocket")}
+        for word in rest:
+            key = kinds.get(word)
+            if key is None:
+                raise OptionError("operation", f"'{text}': '{word}' is no profile ({', '.join(PROFILES)}), shape "
+                                               f"({', '.join(SHAPES)}) or pocket ({', '.join(POCKETS)})")
+            out[key] = word
+        implant = _implant(out)                                       # its own checks: volume range, sizes
+        return out | {"volume_cc": implant.volume_cc}
+
+    @staticmethod
+    def _lift(text: str, words: list[str]) -> dict:
+        if len(words) != 1:
+            raise OptionError("operation", f"'{text}': a lift takes one target: notch=MM, fold=MM or other")
+        return _lift_target(text, words[0])
+
+    @staticmethod
+    def _reduction(text: str, words: list[str]) -> dict:
+        if not words or len(words) > 2:
+            raise OptionError("operation", f"'{text}': a reduction takes the cc resected (or to=CC) and an optional "
+                                           "lift target")
+        out = ({"to_volume_cc": _number(text, words[0][3:])} if words[0].startswith("to=")
+               else {"volume_cc": _number(text, words[0])})
+        lift = _lift_target(text, words[1]) if len(words) == 2 else {}
+        if lift.get("lift") == "notch":
+            raise OptionError("operation", f"'{text}': a reduction's lift is fold=MM or other (for a distance from "
+                                           "the notch, plan the lift on its own)")
+        return out | lift
+
+    @staticmethod
+    def _lumpectomy(text: str, words: list[str]) -> dict:
+        if len(words) != 3:
+            raise OptionError("operation", f"'{text}': a lumpectomy takes VOLUME:CLOCK:DISTANCE (e.g. "
+                                           "lumpectomy:40:10:30)")
+        volume, clock, distance = (_number(text, w) for w in words)
+        if not 0.0 < clock <= 12.0:
+            raise OptionError("operation", f"'{text}': the clock position lies in 1–12, as the surgeon faces her")
+        return {"volume_cc": volume, "clock": clock, "distance_mm": distance}
+
+    def operate(self, volumes: BreastVolumes, nipples: dict, side: str, fold_below_nipple_mm: float) -> SkinLift:
+        """This operation on her `side` breast (`nipples` side → (3,) input frame; her fold `fold_below_nipple_mm`
+        below that nipple)."""
+        s, nipple = self.settings, nipples[side]
+        if self.kind == "augmentation":
+            return augmentation(volumes, side, nipple, fold_below_nipple_mm, _implant(s), s["pocket"])
+        if self.kind == "lumpectomy":
+            return lumpectomy(volumes, side, nipple, s["volume_cc"], s["clock"], s["distance_mm"])
+        if self.kind == "reduction":
+            height = _height(volumes, nipples, side, fold_below_nipple_mm, s) if "lift" in s else None
+            return reduction(volumes, side, nipple, volume_cc=s.get("volume_cc"), to_volume_cc=s.get("to_volume_cc"),
+                             nipple_height_mm=height)
+        if s["lift"] == "notch":
+            return to_notch_distance(volumes, side, nipple, s["mm"])
+        return mastopexy(volumes, side, nipple, _height(volumes, nipples, side, fold_below_nipple_mm, s))
+
+
+def _number(text: str, word: str) -> float:
+    try:
+        value = float(word)
+    except ValueError:
+        raise OptionError("operation", f"'{text}': '{word}' is not a number") from None
+    if not (np.isfinite(value) and value > 0):
+        raise OptionError("operation", f"'{text}': {word} must be a positive number")
+    return value
+
+
+def _lift_target(text: str, word: str) -> dict:
+    if word == "other":
+        return {"lift": "other"}
+    key, _, value = word.partition("=")
+    if key not in ("notch", "fold"):
+        raise OptionError("operation", f"'{text}': a lift's target is notch=MM, fold=MM or other, not '{word}'")
+    return {"lift": key, "mm": _number(text, value)}
+
+
+def _implant(settings: dict) -> Implant:
+    if "width_mm" in settings:
+        return Implant.sized(settings["width_mm"], settings["projection_mm"], settings["shape"])
+    return Implant.of(settings["volume_cc"], settings["profile"], settings["shape"])
+
+
+def _height(volumes: BreastVolumes, nipples: dict, side: str, fold_below_nipple_mm: float, settings: dict) -> float:
+    """The nipple height (body frame y, mm) a lift target asks for."""
+    T = volumes.body_from_input
+    body = {s: transform_points(T, np.asarray(n, float)[None])[0] for s, n in nipples.items()}
+    if settings["lift"] == "fold":
+        return nipple_height(body[side], above_fold_mm=settings["mm"], fold_below_nipple_mm=fold_below_nipple_mm)
+    return nipple_height(body[side], as_nipple_body=body["right" if side == "left" else "left"])
