@@ -7,13 +7,8 @@ import numpy as np
 def mesh_volume(vertices, faces) -> float:
     """Enclosed volume of a closed, outward-oriented triangle mesh (units of vertices³): the sum of the signed
     volumes of the tetrahedra each triangle makes with the origin, (v0 · (v1 × v2)) / 6 (as libigl's centroid)."""
-    return float(mesh_volumes(np.asarray(vertices, dtype=np.float64)[None], faces)[0])
-
-
-def mesh_volumes(vertices, faces) -> np.ndarray:
-    """(S,) `mesh_volume` of each of S meshes sharing `faces`: vertices (S, V, 3)."""
-    tri = np.asarray(vertices, dtype=np.float64)[:, np.asarray(faces, dtype=np.int64)]       # (S, F, 3, 3)
-    return np.einsum("sij,sij->s", tri[:, :, 0], np.cross(tri[:, :, 1], tri[:, :, 2])) / 6.0
+    tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
+    return float(np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0)
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
