@@ -42,12 +42,14 @@ def compute_plan(source: Path, fitted: dict[str, SidePlan], options: PlanOptions
     body = shared_body({s: sp.scan.body for s, sp in sides.items()}, source)
     with clock("volumes on her skin"):
         volumes = measure_breasts(body, {s: sp.scan.nipple_camera_mm for s, sp in sides.items()})
+    fitted_measures = {s: _model_measures(volumes, sp) for s, sp in sides.items()}
     with clock("every slider state"):
-        grid = state_grid(sides, states, options, volumes)
+        grid = state_grid(sides, states, options, volumes, fitted_measures)
     with clock("measures"):
         requested = planned_states(states, next(iter(sides.values())))
         torsos = tuple(planned_torso(body, sides, st) for st in requested)
-        measures = plan_measures(sides, volumes, requested[-1], torsos[-1], grid.measures_at(grid.planned_index))
+        measures = plan_measures(sides, volumes, requested[-1], torsos[-1], fitted_measures,
+                                 grid.measures_at(grid.planned_index))
         skin = {} if earlier is None else skin_changes(body, sides, volumes, earlier)
     return Plan(source, options, body, sides, volumes, states, torsos, measures, earlier, skin,
                 None if source.is_dir() else sha256(source), versions(), clock.ms, grid=grid)
@@ -86,10 +88,10 @@ def _states(sides: dict[str, SidePlan], options: PlanOptions, method: Method):
 
 
 def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], options: PlanOptions,
-               volumes: BreastVolumes) -> StateGrid:
+               volumes: BreastVolumes, fitted: dict[str, dict[str, float]]) -> StateGrid:
     """Every combination of the kinds' slider degrees (`states` holds each kind's change at each), each side's
     fitted model so planned, and her measures on it (`breast_measures_each`; her volume on her skin changed by as
-    much as the fitted model's)."""
+    much as the fitted model's, `fitted` its measures as scanned: `_model_measures`)."""
     kinds = tuple(k for k, _ in options.changes)
     requested = tuple(d for _, d in options.changes)
     degrees = tuple(tuple(slider_degrees(d)) for d in requested)
@@ -103,7 +105,7 @@ def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], option
         moved = PlannedChange.models(planned[s], np.vstack([sp.surface_input, sp.scan.nipple_camera_mm]))
         measures[s] = breast_measures_each(volumes.landmarks, moved[:, -1], moved[:, :-1], sp.fit.faces)
         models[s] = moved[:, :-1].astype(np.float32)
-        measures[s]["volume_cc"] += volumes.sides[s].volume_cc - _model_measures(volumes, sp)["volume_cc"]
+        measures[s]["volume_cc"] += volumes.sides[s].volume_cc - fitted[s]["volume_cc"]
     keys = tuple(COMBINED if len(kinds) > 1 and combo == requested else
                  "+".join(change_name(k, d) for k, d in zip(kinds, combo)) for combo in combos)
     return StateGrid(kinds, degrees, requested, keys, changes, planned, models, measures)
@@ -134,16 +136,15 @@ def planned_torso(body: Body, sides: dict[str, SidePlan], state: PlanState) -> n
 
 
 def plan_measures(sides: dict[str, SidePlan], volumes: BreastVolumes, shown: PlanState, torso: np.ndarray,
-                  after: dict[str, dict[str, float]]) -> Measures:
-    """Each side's measures before and as planned (`shown`, her torso so: `torso`, input frame, mm; `after`: its
-    measures, `StateGrid.measures_at`), and their asymmetry (left − right). The volume is hers, measured on her
-    skin."""
+                  fitted: dict[str, dict[str, float]], after: dict[str, dict[str, float]]) -> Measures:
+    """Each side's measures before (`fitted`: on the fitted breasts as scanned, `_model_measures`) and as planned
+    (`shown`, her torso so: `torso`, input frame, mm; `after`: its measures, `StateGrid.measures_at`), and their
+    asymmetry (left − right). The volume is hers, measured on her skin."""
     before, nipples = {}, {"before": {}, "after": {}}
     for side, sp in sides.items():
         nipple, planned = sp.scan.nipple_camera_mm, shown.planned[side]
         nipples["before"][side], nipples["after"][side] = nipple, planned.model(nipple[None])[0]
-        before[side] = _model_measures(volumes, sp)
-        before[side]["volume_cc"] = volumes.sides[side].volume_cc
+        before[side] = {**fitted[side], "volume_cc": volumes.sides[side].volume_cc}
     asym = {when: {k: v["left_minus_right"] for k, v in asymmetry(m).items()} for when, m in
             (("before", before), ("after", after))}
     symmetry, ptosis = _symmetry(volumes, nipples, torso)
