@@ -26,7 +26,7 @@ from scipy import ndimage
 from breastplan import BadInputError, transform_points
 
 from .breast_volume import CELL_MM, BreastVolumes
-from .skin_lift import SkinLift, scaled
+from .skin_lift import SkinLift, scaled, up_the_breast
 from .surface import smoothstep
 
 MAX_RISE = 0.6
@@ -105,12 +105,11 @@ def mastopexy(volumes: BreastVolumes, side: str, nipple_mm, height_mm: float) ->
         raise BadInputError(None, f"gives her {side} nipple {-rise:.0f} mm above the height asked for a lift: "
                                   "no lift raises it there")
     mask = cells.side(side)
-    top = np.max(np.where(mask, cells.y[None, :], -np.inf), axis=1, keepdims=True)         # each column's border
+    above, top = up_the_breast(cells, side, nipple[1])
     column = int(np.argmin(np.abs(cells.x - nipple[0])))
     if rise > MAX_RISE * (top[column, 0] - nipple[1]):
         raise BadInputError(None, f"asks for her {side} nipple {rise:.0f} mm higher, beyond the "
                                   f"{MAX_RISE * (top[column, 0] - nipple[1]):.0f} mm a lift reaches on her breast")
-    above = np.clip((cells.y[None, :] - nipple[1]) / np.maximum(top - nipple[1], CELL_MM), 0.0, 1.0)
     weight = np.where(mask, smoothstep(above), 0.0)
     X, Y = np.meshgrid(np.arange(len(cells.x)), np.arange(len(cells.y)), indexing="ij")
     raised = ndimage.map_coordinates(cells.height_mm, [X, Y - rise * weight / CELL_MM], order=1, mode="nearest")

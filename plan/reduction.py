@@ -21,7 +21,7 @@ from breastplan import BadInputError, transform_points
 
 from .breast_volume import BreastVolumes
 from .mastopexy import Mastopexy, mastopexy
-from .skin_lift import SkinLift, scaled
+from .skin_lift import SkinLift, scaled, up_the_breast
 
 UPPER_SHARE = 0.3
 """At the footprint's upper border, a reduction takes this share of what it takes from the nipple down."""
@@ -56,8 +56,7 @@ def reduction(volumes: BreastVolumes, side: str, nipple_mm, *, volume_cc: float 
                                   "her skin: a reduction takes more than nothing and less than the breast")
     nipple = transform_points(T, np.asarray(nipple_mm, float)[None])[0]
     mask = cells.side(side)
-    top = np.max(np.where(mask, cells.y[None, :], -np.inf), axis=1, keepdims=True)
-    above = np.clip((cells.y[None, :] - nipple[1]) / np.maximum(top - nipple[1], 1.0), 0.0, 1.0)
+    above, _ = up_the_breast(cells, side, nipple[1])
     shape = -np.where(mask, np.clip(cells.height_mm, 0.0, None) * (1.0 - (1.0 - UPPER_SHARE) * above), 0.0)
     fall = scaled(cells, side, shape, mask, -removed)
     resection = SkinLift(cells.x, cells.y, fall, mask, T)

@@ -50,6 +50,14 @@ class SkinLift:
         return points + self.displacement(points).reshape(points.shape)
 
 
+def up_the_breast(cells: SkinCells, side: str, nipple_y_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """(nx, ny) how far up each cell lies from the nipple's height (0) to her `side` footprint's upper border in its
+    column (1), clipped to 0..1 (a column whose border lies within a cell of the nipple counts a cell); and (nx, 1)
+    each column's border (y, mm; −inf off the footprint)."""
+    top = np.max(np.where(cells.side(side), cells.y[None, :], -np.inf), axis=1, keepdims=True)
+    return np.clip((cells.y[None, :] - nipple_y_mm) / np.maximum(top - nipple_y_mm, CELL_MM), 0.0, 1.0), top
+
+
 def scaled(cells: SkinCells, side: str, shape_mm: np.ndarray, footprint: np.ndarray, change_cc: float) -> np.ndarray:
     """`shape_mm` (nx, ny) scaled so that her `side` breast's volume on her skin (heights above the wall, those
     above 0, over `footprint`) changes by `change_cc` exactly (< 0: falls)."""
