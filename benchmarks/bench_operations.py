@@ -78,31 +78,41 @@ def scanned(body):
             first.plumb_camera, scene.camera_from_body)
 
 
+def over_breast(body, camera_from_body, torso, side: str) -> np.ndarray:
+    """(N,) which scan points lie over her `side` breast: their nearest body vertex is in MakeHuman's breast region."""
+    nearest = cKDTree(transform_points(camera_from_body, body.vertices)).query(torso)[1]
+    return np.isin(nearest, breast_region(side))
+
+
+def against(truth_body, camera_from_body, moved, torso, over, nipple, nipple_after, side) -> dict:
+    """Her skin over the breast (`over`), moved and as scanned, against the true body's surface (mean and 95th
+    percentile); her nipple, moved and as scanned, against its nipple (mm)."""
+    mesh = transform_points(camera_from_body, truth_body.vertices)
+    dist = closest_points(mesh, truth_body.faces, moved[over])[1]
+    base = closest_points(mesh, truth_body.faces, torso[over])[1]
+    true_nipple = transform_points(camera_from_body, truth_body.nipples[side][None])[0]
+    return {"surface_mean_mm": float(dist.mean()), "surface_p95_mm": float(np.percentile(dist, 95)),
+            "baseline_mean_mm": float(base.mean()), "baseline_p95_mm": float(np.percentile(base, 95)),
+            "nipple_mm": float(np.linalg.norm(nipple_after - true_nipple)),
+            "nipple_baseline_mm": float(np.linalg.norm(nipple - true_nipple))}
+
+
 def pair(name: str, before: BodyOptions, cup: float) -> list[dict]:
     small, large = make_body(before), make_body(replace(before, cup=cup))
     torso, nipples, view, plumb, camera_from_body = scanned(small)
     m = measure_breasts(Body(torso, view, plumb), nipples)
     truth = {s: large.half_volumes_cc()[s] - small.half_volumes_cc()[s] for s in ("left", "right")}
-    large_mesh = transform_points(camera_from_body, large.vertices)
-    nearest = cKDTree(transform_points(camera_from_body, small.vertices)).query(torso)[1]
     rows = []
     for side in ("left", "right"):
         nipple = transform_points(m.body_from_input, nipples[side][None])[0]
         fold = ptosis_from_cells(nipple, m.cells, side)["nipple_to_fold_mm"]
         implant = Implant.of(truth[side], "moderate")
         aug = augmentation(m, side, nipples[side], fold, implant)
-        over = np.isin(nearest, breast_region(side))
-        planned = aug(torso[over])
-        dist = closest_points(large_mesh, large.faces, planned)[1]
-        base = closest_points(large_mesh, large.faces, torso[over])[1]
-        true_nipple = transform_points(camera_from_body, large.nipples[side][None])[0]
+        over = over_breast(small, camera_from_body, torso, side)
         rows.append({"pair": name, "side": side, "true_change_cc": truth[side],
                      "implant": f"{implant.volume_cc:.0f} cc, {implant.width_mm:.0f} × {implant.projection_mm:.0f} mm",
-                     "surface_mean_mm": float(dist.mean()), "surface_p95_mm": float(np.percentile(dist, 95)),
-                     "baseline_mean_mm": float(base.mean()), "baseline_p95_mm": float(np.percentile(base, 95)),
-                     "nipple_mm": float(np.linalg.norm(aug(nipples[side][None])[0] - true_nipple)),
-                     "nipple_baseline_mm": float(np.linalg.norm(nipples[side] - true_nipple)),
-                     "points": int(over.sum())})
+                     **against(large, camera_from_body, aug(torso), torso, over, nipples[side],
+                               aug(nipples[side][None])[0], side), "points": int(over.sum())})
     return rows
 
 
@@ -116,16 +126,6 @@ EXCISIONS = (0.05, 0.10, 0.15, 0.25)
 """Shares of her breast excised at 3 o'clock, 35 mm from her nipple, in the lumpectomy rows."""
 
 
-def against(truth_body, camera_from_body, moved, torso, over, nipple_after, side) -> dict:
-    """Her skin over the breast, moved, against the true body's surface; her nipple against its nipple."""
-    mesh = transform_points(camera_from_body, truth_body.vertices)
-    dist = closest_points(mesh, truth_body.faces, moved[over])[1]
-    base = closest_points(mesh, truth_body.faces, torso[over])[1]
-    true_nipple = transform_points(camera_from_body, truth_body.nipples[side][None])[0]
-    return {"surface_mean_mm": float(dist.mean()), "baseline_mean_mm": float(base.mean()),
-            "nipple_mm": float(np.linalg.norm(nipple_after - true_nipple))}
-
-
 def lifted(name: str, before: BodyOptions, firmness: float) -> dict:
     """The left breast lifted to the firmer body's nipple height (found on its own scan), against that body."""
     low, firm = make_body(before), make_body(replace(before, firmness=firmness))
@@ -133,11 +133,12 @@ def lifted(name: str, before: BodyOptions, firmness: float) -> dict:
     m = measure_breasts(Body(torso, view, plumb), nipples)
     aim = transform_points(m.body_from_input @ camera_from_body, firm.nipples["left"][None])[0]
     lift = mastopexy(m, "left", nipples["left"], float(aim[1]))
-    over = np.isin(cKDTree(transform_points(camera_from_body, low.vertices)).query(torso)[1], breast_region("left"))
+    over = over_breast(low, camera_from_body, torso, "left")
     after = replace(m.cells, height_mm=lift.heights(m.cells.height_mm))
     return {"pair": name, "rise_mm": lift.rise_mm, "volume_change_pct":
             100.0 * (after.volume_cc("left") - m.cells.volume_cc("left")) / m.cells.volume_cc("left"),
-            **against(firm, camera_from_body, lift(torso), torso, over, lift(nipples["left"][None])[0], "left")}
+            **against(firm, camera_from_body, lift(torso), torso, over, nipples["left"], lift(nipples["left"][None])[0],
+                      "left")}
 
 
 def reduced(name: str, before: BodyOptions, cup: float) -> dict:
@@ -147,10 +148,11 @@ def reduced(name: str, before: BodyOptions, cup: float) -> dict:
     m = measure_breasts(Body(torso, view, plumb), nipples)
     truth = big.half_volumes_cc()["left"] - small.half_volumes_cc()["left"]
     cut = reduction(m, "left", nipples["left"], volume_cc=min(truth, 0.9 * m.sides["left"].volume_cc))
-    over = np.isin(cKDTree(transform_points(camera_from_body, big.vertices)).query(torso)[1], breast_region("left"))
+    over = over_breast(big, camera_from_body, torso, "left")
     after = replace(m.cells, height_mm=cut.heights(m.cells.height_mm))
     return {"pair": name, "true_change_cc": truth, "planned_change_cc": after.volume_cc("left") - m.cells.volume_cc(
-        "left"), **against(small, camera_from_body, cut(torso), torso, over, cut(nipples["left"][None])[0], "left")}
+        "left"), **against(small, camera_from_body, cut(torso), torso, over, nipples["left"],
+                           cut(nipples["left"][None])[0], "left")}
 
 
 def excised(name: str, body_options: BodyOptions) -> list[dict]:
