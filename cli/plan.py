@@ -14,7 +14,12 @@ from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, SIDES, OptionError, P
 from .app import JSON, UNITS_HELP, UP_HELP, command, scan_file_options
 from .output import holds_plan, inside, read_only, real, report, stderr, usage_error, writable
 
-FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method", "units": "--units", "up": "--up"}
+FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method", "units": "--units", "up": "--up",
+         "operations": "--left/--right", "symmetrise": "--symmetrise"}
+OPERATION_HELP = ("repeatable, in the order made: augmentation:VOLUME[:PROFILE][:round|anatomical][:subglandular|"
+                  "submuscular] or augmentation:WIDTHxPROJECTION[...], lift:notch=MM|fold=MM|other, "
+                  "reduction:VOLUME|to=VOLUME[:fold=MM|other], lumpectomy:VOLUME:CLOCK:DISTANCE (cc, mm; the clock as "
+                  "the surgeon faces her). With operations and no --deform, no change by degree is planned.")
 
 
 @command()
@@ -25,6 +30,14 @@ def plan(
     deform: List[str] = typer.Option([], "--deform", help="KIND:DEGREE, repeatable: a change to plan, KIND one of "
                                      f"{', '.join(DEGREE_KINDS)}, DEGREE in 1..8 (decimals allowed). Default: "
                                      + " ".join(f"{k}:{d:g}" for k, d in DEFAULT_PLAN) + "."),
+    left: List[str] = typer.Option([], "--left", help="An operation on her left breast, " + OPERATION_HELP),
+    right: List[str] = typer.Option([], "--right", help="An operation on her right breast, " + OPERATION_HELP),
+    symmetrise: Optional[str] = typer.Option(None, "--symmetrise", help="left or right: propose the operations on "
+                                             "that breast that bring it to her other breast's volume and nipple "
+                                             "height."),
+    plan_file: Optional[Path] = typer.Option(None, "--plan-file", help="A plan file (YAML or JSON) with the keys "
+                                             "left, right, deform and symmetrise, each as its option takes it; "
+                                             "instead of those options."),
     method: str = typer.Option("exact", "--method", help="How a degree becomes parameters: exact (the inverse "
                                "solver), learnt (the shipped regressions) or MODEL.npz (a trained model of one "
                                "condition, for its kind)."),
@@ -50,8 +63,10 @@ def plan(
     """Plan changes on a patient's scan: ingest, fit, each change and their combination, measures, an
     interactive report (report.html) and a handout for her (report.pdf)."""
     clock = Clock()
+    deform, operations, symmetrise = _written(plan_file, deform, left, right, symmetrise)
     try:
-        options = PlanOptions.parse(deform, side, method, units, up, None if wall_from is None else str(wall_from))
+        options = PlanOptions.parse(deform, side, method, units, up, None if wall_from is None else str(wall_from),
+                                    operations, symmetrise)
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
     who = _patient(patient, patient_id, surgeon, date)
@@ -98,6 +113,31 @@ def plan(
                              "so.", markup=False, soft_wrap=True)
 
 
+def _written(plan_file: Path | None, deform: list[str], left: list[str], right: list[str], symmetrise: str | None):
+    """The changes, the operations ((side, as written), each checked: `OperationSpec.parse`) and the side to
+    symmetrise, from the command line or the plan file (`cli.written_plan`); a usage error naming what is wrong."""
+    from breastplan.plan.operation_spec import OperationSpec
+
+    from .written_plan import read_written_plan
+
+    if plan_file is not None:
+        if deform or left or right or symmetrise:
+            raise usage_error("--plan-file is instead of --deform, --left, --right and --symmetrise: give one or the "
+                              "other", "--plan-file")
+        try:
+            written = read_written_plan(plan_file)
+        except ValueError as exc:
+            raise usage_error(str(exc), "--plan-file") from None
+        deform, left, right, symmetrise = list(written.deform), written.left, written.right, written.symmetrise
+    for flag, items in (("--left", left), ("--right", right)):
+        for text in items:
+            try:
+                OperationSpec.parse(text)
+            except OptionError as exc:
+                raise usage_error(str(exc), "--plan-file" if plan_file else flag) from None
+    return deform, tuple(("left", t) for t in left) + tuple(("right", t) for t in right), symmetrise
+
+
 NAME_CHARS = 120
 """The longest name, ID or surgeon the header takes."""
 
@@ -135,6 +175,8 @@ def _json(plan, out: Path, seconds: float) -> dict:
         sides[s] = {"volume_cc": volume["volume_cc"], "uncertainty_cc": volume["uncertainty_cc"],
                     "model_volume_cc": volume["model_volume_cc"], "stopping_rule_met": sp.fit.stopping_rule_met,
                     "changes": [st.key for st in plan.changes], "reused": list(sp.reused)}
+        if s in plan.operated:
+            sides[s]["operations"] = plan.operated[s].as_dict()
         if sp.follow_up is not None:
             sides[s]["wall_from"] = {**follow_up_record(sp),
                                      **skin_change_record(plan.skin_changes.get(s))}
@@ -148,11 +190,14 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
     from rich.table import Table
 
     from breastplan.plan.measures import measure_label
+    from breastplan.plan.result import OPERATED
 
     from .output import stdout
 
     m, sides = plan.measures, list(plan.sides)
-    table = Table(title=f"plan: {', '.join(st.key for st in plan.changes)} — after: {plan.shown.key}",
+    planned = [f"{s} {spec.text}" for s, op in plan.operated.items() for spec in op.written]
+    planned += [st.key for st in plan.changes if st.key != OPERATED]
+    table = Table(title=f"plan: {', '.join(planned) or 'nothing to operate'} — after: {plan.shown.key}",
                   title_justify="left")
     table.add_column("measure")
     for s in sides:
@@ -190,6 +235,12 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
                          f"({pct:+.1f} %; then {f.earlier_volume_cc:.1f} cc, measured "
                          f"down to its chest wall, registered at rms {f.registration.rms_mm:.2f} mm)"
                          + (f"; on her skin, on the earlier wall: {skin.on_wall_cc:+.1f} cc" if skin else ""))
+    for s, op in plan.operated.items():
+        stdout.print(f"{s} operated: {', '.join(spec.text for spec in op.written) or 'nothing proposed'}; her volume "
+                     f"{op.volume_before_cc:.1f} → {op.volume_cc:.1f} cc on her skin, her nipple moved "
+                     f"{op.as_dict()['nipple_moved_mm']:.0f} mm", markup=False, soft_wrap=True)
+        for words in (*op.warnings, *([op.note] if op.note else [])):
+            stdout.print(f"{s}: {words}", markup=False, soft_wrap=True)
     if m.symmetry["before"]:
         sym = m.symmetry
         stdout.print("symmetry: " + ", ".join(f"{k.replace('_pct', '')} {sym['before'][k]:.1f} → {sym['after'][k]:.1f} %"

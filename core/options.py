@@ -114,7 +114,9 @@ class PlanOptions:
     `breastplan.model/1` file of one condition; `units` and `up` say how to read a scan file, as
     for `IngestOptions`; `wall_from`, an earlier case folder of the patient (a plan's, or one
     side's from `ingest`), makes the plan a follow-up: each breast measured down to that case's
-    chest wall, and its volume change since then."""
+    chest wall, and its volume change since then. `operations`: (side, operation as written) in the order
+    made (`plan.operation_spec`: the words are checked there); `symmetrise`: the side whose operations are
+    proposed to match the other."""
 
     changes: tuple[tuple[str, float], ...] = DEFAULT_PLAN
     sides: tuple[str, ...] = SIDES
@@ -122,11 +124,15 @@ class PlanOptions:
     units: str = "auto"
     up: str = "auto"
     wall_from: str | None = None
+    operations: tuple[tuple[str, str], ...] = ()
+    symmetrise: str | None = None
 
     def __post_init__(self):
         changes = tuple((str(k), float(d)) for k, d in self.changes)
-        if not changes:
-            raise OptionError("changes", "a plan needs at least one change (--deform KIND:DEGREE)")
+        operations = tuple((str(s), str(text)) for s, text in self.operations)
+        if not changes and not operations and self.symmetrise is None:
+            raise OptionError("changes", "a plan needs at least one change (--deform KIND:DEGREE) or operation "
+                                         "(--left/--right, --symmetrise)")
         for kind, degree in changes:
             if kind not in DEGREE_KINDS:
                 raise OptionError("changes", f"'{kind}' has no degrees to plan; choose {', '.join(DEGREE_KINDS)}")
@@ -140,13 +146,29 @@ class PlanOptions:
         if not sides or any(s not in SIDES for s in sides) or len(set(sides)) != len(sides):
             raise OptionError("sides", f"the sides are left, right or both, not {'/'.join(sides) or 'none'}")
         _check_scan_file(self.units, self.up)
+        for side, _ in operations:
+            if side not in sides:
+                raise OptionError("operations", f"an operation on her {side} breast, which is not planned (--side)")
+        if self.symmetrise is not None:
+            if self.symmetrise not in SIDES or sides != SIDES:
+                raise OptionError("symmetrise", "--symmetrise takes left or right, and a plan of both sides")
+            if any(side == self.symmetrise for side, _ in operations):
+                raise OptionError("symmetrise", f"--symmetrise {self.symmetrise} proposes the operations on that "
+                                                "side: give them, or ask for them, not both")
         object.__setattr__(self, "changes", changes)
         object.__setattr__(self, "sides", sides)
+        object.__setattr__(self, "operations", operations)
+
+    def operations_of(self, side: str) -> tuple[str, ...]:
+        """The operations on one side, as written, in order."""
+        return tuple(text for s, text in self.operations if s == side)
 
     @classmethod
     def parse(cls, deform: list[str], side: str = "both", method: str = "exact", units: str = "auto",
-              up: str = "auto", wall_from: str | None = None) -> "PlanOptions":
-        """From the command line's KIND:DEGREE items, side (left, right or both) and the rest as given."""
+              up: str = "auto", wall_from: str | None = None, operations: tuple[tuple[str, str], ...] = (),
+              symmetrise: str | None = None) -> "PlanOptions":
+        """From the command line's KIND:DEGREE items, side (left, right or both) and the rest as given; without
+        KIND:DEGREE items, the default changes unless operations are planned."""
         changes = []
         for item in deform:
             kind, sep, degree = item.partition(":")
@@ -158,17 +180,20 @@ class PlanOptions:
                 raise OptionError("changes", f"'{item}' is not KIND:DEGREE (e.g. ptosis:3)") from None
         if side not in (*SIDES, "both"):
             raise OptionError("sides", f"'{side}' is not a side; choose left, right or both")
-        return cls(tuple(changes) or DEFAULT_PLAN, SIDES if side == "both" else (side,), method, units, up, wall_from)
+        operated = bool(operations) or symmetrise is not None
+        return cls(tuple(changes) or (() if operated else DEFAULT_PLAN), SIDES if side == "both" else (side,), method,
+                   units, up, wall_from, tuple(operations), symmetrise)
 
     def as_dict(self) -> dict:
         return {"changes": [list(c) for c in self.changes], "sides": list(self.sides), "method": self.method,
-                "units": self.units, "up": self.up, "wall_from": self.wall_from}
+                "units": self.units, "up": self.up, "wall_from": self.wall_from,
+                "operations": [list(o) for o in self.operations], "symmetrise": self.symmetrise}
 
     @classmethod
     def from_dict(cls, d: dict) -> "PlanOptions":
         """The options `as_dict` gave."""
         return cls(tuple(map(tuple, d["changes"])), tuple(d["sides"]), d["method"], d["units"], d["up"],
-                   d.get("wall_from"))
+                   d.get("wall_from"), tuple(map(tuple, d.get("operations", ()))), d.get("symmetrise"))
 
 
 EXECUTORS = ("local", "dask")

@@ -21,6 +21,8 @@ from breastplan.deform.lattice import Lattice
 from breastplan.deform.names import METHODS
 from breastplan.model_file import ModelFile, load_model
 
+from .result import OPERATED
+
 
 @dataclass(frozen=True)
 class Change:
@@ -32,6 +34,9 @@ class Change:
     details: tuple[dict, ...]              # per kind: condition, t, params, degree_reached, reached (REACH)
     fields: tuple[Lattice, ...] = ()       # a statistical model's deformations (mm, primitive frame), after it
 
+
+UNCHANGED = Change(OPERATED, (), Deformation(), ())
+"""No change by degree: the change of a plan of operations alone."""
 
 REACH = 0.5
 """A change reaches the degree asked when the degree of its result lies within half a degree of it

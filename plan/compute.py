@@ -10,17 +10,20 @@ from pathlib import Path
 
 import numpy as np
 
-from breastplan import transform_points
+from breastplan import BadInputError, transform_points
 from breastplan.body import Body, shared_body
 from breastplan.case import sha256
 from breastplan.clock import Clock
 from breastplan.options import PlanOptions
 
 from .breast_volume import BreastVolumes, change_on_earlier_wall, measure_breasts
-from .changes import Change, Method, change_name, combine, solve_change
+from .changes import UNCHANGED, Change, Method, change_name, combine, solve_change
 from .measures import asymmetry, breast_measures, breast_measures_each
-from .result import COMBINED, Measures, Plan, PlanState, SidePlan, SkinChange, StateGrid, planned_states
+from .operated import Operated, operate
+from .operation_spec import OperationSpec
+from .result import COMBINED, OPERATED, Measures, Plan, PlanState, SidePlan, SkinChange, StateGrid, planned_states
 from .surface import PlannedChange
+from .symmetrising import symmetrising
 from .symmetry import bcct_measures, ptosis_from_cells
 
 
@@ -33,18 +36,20 @@ def compute_plan(source: Path, fitted: dict[str, SidePlan], options: PlanOptions
                  earlier: BreastVolumes | None, clock: Clock) -> Plan:
     """The plan of `options` on her fitted breasts (`fitted`: each side's scan and fit, no changes yet),
     by `method`; `earlier`: a follow-up's earlier visit measured on her skin then."""
+    body = shared_body({s: sp.scan.body for s, sp in fitted.items()}, source)
+    with clock("volumes on her skin"):
+        volumes = measure_breasts(body, {s: sp.scan.nipple_camera_mm for s, sp in fitted.items()})
+    with clock("operations"):
+        operated = operations(fitted, volumes, options)
     sides = {}
     for side, sp in fitted.items():
         with clock(f"changes {side}"):
-            sides[side] = replace(sp, changes=solve_changes(sp, options, method))
+            sides[side] = replace(sp, changes=solve_changes(sp, options, method) or (UNCHANGED,))
     with clock("states"):
-        states = tuple(_states(sides, options, method))
-    body = shared_body({s: sp.scan.body for s, sp in sides.items()}, source)
-    with clock("volumes on her skin"):
-        volumes = measure_breasts(body, {s: sp.scan.nipple_camera_mm for s, sp in sides.items()})
+        states = tuple(_states(sides, options, method, operated))
     fitted_measures = {s: _model_measures(volumes, sp) for s, sp in sides.items()}
     with clock("every slider state"):
-        grid = state_grid(sides, states, options, volumes, fitted_measures)
+        grid = state_grid(sides, states, options, volumes, fitted_measures, operated)
     with clock("measures"):
         requested = planned_states(states, next(iter(sides.values())))
         torsos = tuple(planned_torso(body, sides, st) for st in requested)
@@ -52,7 +57,7 @@ def compute_plan(source: Path, fitted: dict[str, SidePlan], options: PlanOptions
                                  grid.measures_at(grid.planned_index))
         skin = {} if earlier is None else skin_changes(body, sides, volumes, earlier)
     return Plan(source, options, body, sides, volumes, states, torsos, measures, earlier, skin,
-                None if source.is_dir() else sha256(source), versions(), clock.ms, grid=grid)
+                None if source.is_dir() else sha256(source), versions(), clock.ms, grid=grid, operated=operated)
 
 
 def versions() -> dict[str, str]:
@@ -73,25 +78,53 @@ def solve_changes(side: SidePlan, options: PlanOptions, method: Method) -> tuple
     return tuple(singles + ([combine(singles)] if len(singles) > 1 else []))
 
 
-def _states(sides: dict[str, SidePlan], options: PlanOptions, method: Method):
+def operations(sides: dict[str, SidePlan], volumes: BreastVolumes, options: PlanOptions) -> dict[str, Operated]:
+    """Each side's operations (`options.operations`, or those `options.symmetrise` proposes) made on her skin as
+    measured (`volumes`); sides without any are left out. BadInputError where her scan rules one out."""
+    nipples = {s: sp.scan.nipple_camera_mm for s, sp in sides.items()}
+    out = {}
+    for side in sides:
+        written = tuple(map(OperationSpec.parse, options.operations_of(side)))
+        if not written and options.symmetrise != side:
+            continue
+        fold = ptosis_from_cells(transform_points(volumes.body_from_input, nipples[side][None])[0], volumes.cells,
+                                 side)["nipple_to_fold_mm"]
+        if fold is None or not np.isfinite(fold):
+            raise BadInputError(None, f"shows no inframammary fold under her {side} breast, where its operations "
+                                      "are placed")
+        if options.symmetrise == side:
+            proposal = symmetrising(volumes, nipples, side, fold)
+            out[side] = replace(proposal.operated, note=proposal.note)
+        else:
+            out[side] = operate(volumes, nipples, side, fold, written)
+    return out
+
+
+def _states(sides: dict[str, SidePlan], options: PlanOptions, method: Method, operated: dict[str, Operated]):
     """Each requested kind alone at each of its slider's degrees (the requested degree being the change solved for
-    the plan), then the combination as planned: the changes `state_grid` combines."""
+    the plan), then the combination as planned: the changes `state_grid` combines; with no kind, her operations
+    alone (OPERATED). Each after her operations, if any."""
     for kind, requested in options.changes:
         for degree in slider_degrees(requested):
             name = change_name(kind, degree)
             changes = {s: next((c for c in sp.changes if c.name == name), None)
                        or solve_change(sp.local_surface, kind, degree, sp.primitive, method)
                        for s, sp in sides.items()}
-            yield _state(sides, name, kind, degree, changes)
-    if len(options.changes) > 1:
-        yield _state(sides, COMBINED, None, None, {s: sp.changes[-1] for s, sp in sides.items()})
+            yield _state(sides, name, kind, degree, changes, operated)
+    if len(options.changes) != 1:
+        yield _state(sides, COMBINED if options.changes else OPERATED, None, None,
+                     {s: sp.changes[-1] for s, sp in sides.items()}, operated)
 
 
 def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], options: PlanOptions,
-               volumes: BreastVolumes, fitted: dict[str, dict[str, float]]) -> StateGrid:
-    """Every combination of the kinds' slider degrees (`states` holds each kind's change at each), each side's
-    fitted model so planned, and her measures on it (`breast_measures_each`; her volume on her skin changed by as
-    much as the fitted model's, `fitted` its measures as scanned: `_model_measures`)."""
+               volumes: BreastVolumes, fitted: dict[str, dict[str, float]],
+               operated: dict[str, Operated] | None = None) -> StateGrid:
+    """Every combination of the kinds' slider degrees (`states` holds each kind's change at each; with no kind, the
+    one state of her operations), after her `operated` breasts' operations, each side's fitted model so planned,
+    and her measures on it (`breast_measures_each`). Her volume on her skin is changed by the operations' exact
+    change, then by as much as the fitted model's volume changes from the operations' state (`fitted`: its measures
+    as scanned, `_model_measures`)."""
+    operated = operated or {}
     kinds = tuple(k for k, _ in options.changes)
     requested = tuple(d for _, d in options.changes)
     degrees = tuple(tuple(slider_degrees(d)) for d in requested)
@@ -100,13 +133,18 @@ def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], option
     changes, planned, models, measures = {}, {}, {}, {}
     for s, sp in sides.items():
         singles = [[by_key[change_name(k, d)].changes[s] for k, d in zip(kinds, combo)] for combo in combos]
-        changes[s] = tuple(one[0] if len(one) == 1 else combine(one) for one in singles)
-        planned[s] = tuple(PlannedChange.of(sp, c) for c in changes[s])
+        changes[s] = tuple(one[0] if len(one) == 1 else combine(one) if one else UNCHANGED for one in singles)
+        planned[s] = tuple(PlannedChange.of(sp, c, operated.get(s)) for c in changes[s])
         moved = PlannedChange.models(planned[s], np.vstack([sp.surface_input, sp.scan.nipple_camera_mm]))
         measures[s] = breast_measures_each(volumes.landmarks, moved[:, -1], moved[:, :-1], sp.fit.faces)
         models[s] = moved[:, :-1].astype(np.float32)
-        measures[s]["volume_cc"] += volumes.sides[s].volume_cc - fitted[s]["volume_cc"]
-    keys = tuple(COMBINED if len(kinds) > 1 and combo == requested else
+        base, volume = fitted[s]["volume_cc"], volumes.sides[s].volume_cc
+        if s in operated:
+            op = operated[s]
+            base = breast_measures(volumes.landmarks, op.nipple_mm, op(sp.surface_input), sp.fit.faces)["volume_cc"]
+            volume = op.volume_cc
+        measures[s]["volume_cc"] += volume - base
+    keys = tuple(OPERATED if not kinds else COMBINED if len(kinds) > 1 and combo == requested else
                  "+".join(change_name(k, d) for k, d in zip(kinds, combo)) for combo in combos)
     return StateGrid(kinds, degrees, requested, keys, changes, planned, models, measures)
 
@@ -116,8 +154,10 @@ def _model_measures(volumes: BreastVolumes, sp: SidePlan) -> dict[str, float]:
     return breast_measures(volumes.landmarks, sp.scan.nipple_camera_mm, sp.surface_input, sp.fit.faces)
 
 
-def _state(sides: dict[str, SidePlan], key: str, kind, degree, changes: dict[str, Change]) -> PlanState:
-    return PlanState(key, kind, degree, changes, {s: PlannedChange.of(sp, changes[s]) for s, sp in sides.items()})
+def _state(sides: dict[str, SidePlan], key: str, kind, degree, changes: dict[str, Change],
+           operated: dict[str, Operated]) -> PlanState:
+    return PlanState(key, kind, degree, changes, {s: PlannedChange.of(sp, changes[s], operated.get(s))
+                                                  for s, sp in sides.items()})
 
 
 def measure_scans(scans: dict, where: Path | None = None) -> BreastVolumes:

@@ -3,6 +3,7 @@ torso before and as planned from the five standard views (`plan.pictures`), then
 words, each page with her name, the surgeon, the date and the reminder that it is a simulation."""
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,8 @@ PAGE_PX = (1754, 1240)
 """An A4 page, landscape, at DPI."""
 DPI = 150
 MARGIN_PX = 60
+WRAP_CHARS = 130
+"""What is planned is written in lines of at most this many characters (22 px type fills a line at about 140)."""
 DISCLAIMER = ("A simulation of a planned change on her scanned body: a guide for discussion, not a promise of "
               "the result.")
 PLAIN = {"volume_cc": ("breast volume", "cc"),
@@ -29,6 +32,8 @@ def state_words(grid: StateGrid, i: int) -> str:
     """What state i of the plan's slider states shows, in words: each kind's degree, or their combination as
     planned."""
     degrees = grid.combination(i)
+    if not grid.kinds:
+        return "the operations planned"
     if len(grid.kinds) == 1:
         return f"{grid.kinds[0]}, degree {degrees[0]:g}"
     if degrees == grid.requested:
@@ -38,11 +43,13 @@ def state_words(grid: StateGrid, i: int) -> str:
 
 
 def shown_words(plan: Plan) -> str:
-    """What the pictures as planned show, in words, the changes named."""
+    """What the pictures as planned show, in words, the operations and changes named."""
     words = state_words(plan.grid, plan.grid.planned_index)
     if len(plan.grid.kinds) > 1:
         words += " (" + ", ".join(f"{k} {d:g}" for k, d in plan.options.changes) + ")"
-    return words
+    operations = "; ".join(f"her {s} breast, " + (", then ".join(spec.words for spec in op.written) or "nothing")
+                           for s, op in plan.operated.items())
+    return words if not operations else operations if not plan.grid.kinds else f"{operations}; then {words}"
 
 
 def measure_rows(plan: Plan) -> list[tuple[str, ...]]:
@@ -120,7 +127,8 @@ def _pictures_page(plan: Plan, shots: dict) -> Image.Image:
             page.paste(shot, (x, top + row * h))
     for row, label in enumerate(("before", "as planned")):
         vertical_text(page, label, (left - 40, top + row * h + h // 2), font(24))
-    pen.text((MARGIN_PX, top + 2 * h + 20), f"As planned: {shown_words(plan)}.", fill="#333333", font=font(22))
+    words = textwrap.wrap(f"As planned: {shown_words(plan)}.", WRAP_CHARS)
+    pen.multiline_text((MARGIN_PX, top + 2 * h + 20), "\n".join(words), fill="#333333", font=font(22), spacing=8)
     return page
 
 

@@ -33,10 +33,11 @@ KINDS = ("augmentation", "lift", "reduction", "lumpectomy")
 
 @dataclass(frozen=True)
 class OperationSpec:
-    """One operation as written: its kind and its settings."""
+    """One operation as written (`text`): its kind and its settings."""
 
     kind: str
     settings: dict = field(default_factory=dict)
+    text: str = ""
 
     @classmethod
     def parse(cls, text: str) -> "OperationSpec":
@@ -45,7 +46,7 @@ class OperationSpec:
         if kind not in KINDS:
             raise OptionError("operation", f"'{text}' is no operation: write one of {', '.join(KINDS)} (e.g. "
                                            "augmentation:300:moderate)")
-        return cls(kind, getattr(cls, f"_{kind}")(text, words))
+        return cls(kind, getattr(cls, f"_{kind}")(text, words), ":".join([kind, *words]))
 
     @staticmethod
     def _augmentation(text: str, words: list[str]) -> dict:
@@ -98,6 +99,23 @@ class OperationSpec:
             raise OptionError("operation", f"'{text}': the clock position lies in 1–12, as the surgeon faces her")
         return {"volume_cc": volume, "clock": clock, "distance_mm": distance}
 
+    @property
+    def words(self) -> str:
+        """The operation in a surgeon's words."""
+        s = self.settings
+        if self.kind == "augmentation":
+            implant = _implant(s)
+            return (f"an implant of {implant.volume_cc:.0f} cc ({implant.width_mm:.0f} × {implant.projection_mm:.0f} "
+                    f"mm), {s['shape']}, {'behind the muscle' if s['pocket'] == 'submuscular' else 'behind the gland'}")
+        if self.kind == "lumpectomy":
+            return (f"an excision of {s['volume_cc']:g} cc at {s['clock']:g} o'clock, {s['distance_mm']:g} mm from the "
+                    "nipple")
+        lift = _lift_words(s) if "lift" in s else None
+        if self.kind == "lift":
+            return f"a lift: {lift}"
+        cut = f"to {s['to_volume_cc']:g} cc" if "to_volume_cc" in s else f"of {s['volume_cc']:g} cc"
+        return f"a reduction {cut}" + (f", with a lift: {lift}" if lift else "")
+
     def operate(self, volumes: BreastVolumes, nipples: dict, side: str, fold_below_nipple_mm: float) -> SkinLift:
         """This operation on her `side` breast (`nipples` side → (3,) input frame; her fold `fold_below_nipple_mm`
         below that nipple)."""
@@ -132,6 +150,13 @@ def _lift_target(text: str, word: str) -> dict:
     if key not in ("notch", "fold"):
         raise OptionError("operation", f"'{text}': a lift's target is notch=MM, fold=MM or other, not '{word}'")
     return {"lift": key, "mm": _number(text, value)}
+
+
+def _lift_words(settings: dict) -> str:
+    if settings["lift"] == "other":
+        return "the nipple to her other nipple's height"
+    where = "from the sternal notch" if settings["lift"] == "notch" else "above her fold"
+    return f"the nipple {settings['mm']:g} mm {where}"
 
 
 def _implant(settings: dict) -> Implant:

@@ -45,6 +45,8 @@ def write_plan(plan: Plan, folder: Path, parallel: bool = False) -> dict:
             if sp.follow_up is not None:
                 sides[side]["wall_from"] = {**follow_up_record(sp),
                                             **skin_change_record(plan.skin_changes.get(side))}
+            if side in plan.operated:
+                sides[side]["operations"] = plan.operated[side].as_dict()
         torso_files = {}
         record = {"schema": PLAN_SCHEMA, "version": __version__, "input": input_record(plan),
                   "options": plan.options.as_dict(), "stopping_rule": STOP_RESIDUAL, "sides": sides,

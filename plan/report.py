@@ -42,7 +42,7 @@ from .changes import short_of
 from .handout import DISCLAIMER, PLAIN, plain_value, state_words
 from .measures import asymmetry, measure_label
 from .pictures import FOLD, FOOTPRINT, LANDMARK, LIGHT, VIEWS, camera, picture, skin_colour
-from .result import Plan
+from .result import OPERATED, Plan
 from .modes import modes_of
 from .views import State, Views
 
@@ -182,7 +182,8 @@ def render(plan: Plan, views: Views) -> str:
     data = page_data(plan, views)
     poster = poster_png(views, first_state(plan, views))
     parts = {"TITLE": TITLE, "WHO": html.escape(plan.patient.header),
-             "POSTER": base64.b64encode(poster).decode("ascii"), "TABLES": tables(plan), "SCRIPT": _SCRIPT, "PLOTLY": get_plotlyjs(),
+             "POSTER": base64.b64encode(poster).decode("ascii"), "TABLES": tables(plan), "SCRIPT": _SCRIPT,
+             "PLOTLY": get_plotlyjs(), "PLANNED": "As operated" if not plan.grid.kinds else "Combined, as planned",
              "DATA": json.dumps(data, separators=(",", ":")).replace("</", "<\\/")}
     return re.sub(r"%([A-Z]+)%", lambda m: parts[m[1]], _TEMPLATE)
 
@@ -204,7 +205,7 @@ def tables(plan: Plan) -> str:
     measures, volume, symmetry and follow-up tables, and for the surgeon, collapsed, the fit quality,
     the changes' parameters, the inputs, options and versions."""
     sides = list(plan.sides)
-    parts = [for_her(plan), _measures_table(plan)]
+    parts = [_operations_table(plan), for_her(plan), _measures_table(plan)]
     volumes = {s: plan.volumes.sides[s] for s in sides}
     differs = {s: v.model_differs_pct(plan.sides[s].fit.volume_cc) for s, v in volumes.items()}
     rows = [[s, f"{v.volume_cc:.1f} ± {v.uncertainty_cc:.1f}", v.area_cm2, v.unseen_pct, plan.sides[s].fit.volume_cc,
@@ -238,7 +239,7 @@ def tables(plan: Plan) -> str:
     method = plan.options.method
     rows = [[s, st.key, ", ".join(f"{d['kind']} {d['degree']:g} ({_how(d)})" for d in st.changes[s].details),
              ", ".join(_reached(d, method) for d in st.changes[s].details)]
-            for s in sides for st in plan.changes]
+            for s in sides for st in plan.changes if st.changes[s].details]
     surgeon.append("<h2>Planned changes</h2>" + _table(["side", "change", "how (parameters in model units)",
                                                        "degree reached"], rows))
     rows = [["input", str(plan.input)], ["input kind", plan.input_kind], ["input sha256", plan.input_sha256 or "—"],
@@ -247,6 +248,21 @@ def tables(plan: Plan) -> str:
     parts.append('<details id="for-surgeon"><summary>For the surgeon: the fits\' quality, the changes\' parameters, '
                  'inputs and versions</summary>' + "\n".join(surgeon) + "</details>")
     return "\n".join(parts)
+
+
+def _operations_table(plan: Plan) -> str:
+    """Each operated side's operations in a surgeon's words, in the order made, her volume on her skin before and
+    after them, how far her nipple moves, and what the plan warns of; "" without operations."""
+    if not plan.operated:
+        return ""
+    rows = [[f"her {s}", "; then ".join(spec.words for spec in op.written) or "none proposed",
+             f"{op.volume_before_cc:.0f} → {op.volume_cc:.0f}", op.as_dict()["nipple_moved_mm"],
+             " ".join((*op.warnings, op.note or "")).strip() or "—"] for s, op in plan.operated.items()]
+    after = ("Every state shown is after them: the changes by degree start from her breasts as operated."
+             if plan.grid.kinds else "")
+    return ('<section id="operations"><h2>Operations planned</h2>' + _table(
+        ["breast", "operations, in the order made", "her volume cc", "her nipple moves mm", "warnings"], rows,
+        "operations") + (f"<p>{after}</p>" if after else "") + "</section>")
 
 
 def for_her(plan: Plan) -> str:
@@ -291,6 +307,8 @@ def _measures_table(plan: Plan) -> str:
 
 
 def _opening(plan: Plan) -> str:
+    if plan.shown.key == OPERATED:
+        return "operations as planned"
     return "combination as planned" if plan.shown.kind is None else "planned change"
 
 
@@ -354,7 +372,7 @@ td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4p
 <div id="controls">
 <div><b>View</b><br><button data-view="right-side">Her right side</button><button data-view="right-oblique">Her right oblique</button><button data-view="front">Front</button><button data-view="left-oblique">Her left oblique</button><button data-view="left-side">Her left side</button><button data-view="top">Top</button></div>
 <div id="sliders"></div>
-<div><b>Show</b><br><button id="original">Original</button><button id="combined">Combined, as planned</button></div>
+<div><b>Show</b><br><button id="original">Original</button><button id="combined">%PLANNED%</button></div>
 <div><b>Colour</b><br><button id="colour-skin" class="on">Her skin</button><button id="colour-moved">Millimetres moved</button></div>
 <div><b>Compare</b><br><button id="beside">Before and as planned, side by side</button></div>
 <p id="state"></p>
@@ -543,7 +561,7 @@ G.kinds.forEach((kind,k)=>{
 });
 document.getElementById('original').onclick=()=>show(null);
 const comb=document.getElementById('combined');
-if(G.kinds.length>1){comb.onclick=()=>show(stateAt(G.planned));}else{comb.style.display='none';}
+if(G.kinds.length!==1){comb.onclick=()=>show(stateAt(G.planned));}else{comb.style.display='none';}
 const named=v=>sides.map(s=>v.endsWith('-side')&&!v.startsWith(s)?'':'her '+s);   // a side view names its own side only
 for(const b of document.querySelectorAll('button[data-view]'))b.onclick=()=>{const v=b.dataset.view;
  traces[idx.sides]=Object.assign({},traces[idx.sides],{text:named(v)});

@@ -31,10 +31,13 @@ if TYPE_CHECKING:
 
     from .breast_volume import BreastVolumes
     from .changes import Change
+    from .operated import Operated
     from .surface import PlannedChange
 
 COMBINED = "combined"
 """The key of the state that applies every requested change together."""
+OPERATED = "operated"
+"""The key of the one state of a plan of operations alone (no change by degree)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -244,8 +247,8 @@ class Patient:
 class Plan:
     """A computed plan: its input and options, her body, each breast, her volumes measured on her skin, the
     states (the requested changes, their combination, each kind alone at its slider's degrees), every state the
-    sliders reach (`grid`), her torso as planned, the measures, and for a follow-up the earlier visit's volumes
-    and each side's change since."""
+    sliders reach (`grid`), her torso as planned, the measures, for a follow-up the earlier visit's volumes
+    and each side's change since, and each operated side's operations (made first, under every state)."""
 
     input: Path
     options: PlanOptions
@@ -262,6 +265,7 @@ class Plan:
     timings_ms: dict = field(default_factory=dict)
     patient: Patient = field(default_factory=Patient)
     grid: StateGrid | None = None             # every state the report's sliders reach
+    operated: dict[str, Operated] = field(default_factory=dict)   # side → its operations, under every state
 
     @property
     def input_kind(self) -> str:
@@ -281,5 +285,6 @@ class Plan:
 
     @property
     def shown(self) -> PlanState:
-        """The state the plan leads with: the combination as planned, or the one planned change."""
+        """The state the plan leads with: the combination as planned, the one planned change, or the operations
+        alone."""
         return self.changes[-1]

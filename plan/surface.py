@@ -10,11 +10,14 @@ Top-shape, as the model states it, scales heights on the upper half only and so 
 along y = 0 (docs/model.md §3). On the patient's surface its displacement is faded in over the
 first SEAM·a3 above y = 0 with the same step, so her skin does not split; the planned model
 itself keeps the model's formula, on which degrees are defined.
+
+After operations (`plan.operated`), the change starts from her skin (and the fitted model) as they leave it: the
+operations move the points first, and the change moves them on from there.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
@@ -22,6 +25,9 @@ from breastplan import Primitive, to_mm, to_model_units, transform_points
 from breastplan.units import MM_PER_MU
 from breastplan.deform.global_deformations import Deformation
 from breastplan.deform.lattice import Lattice
+
+if TYPE_CHECKING:
+    from .operated import Operated
 
 BAND = 0.5
 """Width of the blending band outside the footprint, in footprint radii."""
@@ -48,11 +54,18 @@ class PlannedChange:
     to_primitive: np.ndarray          # (4, 4)
     band: float = BAND
     fields: tuple[Lattice, ...] = ()  # FFD lattices applied after the deformation (mm, primitive frame)
+    operated: Operated | None = None  # operations made on her breast before the change (`plan.operated`)
 
     @classmethod
-    def of(cls, side, change) -> "PlannedChange":
-        """A change (`plan.changes.Change`) of one breast (`plan.result.SidePlan`), placed in its input frame."""
-        return cls(change.deformation, side.primitive, side.frames.input_to_primitive, fields=change.fields)
+    def of(cls, side, change, operated: Operated | None = None) -> "PlannedChange":
+        """A change (`plan.changes.Change`) of one breast (`plan.result.SidePlan`), placed in its input frame, after
+        the `operated` breast's operations, if any."""
+        return cls(change.deformation, side.primitive, side.frames.input_to_primitive, fields=change.fields,
+                   operated=operated)
+
+    def _before(self, points: np.ndarray) -> np.ndarray:
+        """(N, 3) input-frame points where the operations, if any, move them: where the change starts."""
+        return points if self.operated is None else self.operated(points)
 
     def footprint_radius(self, local_mm: np.ndarray) -> np.ndarray:
         """Normalised radius of primitive-frame points over the base superellipse (1 on its rim)."""
@@ -62,8 +75,12 @@ class PlannedChange:
         return np.hypot(local_mm[:, 0] / ax, local_mm[:, 1] / ay)
 
     def weights(self, points_mm) -> np.ndarray:
-        """(N,) blending weight of input-frame points: 1 on the footprint, 0 past the band."""
-        return self._weights(transform_points(self.to_primitive, np.asarray(points_mm, dtype=float)))
+        """(N,) blending weight of input-frame points: 1 on the footprint, 0 past the band; 1 where the operations
+        move them."""
+        points = np.asarray(points_mm, dtype=float).reshape(-1, 3)
+        start = self._before(points)
+        moved = np.any(start != points, axis=1)
+        return np.maximum(self._weights(transform_points(self.to_primitive, start)), moved)
 
     def _weights(self, local_mm: np.ndarray) -> np.ndarray:
         return smoothstep((self.footprint_radius(local_mm) - 1.0) / self.band)
@@ -78,15 +95,16 @@ class PlannedChange:
         frame and band): the points placed and weighed once, each top-shape applied once."""
         first = _one_breast(changes)
         pts = np.asarray(points_mm, dtype=float).reshape(-1, 3)
-        local = transform_points(first.to_primitive, pts)
+        start = first._before(pts)
+        local = transform_points(first.to_primitive, start)
         w = first._weights(local)
         moving = w > 0
-        out = np.zeros((len(changes), len(pts), 3))
+        out = np.broadcast_to(start - pts, (len(changes), len(pts), 3)).copy()
         near, lifted = local[moving], {}
         near_mu = to_model_units(near)
         for i, change in enumerate(changes):
             moved = change._lattices(to_mm(change._seamless(near_mu, lifted)))
-            out[i, moving] = (moved - near) * w[moving, None] @ first.to_primitive[:3, :3]   # back by Rᵀ
+            out[i, moving] += (moved - near) * w[moving, None] @ first.to_primitive[:3, :3]   # back by Rᵀ
         return out
 
     def __call__(self, points_mm) -> np.ndarray:
@@ -111,15 +129,16 @@ class PlannedChange:
         return local_mm
 
     def model(self, vertices_mm) -> np.ndarray:
-        """Input-frame vertices of the fitted model moved by the full change (no blending)."""
+        """Input-frame vertices of the fitted model moved by the operations, then the full change (no blending)."""
         return PlannedChange.models([self], vertices_mm)[0]
 
     @staticmethod
     def models(changes: Sequence["PlannedChange"], vertices_mm) -> np.ndarray:
         """(S, V, 3) `model` of input-frame vertices by each of `changes`, all of one breast (one primitive and
-        frame): each top-shape applied once."""
+        frame, after its operations): each top-shape applied once."""
         first = _one_breast(changes)
-        local = to_model_units(transform_points(first.to_primitive, np.asarray(vertices_mm, dtype=float)))
+        start = first._before(np.asarray(vertices_mm, dtype=float).reshape(-1, 3))
+        local = to_model_units(transform_points(first.to_primitive, start))
         out, topped = np.empty((len(changes), len(local), 3)), {}
         back = np.linalg.inv(first.to_primitive)
         for i, change in enumerate(changes):
@@ -132,10 +151,9 @@ class PlannedChange:
 
 
 def _one_breast(changes: Sequence[PlannedChange]) -> PlannedChange:
-    """The first of `changes`; ValueError unless all are of one breast (primitive, frame and band)."""
+    """The first of `changes`; ValueError unless all are of one breast (primitive, frame, band and operations)."""
     first = changes[0]
-    if any(c.primitive != first.primitive or c.band != first.band or not np.array_equal(c.to_primitive,
-                                                                                        first.to_primitive)
-           for c in changes[1:]):
-        raise ValueError("the changes are not all of one breast (its primitive, frame and band)")
+    if any(c.primitive != first.primitive or c.band != first.band or c.operated is not first.operated
+           or not np.array_equal(c.to_primitive, first.to_primitive) for c in changes[1:]):
+        raise ValueError("the changes are not all of one breast (its primitive, frame, band and operations)")
     return first

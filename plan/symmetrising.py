@@ -15,17 +15,16 @@ a lift was asked, and otherwise moves as the operations move it.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from breastplan import transform_points
 
-from .augmentation import augmentation
 from .breast_volume import BreastVolumes
-from .implants import VOLUME_CC, Implant
-from .mastopexy import mastopexy
-from .reduction import reduction
+from .implants import VOLUME_CC
+from .operated import Operated, operate
+from .operation_spec import OperationSpec
 from .skin_lift import SkinLift
 
 SAME_CC = 20.0
@@ -36,16 +35,28 @@ SAME_MM = 5.0
 
 @dataclass(frozen=True, eq=False)
 class Symmetrising:
-    """The operations proposed on `side`, in order, and what they bring her to: its volume on her skin (cc) and its
-    nipple (her body frame, mm) against her other breast's volume and its nipple's mirror image."""
+    """The operations proposed on one breast, as written and made (`operated`), what they bring her to (its nipple
+    after, her body frame, mm) against her other breast's volume (cc) and its nipple's mirror image."""
 
-    side: str
-    operations: tuple[SkinLift, ...]
-    volume_cc: float
+    operated: Operated
     other_volume_cc: float
     nipple_body_mm: np.ndarray
     other_nipple_mirrored_mm: np.ndarray
     note: str | None = None          # what is left unmatched, in words
+
+    @property
+    def side(self) -> str:
+        return self.operated.side
+
+    @property
+    def operations(self) -> tuple[SkinLift, ...]:
+        """The operations as made, in order."""
+        return self.operated.made
+
+    @property
+    def volume_cc(self) -> float:
+        """Her breast's volume on her skin after them (cc)."""
+        return self.operated.volume_cc
 
     @property
     def nipple_off_mm(self) -> float:
@@ -54,37 +65,29 @@ class Symmetrising:
 
     def __call__(self, points_mm) -> np.ndarray:
         """Input-frame points (mm) as the operations, in turn, would move them."""
-        points = np.asarray(points_mm, float)
-        for operation in self.operations:
-            points = operation(points)
-        return points
+        return self.operated(points_mm)
 
 
 def symmetrising(volumes: BreastVolumes, nipples: dict, side: str, fold_below_nipple_mm: float) -> Symmetrising:
-    """The operations on her `side` breast that match her other one (module docstring): `nipples` side → (3,)
-    input frame; her fold `fold_below_nipple_mm` below the `side` nipple (where an implant's lower rim goes)."""
+    """The operations on her `side` breast that match her other one (module docstring), written as a surgeon
+    writes them (`plan.operation_spec`) and made (`plan.operated`): `nipples` side → (3,) input frame; her fold
+    `fold_below_nipple_mm` below the `side` nipple (where an implant's lower rim goes)."""
     other = "right" if side == "left" else "left"
     T = volumes.body_from_input
     body = {s: transform_points(T, np.asarray(n, float)[None])[0] for s, n in nipples.items()}
     mirrored = body[other] * [-1.0, 1.0, 1.0]
     gap = volumes.sides[other].volume_cc - volumes.sides[side].volume_cc
-    lift_to = float(mirrored[1]) if mirrored[1] - body[side][1] > SAME_MM else None
-    operations, cells, nipple, note = [], volumes.cells, np.asarray(nipples[side], float), None
+    lift = mirrored[1] - body[side][1] > SAME_MM
+    written, note = [], None
     if gap >= VOLUME_CC[0]:
-        implant = Implant.of(min(float(gap), VOLUME_CC[1]), "moderate")
-        operations.append(augmentation(volumes, side, nipple, fold_below_nipple_mm, implant))
-    elif gap > SAME_CC:
-        note = (f"her {side} breast is {gap:.0f} cc smaller than her {other}, less than the smallest implant "
-                f"({VOLUME_CC[0]:g} cc): left as it is")
+        written = [f"augmentation:{min(float(gap), VOLUME_CC[1]):.1f}:moderate"] + (["lift:other"] if lift else [])
     elif gap < -SAME_CC:
-        operations.append(reduction(volumes, side, nipple, volume_cc=-gap, nipple_height_mm=lift_to))
-        lift_to = None
-    for done in operations:
-        cells = replace(cells, height_mm=done.heights(cells.height_mm), footprint=cells.footprint | done.footprint)
-        nipple = done(nipple[None])[0]
-    if lift_to is not None:
-        lift = mastopexy(replace(volumes, cells=cells), side, nipple, lift_to)
-        operations.append(lift)
-        cells, nipple = replace(cells, height_mm=lift.heights(cells.height_mm)), lift(nipple[None])[0]
-    return Symmetrising(side, tuple(operations), cells.volume_cc(side) if operations else volumes.sides[side].volume_cc,
-                        volumes.sides[other].volume_cc, transform_points(T, nipple[None])[0], mirrored, note)
+        written = [f"reduction:{-gap:.1f}" + (":other" if lift else "")]
+    else:
+        written = ["lift:other"] if lift else []
+        if gap > SAME_CC:
+            note = (f"her {side} breast is {gap:.0f} cc smaller than her {other}, less than the smallest implant "
+                    f"({VOLUME_CC[0]:g} cc): left as it is")
+    operated = operate(volumes, nipples, side, fold_below_nipple_mm, tuple(map(OperationSpec.parse, written)))
+    return Symmetrising(operated, volumes.sides[other].volume_cc, transform_points(T, operated.nipple_mm[None])[0],
+                        mirrored, note)

@@ -1,0 +1,83 @@
+"""A breast's operations made in turn on her skin: each as written (`plan.operation_spec`), as made (`SkinLift`),
+and the breast they leave her (her volume on her skin, her nipple).
+
+Each operation is made on her skin as the ones before it left it: her skin's heights over the cells raised or
+lowered by them, her footprint grown over what they raise, her nipple where they moved it, her fold at the height
+it was found. Her volume after is hers as measured plus each operation's own change (her skin's volume over the
+footprint it is measured in, after less before), so that what her grown footprint takes in of her skin as she
+is does not count as operated. A lift to her other nipple ("lift:other", a reduction's
+"other") aims at her other nipple as scanned.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from breastplan import transform_points
+
+from .breast_volume import BreastVolumes
+from .operation_spec import OperationSpec
+from .skin_lift import SkinLift
+
+
+@dataclass(frozen=True, eq=False)
+class Operated:
+    """One breast's operations, in order, and what they bring it to: her volume on her skin before and after (cc),
+    her nipple after (input frame, mm)."""
+
+    side: str
+    written: tuple[OperationSpec, ...]
+    made: tuple[SkinLift, ...]
+    volume_before_cc: float
+    volume_cc: float
+    nipple_before_mm: np.ndarray          # (3,) input frame
+    nipple_mm: np.ndarray                 # (3,) input frame, after
+    note: str | None = None               # what a symmetrising proposal leaves unmatched, in words
+
+    def __call__(self, points_mm) -> np.ndarray:
+        """Input-frame points (mm) as the operations, in turn, move them."""
+        points = np.asarray(points_mm, float)
+        for operation in self.made:
+            points = operation(points)
+        return points
+
+    def displacement(self, points_mm) -> np.ndarray:
+        """(N, 3) how far the operations move input-frame points, input frame, mm."""
+        points = np.asarray(points_mm, float).reshape(-1, 3)
+        return self(points) - points
+
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """What a surgeon is warned of (a lumpectomy's excised share), in her words."""
+        return tuple(w for w in (getattr(op, "warning", None) for op in self.made) if w)
+
+    def as_dict(self) -> dict:
+        """plan.json's record of the operations: each as written, her volume and nipple before and after."""
+        moved = self.nipple_mm - self.nipple_before_mm
+        return {"operations": [{"written": spec.text, "kind": spec.kind, **spec.settings} for spec in self.written],
+                "volume_before_cc": round(self.volume_before_cc, 1), "volume_after_cc": round(self.volume_cc, 1),
+                "volume_change_cc": round(self.volume_cc - self.volume_before_cc, 1),
+                "nipple_after_input_mm": [round(float(v), 2) for v in self.nipple_mm],
+                "nipple_moved_mm": round(float(np.linalg.norm(moved)), 1), "warnings": list(self.warnings),
+                "note": self.note}
+
+
+def operate(volumes: BreastVolumes, nipples: dict, side: str, fold_below_nipple_mm: float,
+            written: tuple[OperationSpec, ...]) -> Operated:
+    """The operations `written` made in turn on her `side` breast (module docstring): `nipples` side → (3,) input
+    frame, as scanned; her fold `fold_below_nipple_mm` below the `side` nipple."""
+    T = volumes.body_from_input
+    height = lambda n: float(transform_points(T, n[None])[0, 1])  # noqa: E731
+    start = np.asarray(nipples[side], float)
+    fold_mm, nipple, made, now = height(start) - fold_below_nipple_mm, start, [], volumes
+    for spec in written:
+        done = spec.operate(now, {**nipples, side: nipple}, side, height(nipple) - fold_mm)
+        grown = replace(now.cells, footprint=now.cells.footprint | done.footprint)
+        cells = replace(grown, height_mm=done.heights(grown.height_mm))
+        volume = now.sides[side].volume_cc + cells.volume_cc(side) - grown.volume_cc(side)   # its own change
+        now = replace(now, cells=cells, sides={**now.sides, side: replace(now.sides[side], volume_cc=volume)})
+        nipple = done(nipple[None])[0]
+        made.append(done)
+    return Operated(side, tuple(written), tuple(made), volumes.sides[side].volume_cc, now.sides[side].volume_cc,
+                    start, nipple)
