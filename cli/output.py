@@ -16,8 +16,8 @@ from rich.console import Console
 
 from breastplan.json_text import to_json
 
-stdout = Console(highlight=False)
-stderr = Console(stderr=True, highlight=False)
+stdout = Console(highlight=False, emoji=False)   # "lumpectomy:100:10:30" is no emoji
+stderr = Console(stderr=True, highlight=False, emoji=False)
 
 
 def usage_error(message: str, param: str | None = None) -> typer.BadParameter:

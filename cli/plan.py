@@ -190,6 +190,7 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
     from rich.table import Table
 
     from breastplan.plan.measures import measure_label
+    from breastplan.plan.operated import said
     from breastplan.plan.result import OPERATED
 
     from .output import stdout
@@ -239,7 +240,7 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
         stdout.print(f"{s} operated: {', '.join(spec.text for spec in op.written) or 'nothing proposed'}; her volume "
                      f"{op.volume_before_cc:.1f} → {op.volume_cc:.1f} cc on her skin, her nipple moved "
                      f"{op.as_dict()['nipple_moved_mm']:.0f} mm", markup=False, soft_wrap=True)
-        for words in (*op.warnings, *([op.note] if op.note else [])):
+        for words in said(op, m):
             stdout.print(f"{s}: {words}", markup=False, soft_wrap=True)
     if m.symmetry["before"]:
         sym = m.symmetry

@@ -63,6 +63,19 @@ class Operated:
                 "note": self.note}
 
 
+def said(operated: Operated, measures) -> tuple[str, ...]:
+    """What the plan says of one side's operations: its warnings, each with the measures it names as the plan
+    finds them before → after (`plan.result.Measures`: pBRA, the volume's left − right), and a proposal's note."""
+    sym, asym = measures.symmetry, measures.asymmetry
+    figures = []
+    if sym.get("before", {}).get("pBRA_pct") is not None and sym.get("after", {}).get("pBRA_pct") is not None:
+        figures.append(f"pBRA {sym['before']['pBRA_pct']:.1f} → {sym['after']['pBRA_pct']:.1f} %")
+    if asym:
+        figures.append(f"volume left − right {asym['before']['volume_cc']:+.0f} → {asym['after']['volume_cc']:+.0f} cc")
+    here = f" (this plan: {', '.join(figures)})" if figures else ""
+    return tuple(w + here for w in operated.warnings) + ((operated.note,) if operated.note else ())
+
+
 def operate(volumes: BreastVolumes, nipples: dict, side: str, fold_below_nipple_mm: float,
             written: tuple[OperationSpec, ...]) -> Operated:
     """The operations `written` made in turn on her `side` breast (module docstring): `nipples` side → (3,) input

@@ -44,6 +44,7 @@ from .measures import asymmetry, measure_label
 from .pictures import FOLD, FOOTPRINT, LANDMARK, LIGHT, VIEWS, camera, picture, skin_colour
 from .result import OPERATED, Plan
 from .modes import modes_of
+from .operated import said
 from .views import State, Views
 
 SCAN = "#2b2b2b"
@@ -257,7 +258,7 @@ def _operations_table(plan: Plan) -> str:
         return ""
     rows = [[f"her {s}", "; then ".join(spec.words for spec in op.written) or "none proposed",
              f"{op.volume_before_cc:.0f} → {op.volume_cc:.0f}", op.as_dict()["nipple_moved_mm"],
-             " ".join((*op.warnings, op.note or "")).strip() or "—"] for s, op in plan.operated.items()]
+             " ".join(said(op, plan.measures)) or "—"] for s, op in plan.operated.items()]
     after = ("Every state shown is after them: the changes by degree start from her breasts as operated."
              if plan.grid.kinds else "")
     return ('<section id="operations"><h2>Operations planned</h2>' + _table(

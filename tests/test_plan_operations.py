@@ -161,3 +161,17 @@ def test_the_report_names_the_operations_and_returns_to_them_from_the_original(c
         assert d.execute_script("return window.breastplanState") == "original"
         button = d.execute_script("const b = document.getElementById('combined'); b.click(); return b.innerText")
         assert button == "As operated" and d.execute_script("return window.breastplanState") == "operated"
+
+
+def test_a_large_excision_is_warned_of_with_the_measures_it_worsens_and_every_operation_printed_as_written(cli,
+                                                                                                         patient):
+    """200 cc of her left breast (about 700 cc) passes the fifth of a breast the literature warns of, 100 cc of her
+    right does not; the terminal writes each as given (":100:" is no emoji) and names pBRA and the volume's
+    asymmetry, before → after, beside the warning."""
+    res = run(cli, "plan", patient / "case", "--out", patient / "warned", "--left", "lumpectomy:200:2:30",
+              "--right", "lumpectomy:100:10:30")
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    assert any("lumpectomy:200:2:30" in line for line in lines) and any("lumpectomy:100:10:30" in line for line in lines)
+    warned = [line for line in lines if "poor cosmetic result" in line]
+    assert len(warned) == 1 and warned[0].startswith("left:") and "pBRA" in warned[0] and "left − right" in warned[0]
