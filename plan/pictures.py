@@ -80,22 +80,23 @@ def before_after(views: Views, state: State, names=tuple(VIEWS)) -> dict[str, tu
 
 def picture(views: Views, state: State, cam: raster.Camera, marks: bool = True) -> Image.Image:
     """Her skin moved as `state` plans, seen by `cam`, lit from LIGHT turned with it; with `marks`, the
-    landmarks (red), the footprints (blue) and folds (purple) where not hidden behind her, and her sides named."""
+    landmarks (red), the footprints (blue) and folds (purple) where not hidden behind her (as `state` places them:
+    `Views.marks`), and her sides named."""
     vertices = np.concatenate([views.torso, state.torso])
     rgb, shade = skin_colour(views)
     colours = raster.lit(vertices, views.skin, rgb, cam.light(LIGHT), shade)
     drawn = raster.draw(vertices, views.skin, colours, cam)
     image = Image.fromarray(drawn.rgb)
     if marks:
-        pen = ImageDraw.Draw(image)
+        pen, on = ImageDraw.Draw(image), views.marks(state)
         px = max(2, round(cam.width / 380))
-        for outline in views.footprints.values():
+        for outline in on["footprints"].values():
             _line(pen, drawn, np.vstack([outline, outline[:1]]), FOOTPRINT, px)
-        _line(pen, drawn, views.landmarks["midline"], LANDMARK, px, dash_px=8 * px)
-        for fold in views.folds.values():
+        _line(pen, drawn, on["landmarks"]["midline"], LANDMARK, px, dash_px=8 * px)
+        for fold in on["folds"].values():
             _line(pen, drawn, fold, FOLD, px, tolerance_mm=12.0)
         for name, radius in (("sternal notch", 2.5 * px), ("nipples", 2 * px)):
-            points = views.landmarks[name]
+            points = on["landmarks"][name]
             for (x, y) in cam.project(points)[0][drawn.visible(points)]:
                 pen.ellipse((x - radius, y - radius, x + radius, y + radius), fill=LANDMARK)
         _sides(pen, cam)

@@ -109,6 +109,7 @@ def page_data(plan: Plan, views: Views) -> dict:
             "asymmetry_before": {k: round(float(v), 3) for k, v in plan.measures.asymmetry.get("before", {}).items()},
             "bounds": _bounds(views), "footprints": {s: v.round(2).tolist() for s, v in views.footprints.items()},
             "grid": _grid(plan, views), **_skin_colour(views), "light": list(LIGHT),
+            "operated": None if views.operated is None else _operated_marks(views.operated),
             "scan": SCAN, "model": MODEL, "landmark": LANDMARK, "footprint": FOOTPRINT, "fold": FOLD}
 
 
@@ -122,12 +123,21 @@ def _grid(plan: Plan, views: Views) -> dict:
     rounded = lambda values: np.round(values, 3).tolist()  # noqa: E731
     asym = asymmetry(grid.measures)
     return {"kinds": list(grid.kinds), "degrees": [list(d) for d in grid.degrees], "requested": list(grid.requested),
-            "keys": list(grid.keys), "words": [state_words(grid, i) for i in range(len(grid))],
+            "keys": list(grid.keys), "words": [state_words(grid, i) + (" (after the operations)" if plan.operated and
+                                                                      grid.kinds else "") for i in range(len(grid))],
             "planned": grid.planned_index,
             "measures": {s: {k: rounded(v) for k, v in grid.measures[s].items()} for s in sides},
             "asymmetry": {k: rounded(v["left_minus_right"]) for k, v in asym.items()},
             "coefficients": _b64(stored.coefficients, "<f4"), "modes": _b64(stored.modes, "<i2"),
             "scales": stored.scales.astype(float).tolist(), "worst_mm": stored.worst_mm}
+
+
+def _operated_marks(moved: dict) -> dict:
+    """`Views.operated` for the page: the marks it draws on every state but her skin as scanned."""
+    return {"footprints": {s: v.round(2).tolist() for s, v in moved["footprints"].items()},
+            "folds": {s: v.round(1).tolist() for s, v in moved["folds"].items()},
+            "nipples": moved["nipples"].round(2).tolist(),
+            "side_labels": {s: v.round(1).tolist() for s, v in moved["side_labels"].items()}}
 
 
 def _skin_colour(views: Views) -> dict:
@@ -144,6 +154,10 @@ def _bounds(views: Views) -> list[list[float]]:
     scale."""
     marks = [*views.landmarks.values(), *views.footprints.values(), *views.folds.values(),
              *(p[None] for p in views.side_labels.values())]
+    if views.operated is not None:
+        moved = views.operated
+        marks += [moved["nipples"], *moved["footprints"].values(), *moved["folds"].values(),
+                  *(p[None] for p in moved["side_labels"].values())]
     every = np.concatenate([views.torso, views.patch, views.moved.reshape(-1, 3), *marks])
     lo, hi = every.min(axis=0), every.max(axis=0)
     pad = 0.03 * (hi - lo).max()
@@ -445,6 +459,7 @@ traces.push({type:'scatter3d',mode:'lines',name:'midline',legendgroup:'landmarks
 traces.push({type:'scatter3d',mode:'markers+text',name:'sternal notch',legendgroup:'landmarks',x:col('sternal notch')[0],
  y:col('sternal notch')[1],z:col('sternal notch')[2],text:['\u2002sternal notch'],textposition:'middle right',
  textfont:{...mark,size:11},marker:{...mark,size:4},hoverinfo:'skip'});
+idx.nipples=traces.length;
 traces.push({type:'scatter3d',mode:'markers',name:'nipples (found)',legendgroup:'landmarks',x:col('nipples')[0],
  y:col('nipples')[1],z:col('nipples')[2],marker:{...mark,size:3.5,symbol:'diamond'},hoverinfo:'skip'});
 const sides=Object.keys(P.side_labels);   // her sides named on her body (hers, not the viewer's)
@@ -452,14 +467,15 @@ idx.sides=traces.length;
 traces.push({type:'scatter3d',mode:'text',name:'her sides',x:sides.map(s=>P.side_labels[s][0]),
  y:sides.map(s=>P.side_labels[s][1]),z:sides.map(s=>P.side_labels[s][2]),text:sides.map(s=>'her '+s),
  textfont:{color:'#333',size:13},hoverinfo:'skip',showlegend:false});
+idx.folds={};idx.footprints={};
 for(const s of Object.keys(P.folds)){   // the fold under each breast, where "nipple to fold" is measured to
- const F=P.folds[s].xyz;
+ const F=P.folds[s].xyz;idx.folds[s]=traces.length;
  traces.push({type:'scatter3d',mode:'lines',name:s+' fold ('+P.folds[s].from+')',legendgroup:'folds',x:F.map(p=>p[0]),
   y:F.map(p=>p[1]),z:F.map(p=>p[2]),line:{color:P.fold,width:5,dash:P.folds[s].from==='seen'?'solid':'dot'},
   hovertemplate:'her '+s+' inframammary fold ('+P.folds[s].from+')<extra></extra>'});
 }
 for(const s of Object.keys(P.footprints)){   // the outline each breast's volume is measured inside
- const F=P.footprints[s];
+ const F=P.footprints[s];idx.footprints[s]=traces.length;
  traces.push({type:'scatter3d',mode:'lines',name:s+' footprint',legendgroup:'footprints',x:F.map(p=>p[0]),
   y:F.map(p=>p[1]),z:F.map(p=>p[2]),line:{color:P.footprint,width:6},hoverinfo:'skip'});
 }
@@ -538,7 +554,14 @@ function scenes(layout){   // the layout's scenes for one view or two side by si
  if(beside)out.scene2=Object.assign({},axes,left);else delete out.scene2;
  return out;}
 const drawn=()=>beside?traces:traces.filter((_,i)=>i!==idx.before);   // the traces drawn: the scene before only beside
-function show(state){current=state;label(state);put(arrays(state));const key=window.breastplanState;
+function placed(state){   // the marks on her: as found, or moved by her operations on every planned state
+ if(!P.operated)return;const on=state?P.operated:null;
+ const at=(t,F)=>{traces[t]=Object.assign({},traces[t],{x:F.map(p=>p[0]),y:F.map(p=>p[1]),z:F.map(p=>p[2])});};
+ at(idx.nipples,on?on.nipples:L.nipples);
+ for(const s in idx.folds)at(idx.folds[s],on?on.folds[s]:P.folds[s].xyz);
+ for(const s in idx.footprints)at(idx.footprints[s],on?on.footprints[s]:P.footprints[s]);
+ at(idx.sides,sides.map(s=>(on?on.side_labels:P.side_labels)[s]));}
+function show(state){current=state;label(state);put(arrays(state));placed(state);const key=window.breastplanState;
  return Plotly.react(gd,drawn(),scenes(Object.assign({},gd.layout,{hovermode:colourBy==='moved'?'closest':false})))
   .then(()=>{window.breastplanDrawn=key;});}
 document.getElementById('beside').onclick=()=>{beside=!beside;document.getElementById('beside').classList.toggle('on',beside);
@@ -571,6 +594,7 @@ for(const b of document.querySelectorAll('button[data-view]'))b.onclick=()=>{con
 const first=stateAt(G.planned);
 current=first;
 put(arrays(first));
+placed(first);
 label(first);
 Plotly.newPlot(gd,drawn(),scenes(layout),{displaylogo:false,responsive:true}).then(()=>{gd.on('plotly_relayout',linked);
  document.getElementById('poster').hidden=true;   // kept for print

@@ -68,6 +68,19 @@ class Views:
     planned_meshes: dict[str, np.ndarray] | None = None   # side → (S, V, 3) float32 the planned breast in each state
     skin_rgb: np.ndarray | None = None  # (T + P, 3) uint8 her skin's recorded colour at the torso then the patch's
                                         # points (the mean over each TORSO_MM cube); None: none was recorded
+    operated: dict | None = None        # the footprints, folds, side labels and nipples moved by her operations
+                                        # (keys as `marks` gives them), drawn on every state but her skin as scanned
+
+    def marks(self, state: State) -> dict:
+        """What is drawn on her in `state`: "footprints", "folds", "side_labels" and "landmarks" (with the nipples),
+        as found on her skin as scanned, or moved by her operations in any planned state."""
+        found = {"footprints": self.footprints, "folds": self.folds, "side_labels": self.side_labels,
+                 "landmarks": self.landmarks}
+        if state.index is None or self.operated is None:
+            return found
+        moved = self.operated
+        return {**found, "footprints": moved["footprints"], "folds": moved["folds"],
+                "side_labels": moved["side_labels"], "landmarks": {**self.landmarks, "nipples": moved["nipples"]}}
 
     def state(self, key: str) -> State:
         """The drawn state named `key` ("original": her skin as scanned)."""
@@ -89,6 +102,10 @@ def build_views(plan: Plan) -> Views:
     show = lambda p: transform_points(to_display, p)  # noqa: E731
     meshes = {s: (show(sp.surface_input), sp.fit.faces) for s, sp in plan.sides.items()}
     drawn = np.concatenate([still_in, patch_in])
+    nipples = np.array([sp.scan.nipple_camera_mm for sp in plan.sides.values()])
+    ahead = FOOTPRINT_LIFT_MM * plan.volumes.landmarks.anterior_axis
+    footprints = {s: v.footprint_input_mm + ahead for s, v in plan.volumes.sides.items()}
+    folds = _folds(plan)
     one_view = all(sp.scan.source.kind != "file" for sp in plan.sides.values())
     return Views(torso=show(still_in), patch=show(patch_in),
                  skin=(skin_triangles if one_view else surface_triangles)(transform_points(plan.body.input_to_view,
@@ -99,11 +116,24 @@ def build_views(plan: Plan) -> Views:
                  planned_meshes={s: _shown32(to_display, m) for s, m in plan.grid.models.items()},
                  earlier={s: (show(sp.follow_up.earlier_surface_input), sp.follow_up.earlier_faces)
                           for s, sp in plan.sides.items() if sp.follow_up is not None},
-                 landmarks=_landmarks(plan, show),
-                 footprints={s: show(v.footprint_input_mm + FOOTPRINT_LIFT_MM * plan.volumes.landmarks.anterior_axis)
-                             for s, v in plan.volumes.sides.items()},
-                 side_labels=_side_labels(plan, show), folds=_folds(plan, show),
-                 skin_rgb=None if rgb is None else np.concatenate([rgb[~near], rgb[near]]))
+                 landmarks=_landmarks(plan, show), footprints={s: show(f) for s, f in footprints.items()},
+                 side_labels={s: show(p[None])[0] for s, p in _side_labels(plan, plan.body.torso_input,
+                                                                           nipples).items()},
+                 folds={s: show(f) for s, f in folds.items()},
+                 skin_rgb=None if rgb is None else np.concatenate([rgb[~near], rgb[near]]),
+                 operated=_operated_marks(plan, show, footprints, folds, nipples) if plan.operated else None)
+
+
+def _operated_marks(plan: Plan, show, footprints: dict, folds: dict, nipples: np.ndarray) -> dict:
+    """`Views.operated`: the footprints, folds (side → (K, 3), input frame) and nipples ((sides, 3)) moved by her
+    operations, and her side labels placed on her operated skin, display frame."""
+    def operated(points: np.ndarray) -> np.ndarray:
+        return points + sum(op.displacement(points) for op in plan.operated.values())
+
+    return {"footprints": {s: show(operated(f)) for s, f in footprints.items()},
+            "folds": {s: show(operated(f)) for s, f in folds.items()}, "nipples": show(operated(nipples)),
+            "side_labels": {s: show(p[None])[0] for s, p in _side_labels(
+                plan, operated(np.asarray(plan.body.torso_input, float)), operated(nipples)).items()}}
 
 
 def _moved(plan: Plan, patch_in: np.ndarray, to_display: np.ndarray) -> np.ndarray:
@@ -197,9 +227,9 @@ FOLD_HALF_MM = 30.0
 """Each breast's inframammary fold is drawn this far to either side of the point under its nipple, mm."""
 
 
-def _folds(plan: Plan, show) -> dict[str, np.ndarray]:
+def _folds(plan: Plan) -> dict[str, np.ndarray]:
     """Side → (K, 3) a short line along the fold under the breast as the measures place it (body frame: at the
-    height `nipple_to_fold_mm` below the nipple, on her skin, else the wall), display frame; none where the
+    height `nipple_to_fold_mm` below the nipple, on her skin, else the wall), input frame; none where the
     ptosis measure found no fold."""
     v = plan.volumes
     cells, to_input = v.cells, np.linalg.inv(v.body_from_input)
@@ -213,7 +243,7 @@ def _folds(plan: Plan, show) -> dict[str, np.ndarray]:
         i = np.clip(np.searchsorted(cells.x, x), 0, len(cells.x) - 1)
         j = np.clip(np.searchsorted(cells.y, nipple[1] - below), 0, len(cells.y) - 1)
         front = cells.wall_mm[i, j] + np.clip(cells.height_mm[i, j], 0.0, None)
-        out[s] = show(transform_points(to_input, np.column_stack([x, np.full_like(x, nipple[1] - below), front])))
+        out[s] = transform_points(to_input, np.column_stack([x, np.full_like(x, nipple[1] - below), front]))
     return out
 
 
@@ -225,17 +255,19 @@ LABEL_REACH_MM = 25.0
 """Her skin within this distance of a side's label, across her front, is what the label stands in front of."""
 
 
-def _side_labels(plan: Plan, show) -> dict[str, np.ndarray]:
+def _side_labels(plan: Plan, torso: np.ndarray, nipples: np.ndarray) -> dict[str, np.ndarray]:
+    """Side → (3,) where her side is named (SIDE_LABEL_MM) from her `nipples` ((sides, 3)) and her `torso`, input
+    frame."""
     marks = plan.volumes.landmarks
-    torso, ahead = np.asarray(plan.body.torso_input, float), marks.anterior_axis
+    torso, ahead = np.asarray(torso, float), marks.anterior_axis
     out = {}
-    for s, sp in plan.sides.items():
+    for s, nipple in zip(plan.sides, nipples):
         outward = marks.left_axis if s == "left" else -marks.left_axis
-        place = sp.scan.nipple_camera_mm + SIDE_LABEL_MM[0] * outward - SIDE_LABEL_MM[1] * marks.up_axis
+        place = nipple + SIDE_LABEL_MM[0] * outward - SIDE_LABEL_MM[1] * marks.up_axis
         depth = (torso - place) @ ahead
         near = np.linalg.norm(torso - place - np.outer(depth, ahead), axis=1) < LABEL_REACH_MM
         skin = max(float(depth[near].max()), 0.0) if near.any() else 0.0
-        out[s] = show((place + (skin + SIDE_LABEL_MM[2]) * ahead)[None])[0]
+        out[s] = place + (skin + SIDE_LABEL_MM[2]) * ahead
     return out
 
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from browser import chromium, requires_chromium
+from selenium.webdriver.support.ui import WebDriverWait
 from clitools import assert_bad_input, run
 
 from breastplan import read_ply
@@ -146,9 +147,16 @@ def test_an_operation_her_scan_rules_out_is_refused_and_nothing_written(cli, pat
     assert not (tmp_path / "out").exists()
 
 
+NIPPLES = ("(() => { const t = document.getElementById('plot').data.find(t => t.name === 'nipples (found)');"
+           " return [0, 1].map(i => [t.x[i], t.y[i], t.z[i]]); })()")
+
+
 @requires_chromium
 def test_the_report_names_the_operations_and_returns_to_them_from_the_original(cli, patient):
-    _plan(cli, patient, "shown", "--left", "augmentation:250:moderate", "--right", "lift:fold=40")
+    """The page opens on her operated skin with no slider, names each operation, and its marks move with her skin:
+    each nipple drawn as operated lies as far from where it was found as plan.json says her nipple moves."""
+    plan = _plan(cli, patient, "shown", "--left", "augmentation:250:moderate", "--right", "lift:fold=40")
+    moved = [plan["sides"][s]["operations"]["nipple_moved_mm"] for s in plan["sides"]]   # the page's order
     with chromium() as b:
         b.open(patient / "shown" / "report.html", wait_for_js="window.breastplanReady === true")
         d = b.driver
@@ -157,8 +165,12 @@ def test_the_report_names_the_operations_and_returns_to_them_from_the_original(c
         assert len(rows) == 2 and "an implant of 250 cc" in rows[0] and "a lift" in rows[1]
         assert d.execute_script("return window.breastplanState") == "operated"
         assert d.execute_script("return document.querySelectorAll('#sliders input').length") == 0
+        operated = np.array(d.execute_script("return " + NIPPLES))
         d.execute_script("document.getElementById('original').click()")
         assert d.execute_script("return window.breastplanState") == "original"
+        WebDriverWait(d, 30).until(lambda d: d.execute_script("return window.breastplanDrawn") == "original")
+        found = np.array(d.execute_script("return " + NIPPLES))
+        assert np.linalg.norm(operated - found, axis=1) == pytest.approx(moved, abs=0.1)
         button = d.execute_script("const b = document.getElementById('combined'); b.click(); return b.innerText")
         assert button == "As operated" and d.execute_script("return window.breastplanState") == "operated"
 
