@@ -437,3 +437,29 @@ def test_each_footprints_area_is_the_area_its_outline_encloses(sample):
         enclosed_cm2 = 0.5 * abs(np.dot(xy[:-1, 0], xy[1:, 1]) - np.dot(xy[1:, 0], xy[:-1, 1])) / 100.0
         assert v.area_cm2 == pytest.approx(enclosed_cm2, rel=0.04), side
         assert record["sides"][side]["volume"]["footprint_area_cm2"] == pytest.approx(v.area_cm2, abs=0.051)
+
+
+def test_a_change_by_degree_after_an_operation_deforms_her_operated_breast(tmp_path):
+    """`plan --left augmentation:250:moderate --deform ptosis:3` on the sample: on the left, each slider state's
+    planned breast is the reference deformation (at the parameters solved on her breast as scanned) of her fitted
+    breast as the operation left it, and its volume her volume plus the implant's 250 cc plus the reference model's
+    change from there (the divergence theorem); the right, not operated, is the reference deformation of her
+    fitted breast, as in a plan without operations."""
+    from breastplan.options import PlanOptions
+    from breastplan.plan.job import run_plan
+
+    plan = run_plan(None, tmp_path / "case", PlanOptions(changes=(("ptosis", 3.0),),
+                                                         operations=(("left", "augmentation:250:moderate"),)))
+    grid, implant = plan.grid, plan.operated["left"]
+    assert set(plan.operated) == {"left"} and grid.kinds == ("ptosis",)
+    breasts = {s: Breast(sp) for s, sp in plan.sides.items()}
+    for i in range(len(grid)):
+        measures = grid.measures_at(i)
+        for side, b in breasts.items():
+            start = implant(b.fitted_input) if side == "left" else b.fitted_input
+            moved = b.model(start, vector_of(grid.changes[side][i]))
+            assert np.abs(grid.models[side][i] - moved).max() < 1e-3, (grid.keys[i], side)
+            grown = divergence_volume_cc(moved, b.faces) - divergence_volume_cc(start, b.faces)
+            added = 250.0 if side == "left" else 0.0
+            assert measures[side]["volume_cc"] == pytest.approx(
+                plan.volumes.sides[side].volume_cc + added + grown, abs=1e-3), (grid.keys[i], side)
