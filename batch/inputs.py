@@ -5,7 +5,9 @@ links to folders not followed). Each file becomes an `Input`: one to plan, or on
 reason — not a scan or recording, not a regular file (a named pipe, a device), a symbolic link
 leading outside the folder or into a loop of links, a case name already taken by another input
 (`a.ply` and `a.mcap` both become case `a`; the first in sorted order is planned), or a case inside
-another's (`a/left.ply` beside `a.ply`).
+another's (`a/left.ply` beside `a.ply`). A plan file beside a scan (`a.plan.yaml`, `.plan.yml` or
+`.plan.json` beside `a.ply`: `plan.written_plan`) goes with it, and is no input of its own; one with no
+scan of its name beside it is skipped, saying so.
 """
 from __future__ import annotations
 
@@ -18,17 +20,20 @@ from breastplan.ingest.files import SUPPORTED
 
 SCAN_SUFFIXES = (".mcap", *SUPPORTED)
 """A recording (.mcap) or a scan file of a format ingest reads."""
+PLAN_SUFFIXES = (".plan.yaml", ".plan.yml", ".plan.json")
+"""A scan's own plan file: its name, then one of these."""
 
 
 @dataclass(frozen=True)
 class Input:
     """One file of the input folder: its path, its name relative to the folder (POSIX), the case folder
-    it becomes (relative to the output folder) and, when it is not planned, why."""
+    it becomes (relative to the output folder), when it is not planned, why, and its plan file if any."""
 
     path: Path
     name: str
     case: str
     skipped: str | None = None
+    plan_file: Path | None = None      # her plan, beside her scan
 
 
 def find_inputs(folder: Path, out: Path | None = None) -> list[Input]:
@@ -55,7 +60,34 @@ def find_inputs(folder: Path, out: Path | None = None) -> list[Input]:
             if not f.startswith("."):
                 found.append(_classify(folder, root, base / f))
     found.sort(key=lambda i: i.name)
-    return _mark_duplicates(found)
+    return _mark_duplicates(_with_plan_files(found))
+
+
+def _with_plan_files(found: list[Input]) -> list[Input]:
+    """The inputs with each scan's plan file (PLAN_SUFFIXES) given to it; a plan file with no scan or recording
+    of its name beside it, or a second one of a scan, skipped, saying so."""
+    plans: dict[str, list[Input]] = {}
+    out = []
+    for i in found:
+        suffix = next((p for p in PLAN_SUFFIXES if i.name.lower().endswith(p)), None)
+        if suffix is not None and i.skipped is None:
+            plans.setdefault(i.name[:-len(suffix)], []).append(i)
+        else:
+            out.append(i)
+    scans: dict[str, Input] = {}
+    for i in out:
+        if i.skipped is None:
+            scans.setdefault(i.case, i)                    # the first of a case name is planned
+    for stem, files in plans.items():
+        scan = scans.get(stem)
+        if scan is None:
+            out += [Input(f.path, f.name, f.case, "a plan file with no scan or recording of its name beside it")
+                    for f in files]
+            continue
+        out[out.index(scan)] = Input(scan.path, scan.name, scan.case, None, files[0].path)
+        out += [Input(f.path, f.name, f.case, f"a second plan file of {scan.name} (its plan is {files[0].name})")
+                for f in files[1:]]
+    return sorted(out, key=lambda i: i.name)
 
 
 def _classify(folder: Path, root: Path, path: Path) -> Input:
@@ -65,7 +97,7 @@ def _classify(folder: Path, root: Path, path: Path) -> Input:
         target = path.resolve()
         if not target.is_relative_to(root):
             return _input(folder, path, f"a symbolic link leading outside the input folder (to {target})")
-    if path.suffix.lower() not in SCAN_SUFFIXES:
+    if path.suffix.lower() not in SCAN_SUFFIXES and not path.name.lower().endswith(PLAN_SUFFIXES):
         return _input(folder, path, f"not a scan or recording (the planned kinds end in {', '.join(SCAN_SUFFIXES)})")
     if path.exists() and not path.is_file():  # a named pipe or a device: reading it may never end
         return _input(folder, path, "not a regular file")

@@ -18,7 +18,7 @@ from breastplan import BadInputError, __version__
 from breastplan.building import lock
 from breastplan.case import sha256
 from breastplan.errors import Interrupted, require_folder
-from breastplan.options import BatchOptions
+from breastplan.options import SIDES, BatchOptions, OptionError, PlanOptions
 
 from .executors import require_scheduler, run_dask, run_local
 from .inputs import Input, find_inputs
@@ -114,12 +114,36 @@ def _rows_and_tasks(inputs: list[Input], out: Path, options: BatchOptions) -> tu
             continue
         case = out.resolve() / i.case
         earlier = None if options.wall_from is None else str(Path(options.wall_from).resolve() / i.case)
-        plan = {**options.plan.as_dict(), "wall_from": earlier}
+        try:
+            plan = {**_her_plan(options.plan, i.plan_file).as_dict(), "wall_from": earlier}
+        except ValueError as exc:
+            row.status, row.error = "failed", f"{exc}."
+            continue
         if finished(case, row.sha256, plan):
             row.status = "reused"
         else:
             tasks.append(Task(str(i.path.absolute()), str(case), plan, row.sha256))
     return rows, tasks
+
+
+def _her_plan(plan: PlanOptions, plan_file: Path | None) -> PlanOptions:
+    """The batch's plan of every case, or the one her plan file (`plan.written_plan`) writes for her scan: its
+    operations and its changes (without `deform`, none when it names operations, else the batch's). ValueError
+    in one sentence naming the file when it cannot be read or planned."""
+    if plan_file is None:
+        return plan
+    from breastplan.plan.operation_spec import OperationSpec
+    from breastplan.plan.written_plan import read_written_plan
+
+    written = read_written_plan(plan_file)
+    try:
+        operations = tuple((side, OperationSpec.parse(text).text) for side, texts in
+                           (("left", written.left), ("right", written.right)) for text in texts)
+        changes = [f"{k}:{d:g}" for k, d in plan.changes] if not (operations or written.symmetrise) else []
+        return PlanOptions.parse(list(written.deform) or changes, "both" if plan.sides == SIDES else plan.sides[0],
+                                 plan.method, plan.units, plan.up, plan.wall_from, operations, written.symmetrise)
+    except OptionError as exc:
+        raise ValueError(f"{plan_file}: {exc}") from None
 
 
 def _make_parents(tasks: list[Task], out: Path) -> list[Path]:

@@ -118,7 +118,7 @@ def _written(plan_file: Path | None, deform: list[str], left: list[str], right: 
     symmetrise, from the command line or the plan file (`cli.written_plan`); a usage error naming what is wrong."""
     from breastplan.plan.operation_spec import OperationSpec
 
-    from .written_plan import read_written_plan
+    from breastplan.plan.written_plan import read_written_plan
 
     if plan_file is not None:
         if deform or left or right or symmetrise:
