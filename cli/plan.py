@@ -115,7 +115,7 @@ def plan(
 
 def _written(plan_file: Path | None, deform: list[str], left: list[str], right: list[str], symmetrise: str | None):
     """The changes, the operations ((side, as written), each checked: `OperationSpec.parse`) and the side to
-    symmetrise, from the command line or the plan file (`cli.written_plan`); a usage error naming what is wrong."""
+    symmetrise, from the command line or the plan file (`plan.written_plan`); a usage error naming what is wrong."""
     from breastplan.plan.operation_spec import OperationSpec
 
     from breastplan.plan.written_plan import read_written_plan

@@ -1,4 +1,5 @@
-"""A plan file: what a surgeon plans, written down once (YAML or JSON) and given to `plan --plan-file`.
+"""A plan file: what a surgeon plans, written down once (YAML or JSON), given to `plan --plan-file` or put beside
+her scan in a batch's folder (`anna.plan.yaml` beside `anna.mcap`).
 
     left: [augmentation:300:moderate, lift:fold=20]     # each side's operations, in the order made
     right: augmentation:250:moderate                   # one operation, or a list
