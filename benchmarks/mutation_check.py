@@ -356,6 +356,20 @@ MUTANTS = [
     one("symmetry-lbc-highest", "a breast's lower contour taken at its highest column, not its lowest",
         "plan/symmetry.py", "np.nanmin(lower_edge(cells, regions[s]))", "np.nanmax(lower_edge(cells, regions[s]))",
         ("tests/test_symmetry.py", "tests/test_plan_truths.py")),
+    # --- operations in a plan -----------------------------------------------------------------------
+    one("model-not-operated", "the fitted model as planned left without her operations",
+        "plan/surface.py", "start = first._before(np.asarray(vertices_mm, dtype=float).reshape(-1, 3))",
+        "start = np.asarray(vertices_mm, dtype=float).reshape(-1, 3)",
+        ("tests/test_plan_truths.py", "tests/test_plan_operations.py")),
+    one("operated-volume-grown-skin", "her volume after an operation counting her skin its grown footprint took in",
+        "plan/operated.py", "volume = now.sides[side].volume_cc + cells.volume_cc(side) - grown.volume_cc(side)",
+        "volume = cells.volume_cc(side)", ("tests/test_plan_operations.py", "tests/test_symmetrising.py")),
+    one("page-nipples-not-operated", "the report's nipples left where they were found on an operated state",
+        "plan/report.py", "at(idx.nipples,on?on.nipples:L.nipples);", "at(idx.nipples,L.nipples);",
+        ("tests/test_plan_operations.py",)),
+    one("batch-plan-file-ignored", "a batch planning a scan with its own plan file as every other",
+        "batch/run.py", "plan = {**_her_plan(options.plan, i.plan_file).as_dict(), \"wall_from\": earlier}",
+        "plan = {**options.plan.as_dict(), \"wall_from\": earlier}", ("tests/test_batch_plan_files.py",)),
 ]
 
 
