@@ -6,8 +6,10 @@ Measured as her volume is (`plan.breast_volume`, `plan.skin_lift`):
 1. **Where**: the excision's centre lies `distance_mm` from the nipple towards `clock` (1–12, as the surgeon faces
    her: 12 up; 3 o'clock is towards her left, so lateral on her left breast and medial on her right).
 2. **The volume lost**: healed, the breast is smaller by what was removed. Her skin sinks over the site by a
-   Gaussian of σ the radius of a ball of V (the cavity the excision leaves), scaled so that her volume on her
-   skin, inside her footprint, falls by V exactly (a skin never sinks behind the chest wall).
+   Gaussian of σ = √(ρ² + d²), ρ the radius of a ball of V (the cavity the excision leaves) and d the cavity's
+   depth beneath her skin if given (a deeper cavity is felt over a wider patch of skin, less deeply), scaled so
+   that her volume on her skin, inside her footprint, falls by V exactly (a skin never sinks behind the chest
+   wall). A depth at which her breast, there, is not as thick as the cavity needs (d + ρ) is refused.
 3. **The deformity healing brings**: the scar contracts and draws the breast towards the cavity. Each point of
    her skin at distance r from its centre moves towards it by PULL · f · min(r, ρ) · exp(−(r − ρ)₊ / REACH_MM),
    f the excised fraction of her breast's volume, ρ the cavity's radius: her nipple deviates towards the defect,
@@ -81,13 +83,14 @@ def clock_direction(clock: float) -> np.ndarray:
 
 
 def lumpectomy(volumes: BreastVolumes, side: str, nipple_mm, volume_cc: float, clock: float,
-               distance_mm: float) -> Lumpectomy:
-    """`volume_cc` excised from her `side` breast at `clock`, `distance_mm` from its nipple ((3,) input frame):
-    module docstring. OptionError for a clock outside 1–12 or a negative size; BadInputError for a resection no
-    smaller than her breast or centred outside it."""
-    if not (0.0 < clock <= 12.0 and volume_cc > 0.0 and distance_mm >= 0.0):
-        raise OptionError("lumpectomy", "a lumpectomy takes a positive volume (cc), a clock position 1–12 and a "
-                                        "distance from the nipple (mm)")
+               distance_mm: float, depth_mm: float | None = None) -> Lumpectomy:
+    """`volume_cc` excised from her `side` breast at `clock`, `distance_mm` from its nipple ((3,) input frame), its
+    centre `depth_mm` beneath her skin if given: module docstring. OptionError for a clock outside 1–12 or a
+    negative size; BadInputError for a resection no smaller than her breast, centred outside it, or deeper than
+    her breast there."""
+    if not (0.0 < clock <= 12.0 and volume_cc > 0.0 and distance_mm >= 0.0 and (depth_mm is None or depth_mm > 0)):
+        raise OptionError("lumpectomy", "a lumpectomy takes a positive volume (cc), a clock position 1–12, a "
+                                        "distance from the nipple (mm) and, if given, a positive depth (mm)")
     cells, T = volumes.cells, volumes.body_from_input
     breast = volumes.sides[side].volume_cc
     if volume_cc >= breast:
@@ -101,7 +104,15 @@ def lumpectomy(volumes: BreastVolumes, side: str, nipple_mm, volume_cc: float, c
         raise BadInputError(None, f"gives an excision {distance_mm:g} mm from her {side} nipple at {clock:g} o'clock, "
                                   f"outside her breast (over {EDGE_MM:g} mm from its footprint)")
     radius = float((3.0 * 1000.0 * volume_cc / (4.0 * np.pi)) ** (1.0 / 3.0))
-    sink = -np.exp(-(X * X + Y * Y) / (2.0 * radius * radius)) * mask
+    if depth_mm is not None:
+        at = np.unravel_index(np.argmin(np.where(mask, np.hypot(X, Y), np.inf)), X.shape)
+        thick = float(cells.height_mm[at])
+        if depth_mm + radius > thick:
+            raise BadInputError(None, f"gives an excision {depth_mm:g} mm deep at {clock:g} o'clock on her {side} "
+                                      f"breast, where it is {thick:.0f} mm thick: a cavity of {volume_cc:g} cc, {radius:.0f} mm in "
+                                      "radius, centred there would reach behind it")
+    spread = float(np.hypot(radius, depth_mm or 0.0))
+    sink = -np.exp(-(X * X + Y * Y) / (2.0 * spread * spread)) * mask
     return Lumpectomy(cells.x, cells.y, scaled(cells, side, sink, mask, -volume_cc), mask, T, side=side,
                       volume_cc=float(volume_cc), fraction=float(volume_cc / breast), centre_mm=centre,
                       radius_mm=radius)

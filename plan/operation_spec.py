@@ -5,8 +5,9 @@
     lift:notch=MM | lift:fold=MM | lift:other         the nipple this far from the sternal notch, this far above
                                                       her fold, or at her other nipple's height
     reduction:VOLUME[:LIFT] | reduction:to=VOLUME[:LIFT]   cc resected, or the volume left; LIFT as for lift
-    lumpectomy:VOLUME:CLOCK:DISTANCE                  cc excised at a clock position (1–12, as the surgeon faces
-                                                      her) and a distance from the nipple (mm)
+    lumpectomy:VOLUME:CLOCK:DISTANCE[:DEPTH]          cc excised at a clock position (1–12, as the surgeon faces
+                                                      her) and a distance from the nipple (mm), its centre DEPTH
+                                                      mm beneath her skin
 
 `OperationSpec.parse` checks the words and numbers (an OptionError naming what is wrong: a usage error);
 `OperationSpec.operate` makes the operation on her breast (a BadInputError where her scan rules it out).
@@ -91,13 +92,14 @@ class OperationSpec:
 
     @staticmethod
     def _lumpectomy(text: str, words: list[str]) -> dict:
-        if len(words) != 3:
-            raise OptionError("operation", f"'{text}': a lumpectomy takes VOLUME:CLOCK:DISTANCE (e.g. "
-                                           "lumpectomy:40:10:30)")
-        volume, clock, distance = (_number(text, w) for w in words)
+        if len(words) not in (3, 4):
+            raise OptionError("operation", f"'{text}': a lumpectomy takes VOLUME:CLOCK:DISTANCE[:DEPTH] (e.g. "
+                                           "lumpectomy:40:10:30, or lumpectomy:40:10:30:15)")
+        volume, clock, distance, *depth = (_number(text, w) for w in words)
         if not 0.0 < clock <= 12.0:
             raise OptionError("operation", f"'{text}': the clock position lies in 1–12, as the surgeon faces her")
-        return {"volume_cc": volume, "clock": clock, "distance_mm": distance}
+        return {"volume_cc": volume, "clock": clock, "distance_mm": distance} | (
+            {"depth_mm": depth[0]} if depth else {})
 
     @property
     def words(self) -> str:
@@ -109,7 +111,7 @@ class OperationSpec:
                     f"mm), {s['shape']}, {'behind the muscle' if s['pocket'] == 'submuscular' else 'behind the gland'}")
         if self.kind == "lumpectomy":
             return (f"an excision of {s['volume_cc']:g} cc at {s['clock']:g} o'clock, {s['distance_mm']:g} mm from the "
-                    "nipple")
+                    "nipple" + (f", {s['depth_mm']:g} mm deep" if "depth_mm" in s else ""))
         lift = _lift_words(s) if "lift" in s else None
         if self.kind == "lift":
             return f"a lift: {lift}"
@@ -123,7 +125,7 @@ class OperationSpec:
         if self.kind == "augmentation":
             return augmentation(volumes, side, nipple, fold_below_nipple_mm, _implant(s), s["pocket"])
         if self.kind == "lumpectomy":
-            return lumpectomy(volumes, side, nipple, s["volume_cc"], s["clock"], s["distance_mm"])
+            return lumpectomy(volumes, side, nipple, s["volume_cc"], s["clock"], s["distance_mm"], s.get("depth_mm"))
         if self.kind == "reduction":
             height = _height(volumes, nipples, side, fold_below_nipple_mm, s) if "lift" in s else None
             return reduction(volumes, side, nipple, volume_cc=s.get("volume_cc"), to_volume_cc=s.get("to_volume_cc"),

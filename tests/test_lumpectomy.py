@@ -89,3 +89,21 @@ def test_her_breasts_asymmetry_grows_with_the_volume_excised_and_a_large_excisio
 def test_a_lumpectomy_that_cannot_be_done_is_refused_in_a_sentence(volume_cc, clock, distance_mm, error, words):
     with pytest.raises(error, match=words):
         _excised("left", volume_cc, clock, distance_mm)
+
+
+def test_a_deeper_cavity_sinks_a_wider_patch_of_her_skin_less_deeply_and_loses_the_same_volume():
+    """40 cc at 2 o'clock, 40 mm out, excised just beneath her skin and 20 mm deep: both lose 40 cc on her skin;
+    the deeper one's skin sinks less at its deepest and over more of her breast (cells sunk over 0.5 mm)."""
+    m, nipples, shallow = _excised("left", 40.0, 2, 40.0)
+    deep = lumpectomy(m, "left", nipples["left"], 40.0, 2, 40.0, depth_mm=20.0)
+    for cut in (shallow, deep):
+        after = replace(m.cells, height_mm=cut.heights(m.cells.height_mm))
+        assert after.volume_cc("left") - m.cells.volume_cc("left") == pytest.approx(-40.0, abs=0.1)
+    assert -deep.lift_mm.min() < -shallow.lift_mm.min()
+    assert (deep.lift_mm < -0.5).sum() > (shallow.lift_mm < -0.5).sum()
+
+
+def test_an_excision_deeper_than_her_breast_is_thick_there_is_refused():
+    m, nipples, _ = _excised("left", 40.0, 2, 40.0)
+    with pytest.raises(BadInputError, match="mm thick"):
+        lumpectomy(m, "left", nipples["left"], 40.0, 2, 40.0, depth_mm=150.0)

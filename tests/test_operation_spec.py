@@ -31,7 +31,9 @@ from breastplan.plan.symmetry import ptosis_from_cells
     ("lift:other", "lift", {"lift": "other"}),
     ("reduction:200", "reduction", {"volume_cc": 200.0}),
     ("reduction:to=350:other", "reduction", {"to_volume_cc": 350.0, "lift": "other"}),
-    ("lumpectomy:40:10:30", "lumpectomy", {"volume_cc": 40.0, "clock": 10.0, "distance_mm": 30.0})])
+    ("lumpectomy:40:10:30", "lumpectomy", {"volume_cc": 40.0, "clock": 10.0, "distance_mm": 30.0}),
+    ("lumpectomy:40:10:30:15", "lumpectomy", {"volume_cc": 40.0, "clock": 10.0, "distance_mm": 30.0,
+                                              "depth_mm": 15.0})])
 def test_each_written_form_reads_to_the_settings_it_names(text, kind, settings):
     spec = OperationSpec.parse(text)
     assert spec.kind == kind and settings.items() <= spec.settings.items()
@@ -47,7 +49,7 @@ def test_an_implant_given_by_its_size_holds_the_volume_its_shape_gives():
     ("augmentation:5000", "1000 cc"), ("augmentation:300:huge", "no profile"), ("augmentation:abc", "not a number"),
     ("lift", "one target"), ("lift:nipple=3", "notch=MM, fold=MM or other"), ("lift:notch=-5", "positive"),
     ("reduction", "cc resected"), ("reduction:100:notch=200", "fold=MM or other"),
-    ("lumpectomy:40:10", "VOLUME:CLOCK:DISTANCE"), ("lumpectomy:40:13:30", "1–12")])
+    ("lumpectomy:40:10", "VOLUME:CLOCK:DISTANCE"), ("lumpectomy:40:10:30:0", "positive"), ("lumpectomy:40:13:30", "1–12")])
 def test_a_malformed_operation_is_an_option_error_naming_it(text, words):
     with pytest.raises(OptionError, match=words):
         OperationSpec.parse(text)

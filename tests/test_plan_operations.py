@@ -140,6 +140,7 @@ def test_a_request_the_command_line_rules_out_is_a_usage_error_before_any_work(c
 
 
 @pytest.mark.parametrize("operation", ["lumpectomy:5000:3:30", "augmentation:1000:low", "lumpectomy:20:3:200",
+                                       "lumpectomy:40:2:40:150",
                                        "lift:fold=300", "reduction:to=5000"])
 def test_an_operation_her_scan_rules_out_is_refused_and_nothing_written(cli, patient, tmp_path, operation):
     res = run(cli, "plan", patient / "case", "--out", tmp_path / "out", "--left", operation)
