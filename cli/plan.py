@@ -18,8 +18,9 @@ FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method", "units"
          "operations": "--left/--right", "symmetrise": "--symmetrise"}
 OPERATION_HELP = ("repeatable, in the order made: augmentation:VOLUME[:PROFILE][:round|anatomical][:subglandular|"
                   "submuscular] or augmentation:WIDTHxPROJECTION[...], lift:notch=MM|fold=MM|other, "
-                  "reduction:VOLUME|to=VOLUME[:fold=MM|other], lumpectomy:VOLUME:CLOCK:DISTANCE[:DEPTH] (cc, mm; the clock as "
-                  "the surgeon faces her). With operations and no --deform, no change by degree is planned.")
+                  "reduction:VOLUME|to=VOLUME[:fold=MM|other], lumpectomy:VOLUME:CLOCK:DISTANCE[:DEPTH] (cc, mm; "
+                  "the clock as the surgeon faces her). With operations and no --deform, no change by degree is "
+                  "planned.")
 
 
 @command()
@@ -117,7 +118,6 @@ def _written(plan_file: Path | None, deform: list[str], left: list[str], right: 
     """The changes, the operations ((side, as written), each checked: `OperationSpec.parse`) and the side to
     symmetrise, from the command line or the plan file (`plan.written_plan`); a usage error naming what is wrong."""
     from breastplan.plan.operation_spec import OperationSpec
-
     from breastplan.plan.written_plan import read_written_plan
 
     if plan_file is not None:
@@ -239,7 +239,7 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
     for s, op in plan.operated.items():
         stdout.print(f"{s} operated: {', '.join(spec.text for spec in op.written) or 'nothing proposed'}; her volume "
                      f"{op.volume_before_cc:.1f} → {op.volume_cc:.1f} cc on her skin, her nipple moved "
-                     f"{op.as_dict()['nipple_moved_mm']:.0f} mm", markup=False, soft_wrap=True)
+                     f"{op.nipple_moved_mm:.0f} mm", markup=False, soft_wrap=True)
         for words in said(op, m):
             stdout.print(f"{s}: {words}", markup=False, soft_wrap=True)
     if m.symmetry["before"]:

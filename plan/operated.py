@@ -49,17 +49,21 @@ class Operated:
 
     @property
     def warnings(self) -> tuple[str, ...]:
-        """What a surgeon is warned of (a lumpectomy's excised share), in her words."""
+        """What a surgeon is warned of (a lumpectomy's excised share), in a surgeon's words."""
         return tuple(w for w in (getattr(op, "warning", None) for op in self.made) if w)
+
+    @property
+    def nipple_moved_mm(self) -> float:
+        """How far the operations move her nipple (mm)."""
+        return float(np.linalg.norm(self.nipple_mm - self.nipple_before_mm))
 
     def as_dict(self) -> dict:
         """plan.json's record of the operations: each as written, her volume and nipple before and after."""
-        moved = self.nipple_mm - self.nipple_before_mm
         return {"operations": [{"written": spec.text, "kind": spec.kind, **spec.settings} for spec in self.written],
                 "volume_before_cc": round(self.volume_before_cc, 1), "volume_after_cc": round(self.volume_cc, 1),
                 "volume_change_cc": round(self.volume_cc - self.volume_before_cc, 1),
                 "nipple_after_input_mm": [round(float(v), 2) for v in self.nipple_mm],
-                "nipple_moved_mm": round(float(np.linalg.norm(moved)), 1), "warnings": list(self.warnings),
+                "nipple_moved_mm": round(self.nipple_moved_mm, 1), "warnings": list(self.warnings),
                 "note": self.note}
 
 
