@@ -10,6 +10,7 @@ Every key may be left out; no other key is taken. The words are the command line
 """
 from __future__ import annotations
 
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,13 +35,19 @@ def read_written_plan(path: Path) -> WrittenPlan:
     import yaml
 
     try:
-        if Path(path).stat().st_size > MAX_BYTES:
+        info = Path(path).stat()
+        if not stat.S_ISREG(info.st_mode):            # a named pipe or a device: reading it may never end
+            raise ValueError("is not a regular file")
+        if info.st_size > MAX_BYTES:
             raise ValueError(f"is over {MAX_BYTES >> 20} MB")
         text = Path(path).read_text(encoding="utf-8")
         data = yaml.safe_load(text)        # JSON is YAML; safe_load builds no Python objects
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, ValueError) as exc:
-        reason = str(exc) if isinstance(exc, ValueError) else f"cannot be read as YAML or JSON ({type(exc).__name__})"
-        raise ValueError(f"the plan file {path} {reason.splitlines()[0]}") from None
+    except OSError as exc:
+        raise ValueError(f"the plan file {path} cannot be read ({exc.strerror or type(exc).__name__})") from None
+    except (UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise ValueError(f"the plan file {path} cannot be read as YAML or JSON ({type(exc).__name__})") from None
+    except ValueError as exc:
+        raise ValueError(f"the plan file {path} {exc}") from None
     if data is None:
         data = {}
     if not isinstance(data, dict) or not set(map(str, data)) <= set(KEYS):
