@@ -7,7 +7,8 @@ other as the one to match:
   moderate profile, in front of the muscle) of the difference (`plan.augmentation`), a smaller difference is left
   (and said: `note`); a breast larger by more than SAME_CC is reduced by it (`plan.reduction`);
 * **nipple height**: a nipple lower than the other's by more than SAME_MM is lifted to its height (`plan.mastopexy`,
-  after the augmentation, or within the reduction).
+  after the augmentation, or within the reduction); one higher by more than SAME_MM is said (`note`): no operation
+  lowers a nipple.
 
 Each operation changes her volume on her skin by exactly its own volume (inside her footprint grown over what an
 implant raises), so the breasts come to the same volume on her skin; the nipple comes to the other's height where
@@ -78,7 +79,7 @@ def symmetrising(volumes: BreastVolumes, nipples: dict, side: str, fold_below_ni
     mirrored = body[other] * [-1.0, 1.0, 1.0]
     gap = volumes.sides[other].volume_cc - volumes.sides[side].volume_cc
     lift = mirrored[1] - body[side][1] > SAME_MM
-    written, note = [], None
+    written, notes = [], []
     if gap >= VOLUME_CC[0]:
         written = [f"augmentation:{min(float(gap), VOLUME_CC[1]):.1f}:moderate"] + (["lift:other"] if lift else [])
     elif gap < -SAME_CC:
@@ -86,8 +87,13 @@ def symmetrising(volumes: BreastVolumes, nipples: dict, side: str, fold_below_ni
     else:
         written = ["lift:other"] if lift else []
         if gap > SAME_CC:
-            note = (f"her {side} breast is {gap:.0f} cc smaller than her {other}, less than the smallest implant "
-                    f"({VOLUME_CC[0]:g} cc): left as it is")
+            notes.append(f"her {side} breast is {gap:.0f} cc smaller than her {other}, less than the smallest implant "
+                         f"({VOLUME_CC[0]:g} cc): left as it is")
+    higher = body[side][1] - mirrored[1]
+    if higher > SAME_MM:
+        notes.append(f"her {side} nipple lies {higher:.0f} mm above her {other}: no operation lowers a nipple (a lift "
+                     f"of her {other} breast raises hers: --symmetrise {other})")
+    note = "; ".join(notes) or None
     operated = operate(volumes, nipples, side, fold_below_nipple_mm, tuple(map(OperationSpec.parse, written)))
     return Symmetrising(operated, volumes.sides[other].volume_cc, transform_points(T, operated.nipple_mm[None])[0],
                         mirrored, note)

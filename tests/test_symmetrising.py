@@ -52,3 +52,15 @@ def test_a_symmetric_woman_is_left_as_she_is():
     _, nipples, proposal = _proposed("symmetric", "left")
     assert proposal.operations == () and proposal.note is None
     assert np.array_equal(proposal(nipples["left"][None])[0], nipples["left"])
+
+
+def test_her_higher_nipple_is_not_lowered_and_the_note_says_so():
+    """Her breasts hang unequally (MakeHuman's asymmetry target): symmetrising the breast whose nipple is higher
+    lifts nothing, and the note says no operation lowers a nipple and names the other side to symmetrise."""
+    m, nipples, _ = _proposed("asymmetric", "left")
+    body = {s: transform_points(m.body_from_input, n[None])[0] for s, n in nipples.items()}
+    high = max(body, key=lambda s: body[s][1])
+    low = "right" if high == "left" else "left"
+    _, _, proposal = _proposed("asymmetric", high)
+    assert not any(isinstance(o, Mastopexy) for o in proposal.operations)
+    assert "no operation lowers a nipple" in proposal.note and f"--symmetrise {low}" in proposal.note
