@@ -5,10 +5,10 @@ sternal notch the origin):
 
 1. **The target**: the nipple's new height, chosen as a surgeon chooses it: a sternal-notch-to-nipple distance
    (`to_notch_distance`), a height above her inframammary fold or her other nipple's height (`nipple_height`).
-2. **The breast raised**: over her footprint, her skin's heights above the chest wall are taken from δ · w lower
-   down (δ the nipple's rise): w is 1 from the nipple down (the lower pole and the nipple rise whole, which is
-   what tightens the lower pole against the fold) and falls to 0 at the footprint's upper border with a C² step
-   (the upper chest stays). The fold rises with the breast.
+2. **The breast raised**: over her footprint, her skin rises by δ · w (δ the nipple's rise) and carries its height
+   above the chest wall with it (each cell takes the height of the skin that rises to it): w is 1 from the nipple
+   down (the lower pole and the nipple rise whole, which is what tightens the lower pole against the fold) and falls
+   to 0 at the footprint's upper border with a C² step (the upper chest stays). The fold rises with the breast.
 3. **Volume kept**: the raised heights are then scaled so that her volume on her skin is as before, exactly.
 4. **Her skin moved**: each point of her skin moves up by δ · w where it lies, and forward or back by the change of
    the surface's height between its old place and its new one, so that the areola travels with the nipple.
@@ -21,11 +21,10 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import ndimage
 
 from breastplan import BadInputError, transform_points
 
-from .breast_volume import CELL_MM, BreastVolumes
+from .breast_volume import BreastVolumes
 from .skin_lift import SkinLift, scaled, up_the_breast
 from .surface import smoothstep
 
@@ -53,6 +52,14 @@ class Mastopexy(SkinLift):
         surface = self.wall_mm + self.height_mm
         forward = (self.sampled(surface + self.lift_mm, moved, "nearest") - self.sampled(surface, body, "nearest"))
         return np.column_stack([np.zeros_like(up), up, forward * (up > 0)]) @ T[:3, :3]   # body → input frame
+
+
+def carried_up(height_mm: np.ndarray, y_mm: np.ndarray, rise_mm: np.ndarray) -> np.ndarray:
+    """(nx, ny) her skin's heights over the cells after each cell's skin rises by `rise_mm` (nx, ny) along its
+    column (`y_mm` (ny,) the cells' heights): each cell takes the height of the skin that rises to it, as her skin's
+    points move (the map y → y + rise made monotone where a steep fall of the rise would fold it)."""
+    to = np.maximum.accumulate(y_mm[None, :] + rise_mm, axis=1)
+    return np.stack([np.interp(y_mm, to[i], height_mm[i]) for i in range(len(height_mm))])   # per column
 
 
 def nipple_height(nipple_body, *, above_fold_mm: float | None = None, fold_below_nipple_mm: float | None = None,
@@ -111,8 +118,7 @@ def mastopexy(volumes: BreastVolumes, side: str, nipple_mm, height_mm: float) ->
         raise BadInputError(None, f"asks for her {side} nipple {rise:.0f} mm higher, beyond the "
                                   f"{MAX_RISE * (top[column, 0] - nipple[1]):.0f} mm a lift reaches on her breast")
     weight = np.where(mask, smoothstep(above), 0.0)
-    X, Y = np.meshgrid(np.arange(len(cells.x)), np.arange(len(cells.y)), indexing="ij")
-    raised = ndimage.map_coordinates(cells.height_mm, [X, Y - rise * weight / CELL_MM], order=1, mode="nearest")
+    raised = carried_up(cells.height_mm, cells.y, rise * weight)
     change = np.where(mask, raised - cells.height_mm, 0.0)
     after = replace(cells, height_mm=cells.height_mm + change)
     kept = scaled(after, side, np.where(mask, raised, 0.0), mask, cells.volume_cc(side) - after.volume_cc(side))
