@@ -367,6 +367,10 @@ MUTANTS = [
     one("page-nipples-not-operated", "the report's nipples left where they were found on an operated state",
         "plan/report.py", "at(idx.nipples,on?on.nipples:L.nipples);", "at(idx.nipples,L.nipples);",
         ("tests/test_plan_operations.py",)),
+    one("lift-heights-from-below-the-arrival", "a lift's heights taken from the rise lower down, the rise read where "
+        "the skin arrives, not carried by the map its points move by",
+        "plan/mastopexy.py", "np.interp(y_mm, to[i], height_mm[i])", "np.interp(y_mm - (to[i] - y_mm), y_mm, height_mm[i])",
+        ("tests/test_mastopexy.py",)),
     one("batch-plan-file-ignored", "a batch planning a scan with its own plan file as every other",
         "batch/run.py", "plan = {**_her_plan(options.plan, i.plan_file).as_dict(), \"wall_from\": earlier}",
         "plan = {**options.plan.as_dict(), \"wall_from\": earlier}", ("tests/test_batch_plan_files.py",)),

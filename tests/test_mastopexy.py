@@ -1,7 +1,8 @@
 """Lift (`plan.mastopexy`) on a MakeHuman patient whose breasts hang unequally (MakeHuman's asymmetry target),
 scanned as a clinic scans her, against truths stated here: her volume on her skin is kept; her nipple comes to
 the height asked (her other nipple's, or a distance from her sternal notch as lifted); her areola travels with it;
-her other breast and her chest above the breast stay; a lift no breast allows is refused in a sentence."""
+her other breast and her chest above the breast stay; the lifted nipple stands as far in front of her as her other
+one; a lift no breast allows is refused in a sentence; the heights carried up are the heights the skin had."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -12,7 +13,7 @@ import pytest
 from test_breast_volume import measured, scanned
 
 from breastplan import BadInputError, transform_points
-from breastplan.plan.mastopexy import mastopexy, nipple_height, to_notch_distance
+from breastplan.plan.mastopexy import carried_up, mastopexy, nipple_height, to_notch_distance
 
 BODY = "asymmetric"
 
@@ -40,6 +41,8 @@ def test_her_lower_nipple_lifted_to_her_other_nipples_height_keeps_her_volume_an
     nipple = transform_points(m.body_from_input, lifted(nipples[low][None]))[0]
     assert nipple[1] == pytest.approx(body[high][1], abs=0.5)
     assert abs(nipple[0] - body[low][0]) < 0.5                                # straight up, not across
+    assert abs(nipple[2] - body[high][2]) < 5.0           # as far in front of her as her other nipple (within 0.4 mm
+    #                                                       before): raised, not thrust forward (8 mm, the two maps)
     moved = transform_points(m.body_from_input, lifted(torso)) - transform_points(m.body_from_input, torso)
     at = transform_points(m.body_from_input, torso)
     areola = np.linalg.norm(at[:, :2] - body[low][:2], axis=1) < 8.0
@@ -70,3 +73,15 @@ def test_a_lift_no_breast_allows_is_refused_in_a_sentence(how, words):
             to_notch_distance(m, low, nipples[low], 100.0)
         else:
             mastopexy(m, low, nipples[low], body[low][1] + (-10.0 if how == "lower" else 300.0))
+
+
+def test_the_heights_carried_up_are_the_heights_the_rising_skin_had():
+    """`carried_up` on a column of known heights: where the skin at y rises to y + r(y) (r falling from 20 mm to 0
+    up the column, as a lift's does), the height found there is the height at y (to 0.5 mm: two linear
+    interpolations over 5 mm cells of a curve 20 mm deep)."""
+    y = np.arange(-100.0, 100.0, 5.0)
+    height = 30.0 + 20.0 * np.cos(y / 40.0)
+    rise = 20.0 * np.clip(1.0 - (y + 100.0) / 150.0, 0.0, 1.0)
+    carried = carried_up(height[None], y, rise[None])[0]
+    inside = (y + rise >= y[0]) & (y + rise <= y[-1])
+    assert np.interp(y + rise, y, carried)[inside] == pytest.approx(height[inside], abs=0.5)
