@@ -61,8 +61,8 @@ def plan(
                                        "today)."),
     as_json: bool = JSON,
 ):
-    """Plan changes on a patient's scan: ingest, fit, each change and their combination, measures, an
-    interactive report (report.html) and a handout for her (report.pdf)."""
+    """Plan operations and changes on a patient's scan: ingest, fit, each side's operations, each change by degree
+    and their combination, measures, an interactive report (report.html) and a handout for her (report.pdf)."""
     clock = Clock()
     deform, operations, symmetrise = _written(plan_file, deform, left, right, symmetrise)
     try:
