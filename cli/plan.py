@@ -18,7 +18,7 @@ FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method", "units"
          "operations": "--left/--right", "symmetrise": "--symmetrise"}
 OPERATION_HELP = ("repeatable, in the order made: augmentation:VOLUME[:PROFILE][:round|anatomical][:subglandular|"
                   "submuscular] or augmentation:WIDTHxPROJECTION[...], lift:notch=MM|fold=MM|other, "
-                  "reduction:VOLUME|to=VOLUME[:fold=MM|other], lumpectomy:VOLUME:CLOCK:DISTANCE[:DEPTH] (cc, mm; "
+                  "reduction:VOLUME|to=VOLUME[:fold=MM|other|none], lumpectomy:VOLUME:CLOCK:DISTANCE[:DEPTH] (cc, mm; "
                   "the clock as the surgeon faces her). With operations and no --deform, no change by degree is "
                   "planned.")
 

@@ -4,7 +4,9 @@
     augmentation:WIDTHxPROJECTION[:SHAPE][:POCKET]    augmentation:115x37:submuscular (mm)
     lift:notch=MM | lift:fold=MM | lift:other         the nipple this far from the sternal notch, this far above
                                                       her fold, or at her other nipple's height
-    reduction:VOLUME[:LIFT] | reduction:to=VOLUME[:LIFT]   cc resected, or the volume left; LIFT as for lift
+    reduction:VOLUME[:LIFT] | reduction:to=VOLUME[:LIFT]   cc resected, or the volume left; LIFT fold=MM or other
+                                                      as for lift, none, or (not given) the lift it needs: a nipple
+                                                      below her fold raised to its height
     lumpectomy:VOLUME:CLOCK:DISTANCE[:DEPTH]          cc excised at a clock position (1–12, as the surgeon faces
                                                       her) and a distance from the nipple (mm), its centre DEPTH
                                                       mm beneath her skin
@@ -84,7 +86,8 @@ class OperationSpec:
                                            "lift target")
         out = ({"to_volume_cc": _number(text, words[0][3:])} if words[0].startswith("to=")
                else {"volume_cc": _number(text, words[0])})
-        lift = _lift_target(text, words[1]) if len(words) == 2 else {}
+        lift = ({"lift": "needed"} if len(words) == 1 else {"lift": "none"} if words[1] == "none"
+                else _lift_target(text, words[1]))
         if lift.get("lift") == "notch":
             raise OptionError("operation", f"'{text}': a reduction's lift is fold=MM or other (for a distance from "
                                            "the notch, plan the lift on its own)")
@@ -112,11 +115,12 @@ class OperationSpec:
         if self.kind == "lumpectomy":
             return (f"an excision of {s['volume_cc']:g} cc at {s['clock']:g} o'clock, {s['distance_mm']:g} mm from the "
                     "nipple" + (f", {s['depth_mm']:g} mm deep" if "depth_mm" in s else ""))
-        lift = _lift_words(s) if "lift" in s else None
+        lift = _lift_words(s)
         if self.kind == "lift":
             return f"a lift: {lift}"
         cut = f"to {s['to_volume_cc']:g} cc" if "to_volume_cc" in s else f"of {s['volume_cc']:g} cc"
-        return f"a reduction {cut}" + (f", with a lift: {lift}" if lift else "")
+        return f"a reduction {cut}" + ("" if lift is None else f", with {lift}" if s["lift"] == "needed"
+                                       else f", with a lift: {lift}")
 
     def operate(self, volumes: BreastVolumes, nipples: dict, side: str, fold_below_nipple_mm: float) -> SkinLift:
         """This operation on her `side` breast (`nipples` side → (3,) input frame; her fold `fold_below_nipple_mm`
@@ -127,7 +131,8 @@ class OperationSpec:
         if self.kind == "lumpectomy":
             return lumpectomy(volumes, side, nipple, s["volume_cc"], s["clock"], s["distance_mm"], s.get("depth_mm"))
         if self.kind == "reduction":
-            height = _height(volumes, nipples, side, fold_below_nipple_mm, s) if "lift" in s else None
+            height = (_height(volumes, nipples, side, fold_below_nipple_mm, s) if s["lift"] in ("fold", "other")
+                      else _needed(volumes, nipple, fold_below_nipple_mm) if s["lift"] == "needed" else None)
             return reduction(volumes, side, nipple, volume_cc=s.get("volume_cc"), to_volume_cc=s.get("to_volume_cc"),
                              nipple_height_mm=height)
         if s["lift"] == "notch":
@@ -154,7 +159,20 @@ def _lift_target(text: str, word: str) -> dict:
     return {"lift": key, "mm": _number(text, value)}
 
 
-def _lift_words(settings: dict) -> str:
+def _needed(volumes: BreastVolumes, nipple_mm, fold_below_nipple_mm: float) -> float | None:
+    """The nipple height (body frame y, mm) a reduction's lift needs: her fold's, where her nipple lies below it (the
+    projection of her fold on her breast, where a reduction places the nipple); None where it lies above."""
+    if fold_below_nipple_mm >= 0.0:
+        return None
+    nipple = transform_points(volumes.body_from_input, np.asarray(nipple_mm, float)[None])[0]
+    return nipple_height(nipple, above_fold_mm=0.0, fold_below_nipple_mm=fold_below_nipple_mm)
+
+
+def _lift_words(settings: dict) -> str | None:
+    if settings["lift"] == "none":
+        return None
+    if settings["lift"] == "needed":
+        return "the lift it needs (her nipple to her fold's height, where it lies below it)"
     if settings["lift"] == "other":
         return "the nipple to her other nipple's height"
     where = "from the sternal notch" if settings["lift"] == "notch" else "above her fold"

@@ -83,7 +83,7 @@ def symmetrising(volumes: BreastVolumes, nipples: dict, side: str, fold_below_ni
     if gap >= VOLUME_CC[0]:
         written = [f"augmentation:{min(float(gap), VOLUME_CC[1]):.1f}:moderate"] + (["lift:other"] if lift else [])
     elif gap < -SAME_CC:
-        written = [f"reduction:{-gap:.1f}" + (":other" if lift else "")]
+        written = [f"reduction:{-gap:.1f}" + (":other" if lift else ":none")]
     else:
         written = ["lift:other"] if lift else []
         if gap > SAME_CC:

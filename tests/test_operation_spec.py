@@ -29,7 +29,8 @@ from breastplan.plan.symmetry import ptosis_from_cells
     ("lift:notch=210", "lift", {"lift": "notch", "mm": 210.0}),
     ("lift:fold=20", "lift", {"lift": "fold", "mm": 20.0}),
     ("lift:other", "lift", {"lift": "other"}),
-    ("reduction:200", "reduction", {"volume_cc": 200.0}),
+    ("reduction:200", "reduction", {"volume_cc": 200.0, "lift": "needed"}),
+    ("reduction:200:none", "reduction", {"volume_cc": 200.0, "lift": "none"}),
     ("reduction:to=350:other", "reduction", {"to_volume_cc": 350.0, "lift": "other"}),
     ("lumpectomy:40:10:30", "lumpectomy", {"volume_cc": 40.0, "clock": 10.0, "distance_mm": 30.0}),
     ("lumpectomy:40:10:30:15", "lumpectomy", {"volume_cc": 40.0, "clock": 10.0, "distance_mm": 30.0,
@@ -72,3 +73,17 @@ def test_a_spec_makes_its_operation_on_her_breast(text, kind, want):
     change = replace(grown, height_mm=done.heights(grown.height_mm)).volume_cc(low) - grown.volume_cc(low)
     assert change == pytest.approx(want, abs=0.05)
     assert np.isfinite(done(nipples[low][None])).all()
+
+
+@pytest.mark.parametrize("fold_mm,rise_mm", [(-20.0, 20.0), (15.0, 0.0)])
+def test_a_reduction_lifts_a_nipple_below_her_fold_to_its_height_and_no_other(fold_mm, rise_mm):
+    """`reduction:60` with the lift it needs: a nipple 20 mm below her fold rises 20 mm, to the fold's height (where
+    a reduction places it); one 15 mm above her fold does not rise; `reduction:60:none` never lifts."""
+    _, nipples, *_ = scanned("asymmetric")
+    m = measured("asymmetric")
+    up = lambda done: (transform_points(m.body_from_input, done(nipples["left"][None]))[0]  # noqa: E731
+                       - transform_points(m.body_from_input, nipples["left"][None])[0])[1]
+    assert up(OperationSpec.parse("reduction:60").operate(m, nipples, "left", fold_mm)) == pytest.approx(rise_mm,
+                                                                                                        abs=0.5)
+    assert up(OperationSpec.parse("reduction:60:none").operate(m, nipples, "left", fold_mm)) == pytest.approx(0.0,
+                                                                                                             abs=0.5)
