@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from breastplan import transform_points
+from breastplan import BadInputError, transform_points
 from breastplan.options import OptionError
 
 from .augmentation import POCKETS, augmentation
@@ -133,8 +133,15 @@ class OperationSpec:
         if self.kind == "reduction":
             height = (_height(volumes, nipples, side, fold_below_nipple_mm, s) if s["lift"] in ("fold", "other")
                       else _needed(volumes, nipple, fold_below_nipple_mm) if s["lift"] == "needed" else None)
-            return reduction(volumes, side, nipple, volume_cc=s.get("volume_cc"), to_volume_cc=s.get("to_volume_cc"),
-                             nipple_height_mm=height)
+            try:
+                return reduction(volumes, side, nipple, volume_cc=s.get("volume_cc"),
+                                 to_volume_cc=s.get("to_volume_cc"), nipple_height_mm=height)
+            except BadInputError as exc:
+                if s["lift"] != "needed" or height is None:
+                    raise
+                raise BadInputError(None, f"{exc.problem}: the lift this reduction needs (her {side} nipple to her "
+                                          f"fold's height) is out of reach; give it a lift (fold=MM) or none "
+                                          f"({self.text}:none)") from None
         if s["lift"] == "notch":
             return to_notch_distance(volumes, side, nipple, s["mm"])
         return mastopexy(volumes, side, nipple, _height(volumes, nipples, side, fold_below_nipple_mm, s))

@@ -10,7 +10,7 @@ import pytest
 
 from test_breast_volume import measured, scanned
 
-from breastplan import transform_points
+from breastplan import BadInputError, transform_points
 from breastplan.options import OptionError
 from breastplan.plan.augmentation import Augmentation
 from breastplan.plan.implants import Implant
@@ -50,7 +50,8 @@ def test_an_implant_given_by_its_size_holds_the_volume_its_shape_gives():
     ("augmentation:5000", "1000 cc"), ("augmentation:300:huge", "no profile"), ("augmentation:abc", "not a number"),
     ("lift", "one target"), ("lift:nipple=3", "notch=MM, fold=MM or other"), ("lift:notch=-5", "positive"),
     ("reduction", "cc resected"), ("reduction:100:notch=200", "fold=MM or other"),
-    ("lumpectomy:40:10", "VOLUME:CLOCK:DISTANCE"), ("lumpectomy:40:10:30:0", "positive"), ("lumpectomy:40:13:30", "1–12")])
+    ("lumpectomy:40:10", "VOLUME:CLOCK:DISTANCE"), ("lumpectomy:40:10:30:0", "positive"),
+    ("lumpectomy:40:13:30", "1–12")])
 def test_a_malformed_operation_is_an_option_error_naming_it(text, words):
     with pytest.raises(OptionError, match=words):
         OperationSpec.parse(text)
@@ -87,3 +88,11 @@ def test_a_reduction_lifts_a_nipple_below_her_fold_to_its_height_and_no_other(fo
                                                                                                         abs=0.5)
     assert up(OperationSpec.parse("reduction:60:none").operate(m, nipples, "left", fold_mm)) == pytest.approx(0.0,
                                                                                                              abs=0.5)
+
+
+def test_a_reduction_whose_needed_lift_is_out_of_reach_says_how_to_plan_it():
+    """Her nipple 200 mm below her fold: the lift a reduction needs is beyond any lift's reach; the sentence says
+    so and names the two ways to write the reduction instead."""
+    _, nipples, *_ = scanned("asymmetric")
+    with pytest.raises(BadInputError, match="reduction:60:none"):
+        OperationSpec.parse("reduction:60").operate(measured("asymmetric"), nipples, "left", -200.0)
