@@ -133,12 +133,13 @@ class OperationSpec:
         if self.kind == "reduction":
             height = (_height(volumes, nipples, side, fold_below_nipple_mm, s) if s["lift"] in ("fold", "other")
                       else _needed(volumes, nipple, fold_below_nipple_mm) if s["lift"] == "needed" else None)
+            cut = {"volume_cc": s.get("volume_cc"), "to_volume_cc": s.get("to_volume_cc")}
+            if s["lift"] != "needed" or height is None:
+                return reduction(volumes, side, nipple, **cut, nipple_height_mm=height)
+            reduction(volumes, side, nipple, **cut)                  # the resection alone: its own refusals first
             try:
-                return reduction(volumes, side, nipple, volume_cc=s.get("volume_cc"),
-                                 to_volume_cc=s.get("to_volume_cc"), nipple_height_mm=height)
+                return reduction(volumes, side, nipple, **cut, nipple_height_mm=height)
             except BadInputError as exc:
-                if s["lift"] != "needed" or height is None:
-                    raise
                 raise BadInputError(None, f"{exc.problem}: the lift this reduction needs (her {side} nipple to her "
                                           f"fold's height) is out of reach; give it a lift (fold=MM) or none "
                                           f"({self.text}:none)") from None

@@ -96,3 +96,10 @@ def test_a_reduction_whose_needed_lift_is_out_of_reach_says_how_to_plan_it():
     _, nipples, *_ = scanned("asymmetric")
     with pytest.raises(BadInputError, match="reduction:60:none"):
         OperationSpec.parse("reduction:60").operate(measured("asymmetric"), nipples, "left", -200.0)
+
+
+def test_a_reduction_larger_than_her_breast_is_refused_as_such_whatever_lift_it_needs():
+    _, nipples, *_ = scanned("asymmetric")
+    with pytest.raises(BadInputError, match="less than the breast") as caught:
+        OperationSpec.parse("reduction:5000").operate(measured("asymmetric"), nipples, "left", -20.0)
+    assert "lift" not in str(caught.value)
