@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from breastplan import BadInputError, transform_points
+from breastplan import BadInputError
 from breastplan.options import OptionError
 
 from .breast_volume import CELL_MM, FOOT_MM, BreastVolumes
@@ -63,7 +63,7 @@ def augmentation(volumes: BreastVolumes, side: str, nipple_mm, fold_below_nipple
     if pocket not in POCKETS:
         raise OptionError("pocket", f"the pocket is {' or '.join(POCKETS)}, not '{pocket}'")
     cells, T = volumes.cells, volumes.body_from_input
-    nipple = transform_points(T, np.asarray(nipple_mm, float)[None])[0]
+    nipple = volumes.in_body(nipple_mm)
     R = implant.width_mm / 2.0
     fold = max(fold_below_nipple_mm, implant.width_mm - FOLD_BELOW_WIDTH_MM)
     centre = np.array([nipple[0], nipple[1] - fold + R])

@@ -150,6 +150,10 @@ class BreastVolumes:
     body_from_input: np.ndarray         # (4, 4) input frame → her body frame, mm
     cells: SkinCells
 
+    def in_body(self, point_mm) -> np.ndarray:
+        """(3,) one input-frame point (mm) in her body frame."""
+        return transform_points(self.body_from_input, np.asarray(point_mm, float).reshape(1, 3))[0]
+
 
 def change_on_earlier_wall(earlier: BreastVolumes, torso_mm, earlier_from_input, side: str) -> tuple[float, float]:
     """One breast's volume then and now (cc), both on an earlier visit's chest wall and inside one

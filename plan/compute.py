@@ -87,8 +87,7 @@ def operations(sides: dict[str, SidePlan], volumes: BreastVolumes, options: Plan
         written = tuple(map(OperationSpec.parse, options.operations_of(side)))
         if not written and options.symmetrise != side:
             continue
-        fold = ptosis_from_cells(transform_points(volumes.body_from_input, nipples[side][None])[0], volumes.cells,
-                                 side)["nipple_to_fold_mm"]
+        fold = ptosis_from_cells(volumes.in_body(nipples[side]), volumes.cells, side)["nipple_to_fold_mm"]
         if fold is None or not np.isfinite(fold):
             raise BadInputError(None, f"shows no inframammary fold under her {side} breast, where its operations "
                                       "are placed")

@@ -96,7 +96,7 @@ def lumpectomy(volumes: BreastVolumes, side: str, nipple_mm, volume_cc: float, c
     if volume_cc >= breast:
         raise BadInputError(None, f"gives a resection of {volume_cc:g} cc, no smaller than her {side} breast "
                                   f"({breast:.0f} cc on her skin)")
-    nipple = transform_points(T, np.asarray(nipple_mm, float)[None])[0]
+    nipple = volumes.in_body(nipple_mm)
     centre = nipple[:2] + distance_mm * clock_direction(clock)
     mask = cells.side(side)
     X, Y = np.meshgrid(cells.x - centre[0], cells.y - centre[1], indexing="ij")

@@ -78,12 +78,11 @@ NOTCH_TOLERANCE_MM = 0.1
 def to_notch_distance(volumes: BreastVolumes, side: str, nipple_mm, distance_mm: float) -> Mastopexy:
     """Her `side` breast lifted until its nipple ((3,) input frame) lies `distance_mm` from her sternal notch, as
     lifted (it comes forward as it rises onto her breast): secant steps on its height, to NOTCH_TOLERANCE_MM."""
-    T = volumes.body_from_input
-    nipple = transform_points(T, np.asarray(nipple_mm, float)[None])[0]
+    nipple = volumes.in_body(nipple_mm)
 
     def chord(height: float) -> tuple[float, Mastopexy]:
         lifted = mastopexy(volumes, side, nipple_mm, height)
-        return float(np.linalg.norm(transform_points(T, lifted(np.asarray(nipple_mm, float)[None]))[0])), lifted
+        return float(np.linalg.norm(volumes.in_body(lifted(np.asarray(nipple_mm, float)[None])))), lifted
 
     y = [-float(np.sqrt(max(distance_mm ** 2 - nipple[0] ** 2 - nipple[2] ** 2, 0.0)))]   # raised straight up
     try:
@@ -106,7 +105,7 @@ def mastopexy(volumes: BreastVolumes, side: str, nipple_mm, height_mm: float) ->
     """Her `side` breast lifted so that its nipple ((3,) input frame) comes to `height_mm` (body frame y,
     `nipple_height`): module docstring."""
     cells, T = volumes.cells, volumes.body_from_input
-    nipple = transform_points(T, np.asarray(nipple_mm, float)[None])[0]
+    nipple = volumes.in_body(nipple_mm)
     rise = float(height_mm - nipple[1])
     if rise <= 0.0:
         raise BadInputError(None, f"gives her {side} nipple {-rise:.0f} mm above the height asked for a lift: "

@@ -14,8 +14,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from breastplan import transform_points
-
 from .breast_volume import BreastVolumes
 from .operation_spec import OperationSpec
 from .skin_lift import SkinLift
@@ -84,12 +82,10 @@ def operate(volumes: BreastVolumes, nipples: dict, side: str, fold_below_nipple_
             written: tuple[OperationSpec, ...]) -> Operated:
     """The operations `written` made in turn on her `side` breast (module docstring): `nipples` side → (3,) input
     frame, as scanned; her fold `fold_below_nipple_mm` below the `side` nipple."""
-    T = volumes.body_from_input
-    height = lambda n: float(transform_points(T, n[None])[0, 1])  # noqa: E731
     start = np.asarray(nipples[side], float)
-    fold_mm, nipple, made, now = height(start) - fold_below_nipple_mm, start, [], volumes
+    fold_mm, nipple, made, now = volumes.in_body(start)[1] - fold_below_nipple_mm, start, [], volumes
     for spec in written:
-        done = spec.operate(now, {**nipples, side: nipple}, side, height(nipple) - fold_mm)
+        done = spec.operate(now, {**nipples, side: nipple}, side, volumes.in_body(nipple)[1] - fold_mm)
         grown = replace(now.cells, footprint=now.cells.footprint | done.footprint)
         cells = replace(grown, height_mm=done.heights(grown.height_mm))
         volume = now.sides[side].volume_cc + cells.volume_cc(side) - grown.volume_cc(side)   # its own change

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from breastplan import BadInputError, transform_points
+from breastplan import BadInputError
 from breastplan.options import OptionError
 
 from .augmentation import POCKETS, augmentation
@@ -172,7 +172,7 @@ def _needed(volumes: BreastVolumes, nipple_mm, fold_below_nipple_mm: float) -> f
     projection of her fold on her breast, where a reduction places the nipple); None where it lies above."""
     if fold_below_nipple_mm >= 0.0:
         return None
-    nipple = transform_points(volumes.body_from_input, np.asarray(nipple_mm, float)[None])[0]
+    nipple = volumes.in_body(nipple_mm)
     return nipple_height(nipple, above_fold_mm=0.0, fold_below_nipple_mm=fold_below_nipple_mm)
 
 
@@ -195,8 +195,7 @@ def _implant(settings: dict) -> Implant:
 
 def _height(volumes: BreastVolumes, nipples: dict, side: str, fold_below_nipple_mm: float, settings: dict) -> float:
     """The nipple height (body frame y, mm) a lift target asks for."""
-    T = volumes.body_from_input
-    body = {s: transform_points(T, np.asarray(n, float)[None])[0] for s, n in nipples.items()}
+    body = {s: volumes.in_body(n) for s, n in nipples.items()}
     if settings["lift"] == "fold":
         return nipple_height(body[side], above_fold_mm=settings["mm"], fold_below_nipple_mm=fold_below_nipple_mm)
     return nipple_height(body[side], as_nipple_body=body["right" if side == "left" else "left"])

@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from breastplan import BadInputError, transform_points
+from breastplan import BadInputError
 
 from .breast_volume import BreastVolumes
 from .mastopexy import Mastopexy, mastopexy
@@ -54,7 +54,7 @@ def reduction(volumes: BreastVolumes, side: str, nipple_mm, *, volume_cc: float 
     if not 0.0 < removed < breast:
         raise BadInputError(None, f"gives a resection of {removed:g} cc from her {side} breast of {breast:.0f} cc on "
                                   "her skin: a reduction takes more than nothing and less than the breast")
-    nipple = transform_points(T, np.asarray(nipple_mm, float)[None])[0]
+    nipple = volumes.in_body(nipple_mm)
     mask = cells.side(side)
     above, _ = up_the_breast(cells, side, nipple[1])
     shape = -np.where(mask, np.clip(cells.height_mm, 0.0, None) * (1.0 - (1.0 - UPPER_SHARE) * above), 0.0)

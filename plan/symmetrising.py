@@ -20,8 +20,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from breastplan import transform_points
-
 from .breast_volume import BreastVolumes
 from .implants import VOLUME_CC
 from .operated import Operated, operate
@@ -74,8 +72,7 @@ def symmetrising(volumes: BreastVolumes, nipples: dict, side: str, fold_below_ni
     writes them (`plan.operation_spec`) and made (`plan.operated`): `nipples` side → (3,) input frame; her fold
     `fold_below_nipple_mm` below the `side` nipple (where an implant's lower rim goes)."""
     other = "right" if side == "left" else "left"
-    T = volumes.body_from_input
-    body = {s: transform_points(T, np.asarray(n, float)[None])[0] for s, n in nipples.items()}
+    body = {s: volumes.in_body(n) for s, n in nipples.items()}
     mirrored = body[other] * [-1.0, 1.0, 1.0]
     gap = volumes.sides[other].volume_cc - volumes.sides[side].volume_cc
     lift = mirrored[1] - body[side][1] > SAME_MM
@@ -95,5 +92,5 @@ def symmetrising(volumes: BreastVolumes, nipples: dict, side: str, fold_below_ni
                      f"of her {other} breast raises hers: --symmetrise {other})")
     note = "; ".join(notes) or None
     operated = operate(volumes, nipples, side, fold_below_nipple_mm, tuple(map(OperationSpec.parse, written)))
-    return Symmetrising(operated, volumes.sides[other].volume_cc, transform_points(T, operated.nipple_mm[None])[0],
+    return Symmetrising(operated, volumes.sides[other].volume_cc, volumes.in_body(operated.nipple_mm),
                         mirrored, note)
