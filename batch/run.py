@@ -132,13 +132,12 @@ def _her_plan(plan: PlanOptions, plan_file: Path | None) -> PlanOptions:
     in one sentence naming the file when it cannot be read or planned."""
     if plan_file is None:
         return plan
-    from breastplan.plan.operation_spec import OperationSpec
+    from breastplan.plan.operation_spec import written_operations
     from breastplan.plan.written_plan import read_written_plan
 
     written = read_written_plan(plan_file)
     try:
-        operations = tuple((side, OperationSpec.parse(text).text) for side, texts in
-                           (("left", written.left), ("right", written.right)) for text in texts)
+        operations = written_operations(written.left, written.right)
         changes = [f"{k}:{d:g}" for k, d in plan.changes] if not (operations or written.symmetrise) else []
         return PlanOptions.parse(list(written.deform) or changes, "both" if plan.sides == SIDES else plan.sides[0],
                                  plan.method, plan.units, plan.up, plan.wall_from, operations, written.symmetrise)

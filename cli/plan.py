@@ -115,9 +115,9 @@ def plan(
 
 
 def _written(plan_file: Path | None, deform: list[str], left: list[str], right: list[str], symmetrise: str | None):
-    """The changes, the operations ((side, as written), each checked: `OperationSpec.parse`) and the side to
+    """The changes, the operations ((side, as written), each checked: `written_operations`) and the side to
     symmetrise, from the command line or the plan file (`plan.written_plan`); a usage error naming what is wrong."""
-    from breastplan.plan.operation_spec import OperationSpec
+    from breastplan.plan.operation_spec import written_operations
     from breastplan.plan.written_plan import read_written_plan
 
     if plan_file is not None:
@@ -129,13 +129,11 @@ def _written(plan_file: Path | None, deform: list[str], left: list[str], right: 
         except ValueError as exc:
             raise usage_error(str(exc), "--plan-file") from None
         deform, left, right, symmetrise = list(written.deform), written.left, written.right, written.symmetrise
-    for flag, items in (("--left", left), ("--right", right)):
-        for text in items:
-            try:
-                OperationSpec.parse(text)
-            except OptionError as exc:
-                raise usage_error(str(exc), "--plan-file" if plan_file else flag) from None
-    return deform, tuple(("left", t) for t in left) + tuple(("right", t) for t in right), symmetrise
+    try:
+        operations = written_operations(left, right)
+    except OptionError as exc:
+        raise usage_error(str(exc), "--plan-file" if plan_file else f"--{exc.option}") from None
+    return deform, operations, symmetrise
 
 
 NAME_CHARS = 120

@@ -148,6 +148,19 @@ class OperationSpec:
         return mastopexy(volumes, side, nipple, _height(volumes, nipples, side, fold_below_nipple_mm, s))
 
 
+def written_operations(left, right) -> tuple[tuple[str, str], ...]:
+    """(side, operation as `OperationSpec.parse` reads it) for each of `left`, then of `right`, in order; an
+    OptionError whose option is the side, naming the first that is no operation."""
+    out = []
+    for side, texts in (("left", left), ("right", right)):
+        for text in texts:
+            try:
+                out.append((side, OperationSpec.parse(text).text))
+            except OptionError as exc:
+                raise OptionError(side, str(exc)) from None
+    return tuple(out)
+
+
 def _number(text: str, word: str) -> float:
     try:
         value = float(word)
