@@ -47,8 +47,7 @@ def shown_words(plan: Plan) -> str:
     words = state_words(plan.grid, plan.grid.planned_index)
     if len(plan.grid.kinds) > 1:
         words += " (" + ", ".join(f"{k} {d:g}" for k, d in plan.options.changes) + ")"
-    operations = "; ".join(f"her {s} breast, " + (", then ".join(spec.words for spec in op.written) or "nothing")
-                           for s, op in plan.operated.items())
+    operations = "; ".join(f"her {s} breast, {op.words or 'nothing'}" for s, op in plan.operated.items())
     return words if not operations else operations if not plan.grid.kinds else f"{operations}; then {words}"
 
 

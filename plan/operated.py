@@ -46,6 +46,11 @@ class Operated:
         return self(points) - points
 
     @property
+    def words(self) -> str:
+        """The operations in a surgeon's words, in the order made ("" for none)."""
+        return "; then ".join(spec.words for spec in self.written)
+
+    @property
     def warnings(self) -> tuple[str, ...]:
         """What a surgeon is warned of (a lumpectomy's excised share), in a surgeon's words."""
         return tuple(w for w in (getattr(op, "warning", None) for op in self.made) if w)

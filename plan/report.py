@@ -270,7 +270,7 @@ def _operations_table(plan: Plan) -> str:
     after them, how far her nipple moves, and what the plan warns of; "" without operations."""
     if not plan.operated:
         return ""
-    rows = [[f"her {s}", "; then ".join(spec.words for spec in op.written) or "none proposed",
+    rows = [[f"her {s}", op.words or "none proposed",
              f"{op.volume_before_cc:.0f} → {op.volume_cc:.0f}", round(op.nipple_moved_mm, 1),
              " ".join(said(op, plan.measures)) or "—"] for s, op in plan.operated.items()]
     after = ("Every state shown is after them: the changes by degree start from her breasts as operated."
