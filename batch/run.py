@@ -140,7 +140,8 @@ def _her_plan(plan: PlanOptions, plan_file: Path | None) -> PlanOptions:
         operations = written_operations(written.left, written.right)
         changes = [f"{k}:{d:g}" for k, d in plan.changes] if not (operations or written.symmetrise) else []
         return PlanOptions.parse(list(written.deform) or changes, "both" if plan.sides == SIDES else plan.sides[0],
-                                 plan.method, plan.units, plan.up, plan.wall_from, operations, written.symmetrise)
+                                 plan.method, plan.units, plan.up, plan.wall_from, operations, written.symmetrise,
+                                 plan.operation_models)
     except OptionError as exc:
         raise ValueError(f"{plan_file}: {exc}") from None
 

@@ -28,6 +28,9 @@ def batch(
                                      f"{', '.join(DEGREE_KINDS)}. Default: "
                                      + " ".join(f"{k}:{d:g}" for k, d in DEFAULT_PLAN) + "."),
     method: str = typer.Option("exact", "--method", help="exact, learnt or MODEL.npz, as for plan."),
+    operation_model: List[Path] = typer.Option([], "--operation-model", help="A clinic's model of one operation, "
+                                               "as for plan: it makes that operation wherever a patient's plan "
+                                               "file names it. Repeatable, one per operation."),
     units: str = typer.Option("auto", "--units", help=UNITS_HELP + " The same for every scan file."),
     up: str = typer.Option("auto", "--up", help=UP_HELP + " The same for every scan file."),
     executor: str = typer.Option("local", "--executor", help="local (worker processes) or dask (a Dask "
@@ -42,14 +45,20 @@ def batch(
     """Plan every scan and recording of a folder, one case folder each, with a manifest; resumable.
     Exit 0 when any input was planned, 3 when none was."""
     from breastplan import BadInputError
-    from breastplan.errors import require_folder
+    from breastplan.errors import require_file, require_folder
 
     try:
-        options = BatchOptions(PlanOptions.parse(deform, side, method, units, up), jobs, executor, scheduler,
-                               None if wall_from is None else str(wall_from))
+        models = tuple(str(p.absolute()) for p in operation_model)
+        options = BatchOptions(PlanOptions.parse(deform, side, method, units, up, operation_models=models), jobs,
+                               executor, scheduler, None if wall_from is None else str(wall_from))
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
     check_method(method)
+    for path in operation_model:
+        require_file(path, "model file")
+    from breastplan.plan.learnt_operation import operation_models
+
+    operation_models(models)
     if wall_from is not None:
         read_only(wall_from, out)
     if real(out) == real(input):

@@ -15,7 +15,7 @@ from .app import JSON, UNITS_HELP, UP_HELP, command, scan_file_options
 from .output import holds_plan, inside, read_only, real, report, stderr, usage_error, writable
 
 FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method", "units": "--units", "up": "--up",
-         "operations": "--left/--right", "symmetrise": "--symmetrise"}
+         "operations": "--left/--right", "symmetrise": "--symmetrise", "operation_models": "--operation-model"}
 OPERATION_HELP = ("repeatable, in the order made: augmentation:VOLUME[:PROFILE][:round|anatomical][:subglandular|"
                   "submuscular] or augmentation:WIDTHxPROJECTION[...], lift:notch=MM|fold=MM|other, "
                   "reduction:VOLUME|to=VOLUME[:fold=MM|other|none], lumpectomy:VOLUME:CLOCK:DISTANCE[:DEPTH] (cc, mm; "
@@ -39,6 +39,11 @@ def plan(
     plan_file: Optional[Path] = typer.Option(None, "--plan-file", help="A plan file (YAML or JSON) with the keys "
                                              "left, right, deform and symmetrise, each as its option takes it; "
                                              "instead of those options."),
+    operation_model: List[Path] = typer.Option([], "--operation-model", help="A clinic's model of one operation "
+                                               "(augmentation or reduction), learnt by train-statistical from "
+                                               "before/after scans of the clinic's patients: it makes that "
+                                               "operation in place of the built-in model. Repeatable, one per "
+                                               "operation."),
     method: str = typer.Option("exact", "--method", help="How a degree becomes parameters: exact (the inverse "
                                "solver), learnt (the shipped regressions) or MODEL.npz (a trained model of one "
                                "condition, for its kind)."),
@@ -67,11 +72,12 @@ def plan(
     deform, operations, symmetrise = _written(plan_file, deform, left, right, symmetrise)
     try:
         options = PlanOptions.parse(deform, side, method, units, up, None if wall_from is None else str(wall_from),
-                                    operations, symmetrise)
+                                    operations, symmetrise, tuple(map(str, operation_model)))
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
     who = _patient(patient, patient_id, surgeon, date)
     resolved = check_method(method)
+    check_operation_models(options)
     if input is not None and not input.is_dir():
         require_file(input, "recording or scan file")
     scan_file_options(input, units, up)
@@ -273,6 +279,20 @@ def check_method(method: str):
         raise usage_error(f"{method} models {', '.join(map(str, resolved.kinds))}, which has no degrees to plan",
                           "--method")
     return resolved
+
+
+def check_operation_models(options: PlanOptions) -> None:
+    """--operation-model's files loaded before any work: bad input (exit 3) for a file that is missing or no
+    operation's model, or a second model of one operation; a usage error for a model of an operation not planned."""
+    from breastplan.plan.learnt_operation import operation_models
+    from breastplan.plan.operation_spec import OperationSpec
+
+    for path in options.operation_models:
+        require_file(Path(path), "model file")
+    planned = {OperationSpec.parse(text).kind for _, text in options.operations}
+    for kind, model in operation_models(options.operation_models).items():
+        if kind not in planned and options.symmetrise is None:
+            raise usage_error(f"{model.path} makes {kind}s, and no {kind} is planned", "--operation-model")
 
 
 class _progress:

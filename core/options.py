@@ -116,7 +116,8 @@ class PlanOptions:
     side's from `ingest`), makes the plan a follow-up: each breast measured down to that case's
     chest wall, and its volume change since then. `operations`: (side, operation as written) in the order
     made (`plan.operation_spec`: the words are checked there); `symmetrise`: the side whose operations are
-    proposed to match the other."""
+    proposed to match the other; `operation_models`: paths of a clinic's models of operations, each making its
+    operation in place of the built-in one (`plan.learnt_operation`)."""
 
     changes: tuple[tuple[str, float], ...] = DEFAULT_PLAN
     sides: tuple[str, ...] = SIDES
@@ -126,6 +127,7 @@ class PlanOptions:
     wall_from: str | None = None
     operations: tuple[tuple[str, str], ...] = ()
     symmetrise: str | None = None
+    operation_models: tuple[str, ...] = ()
 
     def __post_init__(self):
         changes = tuple((str(k), float(d)) for k, d in self.changes)
@@ -158,6 +160,7 @@ class PlanOptions:
         object.__setattr__(self, "changes", changes)
         object.__setattr__(self, "sides", sides)
         object.__setattr__(self, "operations", operations)
+        object.__setattr__(self, "operation_models", tuple(map(str, self.operation_models)))
 
     def operations_of(self, side: str) -> tuple[str, ...]:
         """The operations on one side, as written, in order."""
@@ -166,7 +169,7 @@ class PlanOptions:
     @classmethod
     def parse(cls, deform: list[str], side: str = "both", method: str = "exact", units: str = "auto",
               up: str = "auto", wall_from: str | None = None, operations: tuple[tuple[str, str], ...] = (),
-              symmetrise: str | None = None) -> "PlanOptions":
+              symmetrise: str | None = None, operation_models: tuple[str, ...] = ()) -> "PlanOptions":
         """From the command line's KIND:DEGREE items, side (left, right or both) and the rest as given; without
         KIND:DEGREE items, the default changes unless operations are planned."""
         changes = []
@@ -182,18 +185,20 @@ class PlanOptions:
             raise OptionError("sides", f"'{side}' is not a side; choose left, right or both")
         operated = bool(operations) or symmetrise is not None
         return cls(tuple(changes) or (() if operated else DEFAULT_PLAN), SIDES if side == "both" else (side,), method,
-                   units, up, wall_from, tuple(operations), symmetrise)
+                   units, up, wall_from, tuple(operations), symmetrise, tuple(operation_models))
 
     def as_dict(self) -> dict:
         return {"changes": [list(c) for c in self.changes], "sides": list(self.sides), "method": self.method,
                 "units": self.units, "up": self.up, "wall_from": self.wall_from,
-                "operations": [list(o) for o in self.operations], "symmetrise": self.symmetrise}
+                "operations": [list(o) for o in self.operations], "symmetrise": self.symmetrise,
+                "operation_models": list(self.operation_models)}
 
     @classmethod
     def from_dict(cls, d: dict) -> "PlanOptions":
         """The options `as_dict` gave."""
         return cls(tuple(map(tuple, d["changes"])), tuple(d["sides"]), d["method"], d["units"], d["up"],
-                   d.get("wall_from"), tuple(map(tuple, d.get("operations", ()))), d.get("symmetrise"))
+                   d.get("wall_from"), tuple(map(tuple, d.get("operations", ()))), d.get("symmetrise"),
+                   tuple(d.get("operation_models", ())))
 
 
 EXECUTORS = ("local", "dask")

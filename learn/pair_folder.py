@@ -66,6 +66,20 @@ def read_pairs(folder: str | Path) -> list[PairRow]:
     """The pairs of `folder`/pairs.csv, in file order; BadInputError naming pairs.csv (and the line)
     for any defect of the table or of the paths it names. The breasts themselves are read by
     `breast_cloud`."""
+    table, root, (line, header), lines = read_table(folder)
+    index = columns(table, line, header, COLUMNS, REQUIRED)
+    resolved: dict[str, Path] = {}           # a path named on many rows is looked up once
+    rows = [_row(table, n, (root, resolved), cells, index, len(header)) for n, cells in lines]
+    if not any(r.split == "train" for r in rows):
+        raise BadInputError(table, f"holds no training pair: {'all ' * (len(rows) > 1)}{counted(len(rows), 'pair')} "
+                                     f"{'is' if len(rows) == 1 else 'are'} in the test split")
+    return rows
+
+
+def read_table(folder: str | Path) -> tuple[Path, Path, tuple[int, list[str]], list[tuple[int, list[str]]]]:
+    """`folder`/pairs.csv read and split: (its path, the folder resolved, (line, cells) of its header, (line,
+    cells) of each row that is not blank); BadInputError naming the folder or the table for what makes it no
+    table of pairs (no such folder, too large, not UTF-8, not CSV, no header, no rows, too many)."""
     folder = Path(folder)
     if loops(folder):
         raise BadInputError(folder, "is a symbolic link loop, not a pairs folder")
@@ -93,41 +107,40 @@ def read_pairs(folder: str | Path) -> list[PairRow]:
     except UnicodeDecodeError as exc:
         line = data.count(b"\n", 0, exc.start) + 1
         raise BadInputError(table, f"line {line}: is not UTF-8 text") from None
-    root = folder.resolve()
-    rows: list[PairRow] = []
     reader = csv.reader(io.StringIO(text, newline=""), strict=True)
+    lines: list[tuple[int, list[str]]] = []
     try:
         header = next((r for r in reader if any(c.strip() for c in r)), None)
         if header is None:
-            raise BadInputError(table, f"is empty: it has no header line ({','.join(REQUIRED)}[,split][,condition])")
-        index = _columns(table, reader.line_num, header)
-        resolved: dict[str, Path] = {}           # a path named on many rows is looked up once
+            raise BadInputError(table, "is empty: it has no header line")
+        top = reader.line_num
         for cells in reader:
             if any(c.strip() for c in cells):    # blank lines (and all-empty ones a spreadsheet adds) skipped
-                if len(rows) == MAX_PAIRS:
+                if len(lines) == MAX_PAIRS:
                     raise BadInputError(table, f"holds more than {MAX_PAIRS:,} pairs, more than breastplan "
                                                "trains on")
-                rows.append(_row(table, reader.line_num, (root, resolved), cells, index, len(header)))
+                lines.append((reader.line_num, cells))
     except csv.Error as exc:
         raise BadInputError(table, f"line {reader.line_num}: is not valid CSV ({exc})") from None
-    if not rows:
+    if not lines:
         raise BadInputError(table, "holds no pairs: only a header")
-    if not any(r.split == "train" for r in rows):
-        raise BadInputError(table, f"holds no training pair: {'all ' * (len(rows) > 1)}{counted(len(rows), 'pair')} "
-                                     f"{'is' if len(rows) == 1 else 'are'} in the test split")
-    return rows
+    return table, folder.resolve(), (top, header), lines
 
 
-def _columns(table: Path, line: int, header: list[str]) -> dict[str, int]:
+def columns(table: Path, line: int, header: list[str], known: tuple[str, ...],
+            required: tuple[str, ...]) -> dict[str, int]:
+    """Each `known` column's index in `header` (line `line` of `table`); BadInputError for one named twice or a
+    `required` one missing."""
     names = [h.strip().lower() for h in header]
-    for name in COLUMNS:
+    for name in known:
         if names.count(name) > 1:
             raise BadInputError(table, f"line {line}: the header names column '{name}' twice")
-    missing = [name for name in REQUIRED if name not in names]
+    missing = [name for name in required if name not in names]
     if missing:
+        optional = "".join(f"[,{name}]" for name in known if name not in required)
         raise BadInputError(table, f"line {line}: the header lacks column{'s' * (len(missing) > 1)} "
-                                   f"{', '.join(missing)} (it needs {','.join(REQUIRED)}[,split][,condition])")
-    return {name: names.index(name) for name in COLUMNS if name in names}
+                                   f"{', '.join(missing)} (it needs {','.join(required)}{optional})")
+    return {name: names.index(name) for name in known if name in names}
 
 
 def _row(table: Path, line: int, paths: tuple[Path, dict[str, Path]], cells: list[str], index: dict[str, int],
@@ -167,14 +180,14 @@ def _row(table: Path, line: int, paths: tuple[Path, dict[str, Path]], cells: lis
     root, resolved = paths
     for col in (BEFORE, AFTER):
         if value[col] not in resolved:
-            resolved[value[col]] = _member(bad, root, value[col], col)
+            resolved[value[col]] = member(bad, root, value[col], col)
     before, after = resolved[value[BEFORE]], resolved[value[AFTER]]
     return PairRow(before=before, after=after, kind=kind, degree=degree, split=split, condition=condition)
 
 
-def _member(bad: Callable[[str], BadInputError], root: Path, text: str, column: str) -> Path:
-    """The resolved path `text` names relative to the folder `root`, which must lie inside it and exist
-    (a file, or a case folder)."""
+def member(bad: Callable[[str], BadInputError], root: Path, text: str, column: str, plans: bool = False) -> Path:
+    """The resolved path `text` names relative to the folder `root`, which must lie inside it and exist: a file
+    or a case folder (`plans`: a folder of a plan's cases, left/ and right/, or one side's case only)."""
     if not text:
         raise bad(f"has no {column} path")
     try:
@@ -188,12 +201,14 @@ def _member(bad: Callable[[str], BadInputError], root: Path, text: str, column: 
     except (OSError, ValueError) as exc:      # a name too long, a NUL byte
         raise bad(f"{column} path '{text}' cannot be a file name here ({getattr(exc, 'strerror', None) or exc})") \
             from None
-    if path.is_dir():
-        from breastplan.case import Case
+    from breastplan.case import Case
 
-        if not Case.holds(path):
-            raise bad(f"{column} path '{text}' is a folder but not a case folder (it holds no "
-                      f"{Case.SCAN_NPZ} from `breastplan ingest`)")
+    if plans and not (path.is_dir() and (Case.holds(path) or any(Case.holds(path / s) for s in ("left", "right")))):
+        raise bad(f"{column} path '{text}' is no case folder of `breastplan plan` (it holds no left/ or right/ "
+                  f"case, nor {Case.SCAN_NPZ})")
+    if path.is_dir() and not plans and not Case.holds(path):
+        raise bad(f"{column} path '{text}' is a folder but not a case folder (it holds no "
+                  f"{Case.SCAN_NPZ} from `breastplan ingest`)")
     return path
 
 

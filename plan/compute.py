@@ -19,6 +19,7 @@ from breastplan.options import PlanOptions
 from .breast_volume import BreastVolumes, change_on_earlier_wall, measure_breasts
 from .changes import UNCHANGED, Change, Method, change_name, combine, solve_change
 from .measures import asymmetry, breast_measures, breast_measures_each
+from .learnt_operation import operation_models
 from .operated import Operated, operate
 from .operation_spec import OperationSpec
 from .result import COMBINED, OPERATED, Measures, Plan, PlanState, SidePlan, SkinChange, StateGrid, planned_states
@@ -82,6 +83,7 @@ def operations(sides: dict[str, SidePlan], volumes: BreastVolumes, options: Plan
     """Each side's operations (`options.operations`, or those `options.symmetrise` proposes) made on her skin as
     measured (`volumes`); sides without any are left out. BadInputError where her scan rules one out."""
     nipples = {s: sp.scan.nipple_camera_mm for s, sp in sides.items()}
+    models = operation_models(options.operation_models)
     out = {}
     for side in sides:
         written = tuple(map(OperationSpec.parse, options.operations_of(side)))
@@ -92,10 +94,10 @@ def operations(sides: dict[str, SidePlan], volumes: BreastVolumes, options: Plan
             raise BadInputError(None, f"shows no inframammary fold under her {side} breast, where its operations "
                                       "are placed")
         if options.symmetrise == side:
-            proposal = symmetrising(volumes, nipples, side, fold)
+            proposal = symmetrising(volumes, nipples, side, fold, models)
             out[side] = replace(proposal.operated, note=proposal.note)
         else:
-            out[side] = operate(volumes, nipples, side, fold, written)
+            out[side] = operate(volumes, nipples, side, fold, written, models)
     return out
 
 

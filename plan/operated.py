@@ -47,8 +47,10 @@ class Operated:
 
     @property
     def words(self) -> str:
-        """The operations in a surgeon's words, in the order made ("" for none)."""
-        return "; then ".join(spec.words for spec in self.written)
+        """The operations in a surgeon's words, in the order made, each made by a clinic's model named ("" for
+        none)."""
+        return "; then ".join(spec.words + (f" (as {op.model} makes it)" if hasattr(op, "model") else "")
+                              for spec, op in zip(self.written, self.made))
 
     @property
     def warnings(self) -> tuple[str, ...]:
@@ -62,7 +64,9 @@ class Operated:
 
     def as_dict(self) -> dict:
         """plan.json's record of the operations: each as written, her volume and nipple before and after."""
-        return {"operations": [{"written": spec.text, "kind": spec.kind, **spec.settings} for spec in self.written],
+        return {"operations": [{"written": spec.text, "kind": spec.kind, **spec.settings,
+                                **({"model": op.model} if hasattr(op, "model") else {})}
+                               for spec, op in zip(self.written, self.made)],
                 "volume_before_cc": round(self.volume_before_cc, 1), "volume_after_cc": round(self.volume_cc, 1),
                 "volume_change_cc": round(self.volume_cc - self.volume_before_cc, 1),
                 "nipple_after_input_mm": [round(float(v), 2) for v in self.nipple_mm],
@@ -84,13 +88,16 @@ def said(operated: Operated, measures) -> tuple[str, ...]:
 
 
 def operate(volumes: BreastVolumes, nipples: dict, side: str, fold_below_nipple_mm: float,
-            written: tuple[OperationSpec, ...]) -> Operated:
+            written: tuple[OperationSpec, ...], models: dict | None = None) -> Operated:
     """The operations `written` made in turn on her `side` breast (module docstring): `nipples` side → (3,) input
-    frame, as scanned; her fold `fold_below_nipple_mm` below the `side` nipple."""
+    frame, as scanned; her fold `fold_below_nipple_mm` below the `side` nipple; `models`: operation kind → a clinic's
+    model that makes it (`plan.learnt_operation.OperationModel`) in place of the built-in one."""
+    models = models or {}
     start = np.asarray(nipples[side], float)
     fold_mm, nipple, made, now = volumes.in_body(start)[1] - fold_below_nipple_mm, start, [], volumes
     for spec in written:
-        done = spec.operate(now, {**nipples, side: nipple}, side, volumes.in_body(nipple)[1] - fold_mm)
+        done = (models[spec.kind].operate(now, nipple, side, spec) if spec.kind in models
+                else spec.operate(now, {**nipples, side: nipple}, side, volumes.in_body(nipple)[1] - fold_mm))
         grown = replace(now.cells, footprint=now.cells.footprint | done.footprint)
         cells = replace(grown, height_mm=done.heights(grown.height_mm))
         volume = now.sides[side].volume_cc + cells.volume_cc(side) - grown.volume_cc(side)   # its own change

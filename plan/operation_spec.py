@@ -70,7 +70,7 @@ class OperationSpec:
                 raise OptionError("operation", f"'{text}': '{word}' is no profile ({', '.join(PROFILES)}), shape "
                                                f"({', '.join(SHAPES)}) or pocket ({', '.join(POCKETS)})")
             out[key] = word
-        implant = _implant(out)                                       # its own checks: volume range, sizes
+        implant = implant_of(out)                                       # its own checks: volume range, sizes
         return out | {"volume_cc": implant.volume_cc}
 
     @staticmethod
@@ -109,7 +109,7 @@ class OperationSpec:
         """The operation in a surgeon's words."""
         s = self.settings
         if self.kind == "augmentation":
-            implant = _implant(s)
+            implant = implant_of(s)
             return (f"an implant of {implant.volume_cc:.0f} cc ({implant.width_mm:.0f} × {implant.projection_mm:.0f} "
                     f"mm), {s['shape']}, {'behind the muscle' if s['pocket'] == 'submuscular' else 'behind the gland'}")
         if self.kind == "lumpectomy":
@@ -127,7 +127,7 @@ class OperationSpec:
         below that nipple)."""
         s, nipple = self.settings, nipples[side]
         if self.kind == "augmentation":
-            return augmentation(volumes, side, nipple, fold_below_nipple_mm, _implant(s), s["pocket"])
+            return augmentation(volumes, side, nipple, fold_below_nipple_mm, implant_of(s), s["pocket"])
         if self.kind == "lumpectomy":
             return lumpectomy(volumes, side, nipple, s["volume_cc"], s["clock"], s["distance_mm"], s.get("depth_mm"))
         if self.kind == "reduction":
@@ -200,7 +200,8 @@ def _lift_words(settings: dict) -> str | None:
     return f"the nipple {settings['mm']:g} mm {where}"
 
 
-def _implant(settings: dict) -> Implant:
+def implant_of(settings: dict) -> Implant:
+    """The implant an augmentation's settings name (`OperationSpec.settings`)."""
     if "width_mm" in settings:
         return Implant.sized(settings["width_mm"], settings["projection_mm"], settings["shape"])
     return Implant.of(settings["volume_cc"], settings["profile"], settings["shape"])

@@ -67,10 +67,12 @@ class Symmetrising:
         return self.operated(points_mm)
 
 
-def symmetrising(volumes: BreastVolumes, nipples: dict, side: str, fold_below_nipple_mm: float) -> Symmetrising:
+def symmetrising(volumes: BreastVolumes, nipples: dict, side: str, fold_below_nipple_mm: float,
+                 models: dict | None = None) -> Symmetrising:
     """The operations on her `side` breast that match her other one (module docstring), written as a surgeon
-    writes them (`plan.operation_spec`) and made (`plan.operated`): `nipples` side → (3,) input frame; her fold
-    `fold_below_nipple_mm` below the `side` nipple (where an implant's lower rim goes)."""
+    writes them (`plan.operation_spec`) and made (`plan.operated`, by the clinic's `models` where given): `nipples`
+    side → (3,) input frame; her fold `fold_below_nipple_mm` below the `side` nipple (where an implant's lower rim
+    goes)."""
     other = "right" if side == "left" else "left"
     body = {s: volumes.in_body(n) for s, n in nipples.items()}
     mirrored = body[other] * [-1.0, 1.0, 1.0]
@@ -91,6 +93,6 @@ def symmetrising(volumes: BreastVolumes, nipples: dict, side: str, fold_below_ni
         notes.append(f"her {side} nipple lies {higher:.0f} mm above her {other}: no operation lowers a nipple (a lift "
                      f"of her {other} breast raises hers: --symmetrise {other})")
     note = "; ".join(notes) or None
-    operated = operate(volumes, nipples, side, fold_below_nipple_mm, tuple(map(OperationSpec.parse, written)))
+    operated = operate(volumes, nipples, side, fold_below_nipple_mm, tuple(map(OperationSpec.parse, written)), models)
     return Symmetrising(operated, volumes.sides[other].volume_cc, volumes.in_body(operated.nipple_mm),
                         mirrored, note)

@@ -1,0 +1,249 @@
+"""An operation as a clinic's own before/after pairs show it: a statistical model of how one operation changes her
+skin, learnt from scans of the women it was made on, that makes that operation in a plan in place of the built-in
+model (`plan --operation-model MODEL.npz`).
+
+Measured as her volume is (`plan.breast_volume`: her skin over 5 mm cells of her body frame):
+
+1. **What a pair shows**: her skin after less her skin before, along her anterior axis, over a square of GRID_MM
+   around her nipple before (each scan in its own body frame, found from her body: the sternal notch its origin),
+   the square turned so that u runs from her midline outwards: a left and a right breast share one field.
+2. **What is learnt** (`learn.statistical.FieldModel`): the PCA modes of these fields and a regressor of their
+   weights from her signed volume change (cc: an implant's volume, a resection's less) and her breast's volume on
+   her skin before it (cc).
+3. **Made on her**: the field predicted for her is laid on her cells round her nipple, her footprint grown over the
+   skin it raises, and scaled so that her volume on her skin changes by the operation's volume exactly
+   (`plan.skin_lift.scaled`), as the built-in operations are.
+
+4. **Her nipple**: where the pairs show it move across her body (down and outwards under a larger breast), a
+   straight line in the same two inputs, fitted by least squares. Her skin slides with it, by the nipple's shift
+   times a Gaussian of the distance from her nipple (σ SLIDE_MM), and comes forward or back onto the changed
+   surface, so that the areola travels with the nipple (as a lift moves her skin, `plan.mastopexy`).
+
+Learnt: augmentation and reduction. A lift's change is a sliding of her skin that a height field does not hold, and
+a lumpectomy's is tied to a place on her breast.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from breastplan import ArtefactError, BadInputError, transform_points
+from breastplan.model_file import ModelFile, load_model, save_model
+
+from .breast_volume import CELL_MM, FOOT_MM, BreastVolumes
+from .operation_spec import OperationSpec, implant_of
+from .skin_lift import SkinLift, scaled
+
+OPERATION = "operation"
+"""A model file's `model`: an operation's model (a deformation's statistical model is "statistical")."""
+LEARNT = ("augmentation", "reduction")
+GRID_MM = 120.0
+"""The field is learnt over u, v in [−GRID_MM, GRID_MM] round her nipple (mm)."""
+AXIS = np.arange(-GRID_MM, GRID_MM + CELL_MM / 2, CELL_MM)
+FEATURES = ("volume change, cc", "her volume before, cc")
+SLIDE_MM = 40.0
+"""σ of the Gaussian her skin slides with her nipple by (mm)."""
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class LearntOperation(SkinLift):
+    """An operation made by a clinic's model (`SkinLift`: her skin's change over the cells, the footprint it is
+    measured in), with the operation as written and the model that made it."""
+
+    spec: OperationSpec
+    side: str
+    model: str                       # the model file's name
+    nipple_mm: np.ndarray            # (2,) her nipple before, (x, y) body frame
+    shift_mm: np.ndarray             # (2,) how far it moves across her body, (x, y) body frame
+    surface_mm: np.ndarray           # (nx, ny) her skin's anterior coordinate before, body frame
+
+    def displacement(self, points_mm) -> np.ndarray:
+        """(N, 3) how far input-frame points of her skin move (across her body with her nipple, and forward or back
+        onto the changed surface), input frame, mm."""
+        T = self.body_from_input
+        body = transform_points(T, np.asarray(points_mm, float).reshape(-1, 3))
+        near = np.exp(-0.5 * np.sum((body[:, :2] - self.nipple_mm) ** 2, axis=1) / SLIDE_MM ** 2)
+        across = np.outer(near * (np.sign(body[:, 0]) == _outwards(self.side)), self.shift_mm)
+        moved = body[:, :2] + across
+        forward = self.sampled(self.surface_mm + self.lift_mm, moved, "nearest") - self.sampled(self.surface_mm, body,
+                                                                                                  "nearest")
+        return np.column_stack([across, forward]) @ T[:3, :3]                  # body → input frame
+
+
+def signed_change_cc(spec: OperationSpec, volume_before_cc: float) -> float:
+    """How much an operation changes her breast's volume (cc, < 0 for a reduction), as written."""
+    s = spec.settings
+    if spec.kind == "augmentation":
+        return implant_of(s).volume_cc
+    if spec.kind == "reduction":
+        return -float(s["volume_cc"] if "volume_cc" in s else volume_before_cc - s["to_volume_cc"])
+    raise ValueError(f"no learnt model makes a {spec.kind}")
+
+
+@dataclass(frozen=True, eq=False)
+class Pair:
+    """One breast before and after an operation: her torso measured on her skin before and after it, her nipple
+    before and after (each in its scan's input frame, mm), the side, the operation as written, and the group it
+    belongs to in cross-validation (her scan before, say)."""
+
+    before: BreastVolumes
+    after: BreastVolumes
+    nipple_mm: np.ndarray
+    nipple_after_mm: np.ndarray      # (3,) her nipple after, input frame of the scan after
+    side: str
+    spec: OperationSpec
+    group: str
+
+    @property
+    def volume_before_cc(self) -> float:
+        return self.before.sides[self.side].volume_cc
+
+    def nipple_shift(self) -> np.ndarray:
+        """(2,) how far her nipple moved across her body (u outwards, v up; mm), each scan's in its own body frame."""
+        return _across(self.after.in_body(self.nipple_after_mm) - self.before.in_body(self.nipple_mm), self.side)
+
+    def skin_change(self) -> np.ndarray:
+        """(len(AXIS), len(AXIS)) her skin after less before along her anterior axis (mm), at u (outwards from her
+        midline), v (up) round her nipple before; each scan's skin in its own body frame; 0 off either's cells."""
+        centre = self.before.in_body(self.nipple_mm)
+        return np.nan_to_num(_skin_at(self.after, centre, self.side) - _skin_at(self.before, centre, self.side))
+
+
+def features(change_cc: float, volume_before_cc: float) -> np.ndarray:
+    """(1, 2) the regressor's inputs (FEATURES)."""
+    return np.array([[change_cc, volume_before_cc]], float)
+
+
+@dataclass(frozen=True)
+class OperationModel:
+    """A loaded operation model: the operation it makes, and its file."""
+
+    model: ModelFile
+    path: Path
+
+    @property
+    def kind(self) -> str:
+        return str(self.model.meta["kind"])
+
+    @property
+    def pairs(self) -> int:
+        return int(self.model.meta["training"]["pairs"])
+
+    def field(self, change_cc: float, volume_before_cc: float) -> np.ndarray:
+        """(len(AXIS), len(AXIS)) the skin change predicted for her (mm), over u, v round her nipple."""
+        weights = self.model.predict(features(change_cc, volume_before_cc)).reshape(1, -1)
+        return (weights @ self.model.extra["components"] + self.model.extra["mean"])[0].reshape(AXIS.size, AXIS.size)
+
+    def nipple_shift(self, change_cc: float, volume_before_cc: float) -> np.ndarray:
+        """(2,) how far her nipple moves across her body (u outwards, v up; mm)."""
+        return (np.append(features(change_cc, volume_before_cc)[0], 1.0) @ self.model.extra["nipple"])
+
+    def operate(self, volumes: BreastVolumes, nipple_mm, side: str, spec: OperationSpec) -> LearntOperation:
+        """`spec` made on her `side` breast by this model (module docstring); `nipple_mm` (3,) input frame.
+        BadInputError where her breast rules it out (a resection no smaller than it)."""
+        cells, breast = volumes.cells, volumes.sides[side].volume_cc
+        change = signed_change_cc(spec, breast)
+        if not change > -breast:
+            raise BadInputError(None, f"gives a resection of {-change:g} cc from her {side} breast of {breast:.0f} cc "
+                                      "on her skin: a reduction takes more than nothing and less than the breast")
+        nipple = volumes.in_body(nipple_mm)
+        U, V = np.meshgrid((cells.x - nipple[0]) * _outwards(side), cells.y - nipple[1], indexing="ij")
+        at = np.stack([(U - AXIS[0]) / CELL_MM, (V - AXIS[0]) / CELL_MM])
+        shape = ndimage.map_coordinates(self.field(change, breast), at, order=1, mode="constant", cval=0.0)
+        half = (cells.x > 0 if side == "left" else cells.x < 0)[:, None]
+        shape = np.where(half, shape, 0.0)
+        raised = half & (cells.height_mm + shape > FOOT_MM) & (change > 0)   # a resection raises no skin
+        grown = ndimage.binary_propagation(cells.side(side), mask=cells.side(side) | raised)
+        lift = scaled(cells, side, np.where(grown, shape, 0.0), grown, change)
+        return LearntOperation(cells.x, cells.y, lift, grown, volumes.body_from_input, spec=spec, side=side,
+                               model=self.path.name, nipple_mm=nipple[:2],
+                               shift_mm=_across(self.nipple_shift(change, breast), side),
+                               surface_mm=cells.wall_mm + cells.height_mm)
+
+
+def load_operation_model(path: str | Path) -> OperationModel:
+    """An operation model file (`train`); ArtefactError naming it if it is not one or is inconsistent."""
+    path = Path(path)
+    model = load_model(path)
+    meta, extra = model.meta, model.extra
+    if meta.get("model") != OPERATION:
+        raise ArtefactError(path, "is no operation's model (train-statistical writes one from a folder of "
+                                  "before/after pairs of one operation)")
+    mean, components = extra.get("mean"), extra.get("components")
+    nipple = extra.get("nipple")
+    if (meta.get("kind") not in LEARNT or mean is None or components is None or mean.shape != (AXIS.size ** 2,)
+            or components.shape != (model.n_outputs, mean.size) or model.n_features != len(FEATURES)
+            or nipple is None or nipple.shape != (len(FEATURES) + 1, 2)
+            or not isinstance(meta.get("training", {}).get("pairs"), int)):
+        raise ArtefactError(path, "holds an inconsistent operation model (its operation, modes or features)")
+    return OperationModel(model, path)
+
+
+def operation_models(paths) -> dict[str, OperationModel]:
+    """The operation models of the files `paths`, by the operation each makes; ArtefactError naming a file that is
+    no operation model, BadInputError naming a second model of one operation."""
+    out: dict[str, OperationModel] = {}
+    for path in paths:
+        model = load_operation_model(path)
+        if model.kind in out:
+            raise BadInputError(model.path, f"makes {model.kind}s, as {out[model.kind].path} does: give one model "
+                                            "per operation")
+        out[model.kind] = model
+    return out
+
+
+def train(pairs: list[Pair], regressor: str = "kernel-ridge"):
+    """One operation learnt from `pairs`: (the skin change's FieldModel, the nipple's shift as (3, 2) coefficients
+    of the features and 1, the file's metadata), for `save`. The FieldModel's hyper-parameters are chosen by 4-fold
+    cross-validation grouped by the pairs' `group` when there are at least 4 groups."""
+    from breastplan.learn.statistical import FieldModel
+    from breastplan.learn.statistical_study import GRIDS, grid_select
+
+    kinds = {p.spec.kind for p in pairs}
+    if len(kinds) != 1 or not kinds <= set(LEARNT):
+        raise ValueError(f"one operation's pairs are learnt at a time, of {' or '.join(LEARNT)}; got {sorted(kinds)}")
+    fields = np.stack([p.skin_change().ravel() for p in pairs])
+    X = np.concatenate([features(signed_change_cc(p.spec, p.volume_before_cc), p.volume_before_cc) for p in pairs])
+    groups = np.array([p.group for p in pairs])
+    nipple = np.linalg.lstsq(np.column_stack([X, np.ones(len(X))]), np.stack([p.nipple_shift() for p in pairs]),
+                             rcond=None)[0]
+    if len(set(groups)) >= 4:
+        est, hyper, cv = grid_select(FieldModel(regressor), GRIDS[regressor], X, fields, groups)
+    else:
+        est, hyper, cv = FieldModel(regressor).fit(X, fields), {}, float("nan")
+    meta = {"model": OPERATION, "kind": kinds.pop(), "regressor": regressor, "features": list(FEATURES),
+            "hyper": {k: float(v) for k, v in hyper.items()}, "cv_field_rmse_mm": cv / 100.0,
+            "grid_mm": GRID_MM, "cell_mm": CELL_MM,
+            "target": "PCA weights of her skin's change along her anterior axis round her nipple, mm",
+            "training": {"pairs": len(pairs), "women": len(set(groups))}}
+    return est, nipple, meta
+
+
+def save(path: str | Path, trained: tuple) -> Path:
+    """Write a trained operation model (`train`'s) as a `breastplan.model/1` file, atomically."""
+    estimator, nipple, meta = trained
+    return save_model(path, estimator.weights_, meta=meta, extra={
+        "mean": estimator.pca_.mean_, "components": estimator.pca_.components_, "nipple": nipple})
+
+
+def _outwards(side: str) -> float:
+    return 1.0 if side == "left" else -1.0
+
+
+def _across(shift, side: str) -> np.ndarray:
+    """(2,) a shift's (x, y) in her body frame as (u, v) outwards and up, or back: the same map both ways."""
+    return np.array([_outwards(side) * shift[0], shift[1]], float)
+
+
+def _skin_at(volumes: BreastVolumes, centre: np.ndarray, side: str) -> np.ndarray:
+    """Her skin's anterior coordinate (body frame, mm) at u, v round `centre`: bilinear over her cells, the
+    wall's where no skin was seen on either side, 0 off the cells."""
+    cells = volumes.cells
+    U, V = np.meshgrid(AXIS, AXIS, indexing="ij")
+    at = np.stack([(centre[0] + _outwards(side) * U - cells.x[0]) / CELL_MM, (centre[1] + V - cells.y[0]) / CELL_MM])
+    skin = ndimage.map_coordinates(cells.height_mm + cells.wall_mm, at, order=1, mode="nearest")
+    inside = (at >= 0).all(0) & (at[0] <= cells.x.size - 1) & (at[1] <= cells.y.size - 1)
+    return np.where(inside, skin, np.nan)

@@ -1,0 +1,156 @@
+"""A clinic's model of an operation learnt from before/after pairs (`plan.learnt_operation`), against truths built
+here: her scanned skin with a bump of known shape and volume added and her nipple moved by a known shift (the
+"after" of each pair), her mirror symmetry, and a MakeHuman body one cup larger (the body an augmentation aims at)."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from test_breast_volume import measured, scanned
+
+from breastplan import ArtefactError, BadInputError
+from breastplan.plan.breast_volume import CELL_MM
+from breastplan.plan.learnt_operation import (AXIS, LearntOperation, Pair, load_operation_model, operation_models,
+                                              save, train)
+from breastplan.plan.operation_spec import OperationSpec
+
+BODY = "symmetric"
+SIGMA_MM = 30.0
+"""The bump's width: a Gaussian of this σ round her nipple, lowered by LOWER_MM (an implant fills the lower pole)."""
+LOWER_MM = 10.0
+DROP_MM_PER_CC = 0.05
+"""The pairs' nipple goes this far down, and half as far outwards, per cc added."""
+
+
+def _bump(volumes, side: str) -> tuple[np.ndarray, float]:
+    """(nx, ny) a Gaussian bump of unit height round her `side` nipple (lowered), and its volume (cc)."""
+    cells = volumes.cells
+    n = volumes.in_body(scanned(BODY)[1][side])
+    X, Y = np.meshgrid(cells.x - n[0], cells.y - n[1] + LOWER_MM, indexing="ij")
+    bump = np.exp(-0.5 * (X ** 2 + Y ** 2) / SIGMA_MM ** 2)
+    return bump, float(bump.sum() * CELL_MM ** 2 / 1000.0)
+
+
+def _after(volumes, change_cc: float, sides=("left",)):
+    """Her torso's cells with `change_cc` of bump on each of `sides`, and her nipples moved as DROP_MM_PER_CC says
+    (input frame)."""
+    height, nipples = volumes.cells.height_mm, dict(scanned(BODY)[1])
+    R = volumes.body_from_input[:3, :3]
+    for side in sides:
+        bump, cc = _bump(volumes, side)
+        height = height + bump * change_cc / cc
+        out = 1.0 if side == "left" else -1.0
+        nipples[side] = nipples[side] + np.array([0.5 * out, -1.0, 0.0]) @ R * DROP_MM_PER_CC * change_cc
+    return replace(volumes, cells=replace(volumes.cells, height_mm=height)), nipples
+
+
+def _pairs(volumes, changes=(150.0, 250.0, 350.0, 450.0), side="left"):
+    nipples = scanned(BODY)[1]
+    out = []
+    for cc in changes:
+        after, moved = _after(volumes, cc, (side,))
+        out.append(Pair(volumes, after, nipples[side], moved[side], side, OperationSpec.parse(f"augmentation:{cc:g}"),
+                        f"woman {cc:g}"))
+    return out
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory):
+    path = tmp_path_factory.mktemp("model") / "augmentation.npz"
+    save(path, train(_pairs(measured(BODY)), "ridge"))
+    return load_operation_model(path)
+
+
+def test_a_pairs_skin_change_is_the_bump_it_was_given():
+    volumes = measured(BODY)
+    pair = _pairs(volumes, (300.0,))[0]
+    bump, cc = _bump(volumes, "left")
+    change = pair.skin_change()
+    assert change.shape == (AXIS.size, AXIS.size)
+    assert change.sum() * CELL_MM ** 2 / 1000.0 == pytest.approx(300.0 * (bump.sum() - 0) / bump.sum(), rel=0.03)
+    assert np.unravel_index(np.argmax(change), change.shape)[1] < AXIS.size // 2    # below her nipple
+    assert pair.nipple_shift() == pytest.approx([0.5 * DROP_MM_PER_CC * 300, -DROP_MM_PER_CC * 300], abs=1e-6)
+
+
+def test_the_model_makes_the_operation_the_pairs_show_with_her_volume_changed_exactly(model):
+    """A 200 cc implant, an amount no pair shows: her skin rises in the bump's shape over her footprint (the part
+    of the bump outside it made up inside, so that her volume on her skin grows by 200 cc exactly), her nipple
+    moves as the pairs' line says."""
+    volumes = measured(BODY)
+    nipple = scanned(BODY)[1]["left"]
+    op = model.operate(volumes, nipple, "left", OperationSpec.parse("augmentation:200"))
+    assert isinstance(op, LearntOperation) and op.model == "augmentation.npz"
+    after = replace(volumes.cells, height_mm=op.heights(volumes.cells.height_mm), footprint=op.footprint)
+    grown = replace(volumes.cells, footprint=op.footprint)
+    assert after.volume_cc("left") - grown.volume_cc("left") == pytest.approx(200.0, abs=0.01)
+    bump, cc = _bump(volumes, "left")
+    inside = op.footprint & (volumes.cells.x > 0)[:, None]
+    ratio = op.lift_mm[inside] / bump[inside]
+    assert ratio.std() < 0.01 * ratio.mean() and 1.0 <= ratio.mean() < 1.0 / 0.8 * 200.0 / cc
+    assert (op.lift_mm[~inside] == 0.0).all()
+    assert np.abs(op.lift_mm[volumes.cells.x < 0]).max() == 0.0                      # her other breast untouched
+    moved = volumes.in_body(op(nipple[None])[0]) - volumes.in_body(nipple)
+    assert moved[:2] == pytest.approx([0.5 * DROP_MM_PER_CC * 200, -DROP_MM_PER_CC * 200], abs=0.05)
+    assert moved[2] > 0.0                                                             # onto the risen skin
+
+
+def test_a_model_learnt_on_left_breasts_makes_the_mirror_change_on_a_right_one(model):
+    """Learnt from left breasts only, on her right breast: the bump round her right nipple, and the nipple's shift
+    mirrored (outwards is to her right)."""
+    volumes = measured(BODY)
+    nipple = scanned(BODY)[1]["right"]
+    op = model.operate(volumes, nipple, "right", OperationSpec.parse("augmentation:300"))
+    bump, _ = _bump(volumes, "right")
+    inside = op.footprint & (volumes.cells.x < 0)[:, None]
+    ratio = op.lift_mm[inside] / bump[inside]
+    assert ratio.std() < 0.01 * ratio.mean()
+    assert np.abs(op.lift_mm[volumes.cells.x > 0]).max() == 0.0
+    moved = volumes.in_body(op(nipple[None])[0]) - volumes.in_body(nipple)
+    assert moved[:2] == pytest.approx([-0.5 * DROP_MM_PER_CC * 300, -DROP_MM_PER_CC * 300], abs=0.05)
+
+
+def test_a_reduction_model_lowers_her_skin_by_the_resection_exactly(tmp_path):
+    volumes = measured(BODY)
+    nipple = scanned(BODY)[1]["right"]
+    pairs = []
+    for cc in (100.0, 200.0):
+        after, moved = _after(volumes, -cc, ("right",))
+        pairs.append(Pair(volumes, after, nipple, moved["right"], "right", OperationSpec.parse(f"reduction:{cc:g}"),
+                          f"woman {cc:g}"))
+    save(tmp_path / "reduction.npz", train(pairs, "ridge"))
+    model = load_operation_model(tmp_path / "reduction.npz")
+    assert model.kind == "reduction" and model.pairs == 2
+    op = model.operate(volumes, nipple, "right", OperationSpec.parse("reduction:150"))
+    cells = replace(volumes.cells, footprint=op.footprint)
+    assert replace(cells, height_mm=op.heights(cells.height_mm)).volume_cc("right") - cells.volume_cc("right") \
+        == pytest.approx(-150.0, abs=0.01)
+    assert (op.footprint == volumes.cells.side("right")).all()                 # a resection grows no footprint
+    breast = volumes.sides["right"].volume_cc
+    with pytest.raises(BadInputError, match="less than the breast"):
+        model.operate(volumes, nipple, "right", OperationSpec.parse(f"reduction:{breast + 1:.0f}"))
+
+
+def test_a_file_that_is_no_operation_model_and_two_models_of_one_operation_are_refused(model, tmp_path):
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, a=np.zeros(3))
+    with pytest.raises(ArtefactError) as refused:
+        load_operation_model(bad)
+    assert "bad.npz" in str(refused.value)
+    with pytest.raises(BadInputError, match="one model per operation"):
+        operation_models([model.path, model.path])
+    with pytest.raises(ValueError, match="one operation"):
+        volumes = measured(BODY)
+        mixed = _pairs(volumes, (150.0,)) + [replace(_pairs(volumes, (250.0,))[0],
+                                                     spec=OperationSpec.parse("reduction:100"))]
+        train(mixed)
+
+
+def test_the_model_is_the_same_whatever_the_order_of_the_pairs(tmp_path):
+    pairs = _pairs(measured(BODY))
+    save(tmp_path / "a.npz", train(pairs, "ridge"))
+    save(tmp_path / "b.npz", train(pairs[::-1], "ridge"))
+    a, b = (load_operation_model(tmp_path / f) for f in ("a.npz", "b.npz"))
+    assert np.allclose(a.field(222.0, 500.0), b.field(222.0, 500.0), atol=1e-9)
+    assert np.allclose(a.nipple_shift(222.0, 500.0), b.nipple_shift(222.0, 500.0), atol=1e-9)
