@@ -87,7 +87,7 @@ def _operation_model(pairs: Path, out: Path, regressor: str, as_json: bool, cloc
         raise BadInputError(pairs / "pairs.csv", "holds one breast operated: a model learns from two at least")
     trained = train(learnt, regressor)
     save(out, trained)
-    meta = trained[2]
+    meta = trained[-1]
     report({"model": str(out), "operation": meta["kind"], "pairs": meta["training"]["pairs"],
             "women": meta["training"]["women"], "regressor": regressor, "hyper": meta["hyper"],
             "cv_field_rmse_mm": meta["cv_field_rmse_mm"], "seconds": clock.seconds}, as_json, f"model → {out}")

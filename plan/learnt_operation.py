@@ -6,18 +6,25 @@ Measured as her volume is (`plan.breast_volume`: her skin over 5 mm cells of her
 
 1. **What a pair shows**: her skin after less her skin before, along her anterior axis, over a square of GRID_MM
    around her nipple before (each scan in its own body frame, found from her body: the sternal notch its origin),
-   the square turned so that u runs from her midline outwards: a left and a right breast share one field.
+   the square turned so that u runs from her midline outwards: a left and a right breast share one field. Of an
+   augmentation, the rise is learnt (mm: an implant adds its thickness whatever lies over it); of a reduction, the
+   share of her tissue taken at each place (the fall over her skin's height above the wall), which is then laid on
+   her own tissue, as the built-in reduction takes it.
 2. **What is learnt** (`learn.statistical.FieldModel`): the PCA modes of these fields and a regressor of their
    weights from her signed volume change (cc: an implant's volume, a resection's less) and her breast's volume on
    her skin before it (cc).
-3. **Made on her**: the field predicted for her is laid on her cells round her nipple, her footprint grown over the
-   skin it raises, and scaled so that her volume on her skin changes by the operation's volume exactly
-   (`plan.skin_lift.scaled`), as the built-in operations are.
-
-4. **Her nipple**: where the pairs show it move across her body (down and outwards under a larger breast), a
-   straight line in the same two inputs, fitted by least squares. Her skin slides with it, by the nipple's shift
+3. **Made on her**: the field predicted for her is laid on her cells round her nipple (a reduction's share times
+   her own skin's height above the wall), its part of the operation's sign kept (an implant raises her skin, a
+   resection lowers it: the rest is the pairs' scans differing), her footprint grown over the skin it raises, and
+   scaled so that her volume on her skin changes by the operation's volume exactly (`plan.skin_lift.scaled`), as
+   the built-in operations are; a fall stops at her chest wall (where her volume counts no height below it).
+4. **Her nipple**: where the pairs show it move across her body (down and outwards under a larger breast), in
+   proportion to the volume change, fitted by least squares. Her skin slides with it, by the nipple's shift
    times a Gaussian of the distance from her nipple (σ SLIDE_MM), and comes forward or back onto the changed
    surface, so that the areola travels with the nipple (as a lift moves her skin, `plan.mastopexy`).
+
+The model does not extrapolate: for a woman whose volume or change lies outside the pairs', the skin change is
+shaped as at the nearest of their range (and still scaled to her change exactly), and the plan says so (`warning`).
 
 Learnt: augmentation and reduction. A lift's change is a sliding of her skin that a height field does not hold, and
 a lumpectomy's is tied to a place on her breast.
@@ -59,6 +66,7 @@ class LearntOperation(SkinLift):
     nipple_mm: np.ndarray            # (2,) her nipple before, (x, y) body frame
     shift_mm: np.ndarray             # (2,) how far it moves across her body, (x, y) body frame
     surface_mm: np.ndarray           # (nx, ny) her skin's anterior coordinate before, body frame
+    warning: str | None = None       # where she lies outside the pairs it learnt from
 
     def displacement(self, points_mm) -> np.ndarray:
         """(N, 3) how far input-frame points of her skin move (across her body with her nipple, and forward or back
@@ -111,6 +119,16 @@ class Pair:
         centre = self.before.in_body(self.nipple_mm)
         return np.nan_to_num(_skin_at(self.after, centre, self.side) - _skin_at(self.before, centre, self.side))
 
+    def learnt(self) -> np.ndarray:
+        """(len(AXIS), len(AXIS)) what a model learns of this pair: an augmentation's rise of her skin (mm); a
+        reduction's share of her tissue taken at each place (her skin's fall over its height above the wall, at
+        least FOOT_MM: −1..0)."""
+        change = self.skin_change()
+        if self.spec.kind == "augmentation":
+            return change
+        height = _skin_at(self.before, self.before.in_body(self.nipple_mm), self.side, wall=False)
+        return np.clip(change / np.maximum(np.nan_to_num(height), FOOT_MM), -1.0, 0.0)
+
 
 def features(change_cc: float, volume_before_cc: float) -> np.ndarray:
     """(1, 2) the regressor's inputs (FEATURES)."""
@@ -133,13 +151,24 @@ class OperationModel:
         return int(self.model.meta["training"]["pairs"])
 
     def field(self, change_cc: float, volume_before_cc: float) -> np.ndarray:
-        """(len(AXIS), len(AXIS)) the skin change predicted for her (mm), over u, v round her nipple."""
-        weights = self.model.predict(features(change_cc, volume_before_cc)).reshape(1, -1)
+        """(len(AXIS), len(AXIS)) the skin change predicted for her (mm), over u, v round her nipple; inputs outside
+        the pairs' range taken at its nearest end."""
+        X = np.clip(features(change_cc, volume_before_cc), *self.model.extra["range"])
+        weights = self.model.predict(X).reshape(1, -1)
         return (weights @ self.model.extra["components"] + self.model.extra["mean"])[0].reshape(AXIS.size, AXIS.size)
 
-    def nipple_shift(self, change_cc: float, volume_before_cc: float) -> np.ndarray:
-        """(2,) how far her nipple moves across her body (u outwards, v up; mm)."""
-        return (np.append(features(change_cc, volume_before_cc)[0], 1.0) @ self.model.extra["nipple"])
+    def nipple_shift(self, change_cc: float) -> np.ndarray:
+        """(2,) how far her nipple moves across her body (u outwards, v up; mm) for a volume change (cc)."""
+        return change_cc * self.model.extra["nipple"]
+
+    def outside(self, change_cc: float, volume_before_cc: float) -> str | None:
+        """Where her change or her volume lies outside the pairs' (a warning in words), else None."""
+        lo, hi = self.model.extra["range"]
+        said = [f"{name} {value:.0f} cc lies outside the pairs' {a:.0f}–{b:.0f} cc"
+                for name, value, a, b in zip(("the change", "her volume"), (change_cc, volume_before_cc), lo, hi)
+                if not a <= value <= b]
+        return (f"{self.path.name} learnt from {self.pairs} breasts: {' and '.join(said)}; shaped as the nearest "
+                "of them") if said else None
 
     def operate(self, volumes: BreastVolumes, nipple_mm, side: str, spec: OperationSpec) -> LearntOperation:
         """`spec` made on her `side` breast by this model (module docstring); `nipple_mm` (3,) input frame.
@@ -154,14 +183,16 @@ class OperationModel:
         at = np.stack([(U - AXIS[0]) / CELL_MM, (V - AXIS[0]) / CELL_MM])
         shape = ndimage.map_coordinates(self.field(change, breast), at, order=1, mode="constant", cval=0.0)
         half = (cells.x > 0 if side == "left" else cells.x < 0)[:, None]
-        shape = np.where(half, shape, 0.0)
+        shape = np.where(half, np.clip(shape, 0.0, None) if change > 0 else
+                         np.clip(shape, -1.0, 0.0) * np.clip(cells.height_mm, 0.0, None), 0.0)
         raised = half & (cells.height_mm + shape > FOOT_MM) & (change > 0)   # a resection raises no skin
         grown = ndimage.binary_propagation(cells.side(side), mask=cells.side(side) | raised)
         lift = scaled(cells, side, np.where(grown, shape, 0.0), grown, change)
+        lift = np.maximum(lift, -np.clip(cells.height_mm, 0.0, None))     # to her wall: her volume counts no less
         return LearntOperation(cells.x, cells.y, lift, grown, volumes.body_from_input, spec=spec, side=side,
                                model=self.path.name, nipple_mm=nipple[:2],
-                               shift_mm=_across(self.nipple_shift(change, breast), side),
-                               surface_mm=cells.wall_mm + cells.height_mm)
+                               shift_mm=_across(self.nipple_shift(change), side),
+                               surface_mm=cells.wall_mm + cells.height_mm, warning=self.outside(change, breast))
 
 
 def load_operation_model(path: str | Path) -> OperationModel:
@@ -173,10 +204,11 @@ def load_operation_model(path: str | Path) -> OperationModel:
         raise ArtefactError(path, "is no operation's model (train-statistical writes one from a folder of "
                                   "before/after pairs of one operation)")
     mean, components = extra.get("mean"), extra.get("components")
-    nipple = extra.get("nipple")
+    nipple, bounds = extra.get("nipple"), extra.get("range")
     if (meta.get("kind") not in LEARNT or mean is None or components is None or mean.shape != (AXIS.size ** 2,)
             or components.shape != (model.n_outputs, mean.size) or model.n_features != len(FEATURES)
-            or nipple is None or nipple.shape != (len(FEATURES) + 1, 2)
+            or nipple is None or nipple.shape != (2,) or bounds is None or bounds.shape != (2, len(FEATURES))
+            or not (bounds[0] <= bounds[1]).all()
             or not isinstance(meta.get("training", {}).get("pairs"), int)):
         raise ArtefactError(path, "holds an inconsistent operation model (its operation, modes or features)")
     return OperationModel(model, path)
@@ -196,20 +228,20 @@ def operation_models(paths) -> dict[str, OperationModel]:
 
 
 def train(pairs: list[Pair], regressor: str = "kernel-ridge"):
-    """One operation learnt from `pairs`: (the skin change's FieldModel, the nipple's shift as (3, 2) coefficients
-    of the features and 1, the file's metadata), for `save`. The FieldModel's hyper-parameters are chosen by 4-fold
-    cross-validation grouped by the pairs' `group` when there are at least 4 groups."""
+    """One operation learnt from `pairs`: (the FieldModel of what each pair shows, `Pair.learnt`; the nipple's shift
+    per cc of change (2,); the features' least and most (2, features); the file's metadata), for `save`. The
+    FieldModel's hyper-parameters are chosen by 4-fold cross-validation grouped by the pairs' `group` when there
+    are at least 4 groups."""
     from breastplan.learn.statistical import FieldModel
     from breastplan.learn.statistical_study import GRIDS, grid_select
 
     kinds = {p.spec.kind for p in pairs}
     if len(kinds) != 1 or not kinds <= set(LEARNT):
         raise ValueError(f"one operation's pairs are learnt at a time, of {' or '.join(LEARNT)}; got {sorted(kinds)}")
-    fields = np.stack([p.skin_change().ravel() for p in pairs])
+    fields = np.stack([p.learnt().ravel() for p in pairs])
     X = np.concatenate([features(signed_change_cc(p.spec, p.volume_before_cc), p.volume_before_cc) for p in pairs])
     groups = np.array([p.group for p in pairs])
-    nipple = np.linalg.lstsq(np.column_stack([X, np.ones(len(X))]), np.stack([p.nipple_shift() for p in pairs]),
-                             rcond=None)[0]
+    nipple = np.linalg.lstsq(X[:, :1], np.stack([p.nipple_shift() for p in pairs]), rcond=None)[0][0]
     if len(set(groups)) >= 4:
         est, hyper, cv = grid_select(FieldModel(regressor), GRIDS[regressor], X, fields, groups)
     else:
@@ -219,14 +251,14 @@ def train(pairs: list[Pair], regressor: str = "kernel-ridge"):
             "grid_mm": GRID_MM, "cell_mm": CELL_MM,
             "target": "PCA weights of her skin's change along her anterior axis round her nipple, mm",
             "training": {"pairs": len(pairs), "women": len(set(groups))}}
-    return est, nipple, meta
+    return est, nipple, np.stack([X.min(axis=0), X.max(axis=0)]), meta
 
 
 def save(path: str | Path, trained: tuple) -> Path:
     """Write a trained operation model (`train`'s) as a `breastplan.model/1` file, atomically."""
-    estimator, nipple, meta = trained
+    estimator, nipple, bounds, meta = trained
     return save_model(path, estimator.weights_, meta=meta, extra={
-        "mean": estimator.pca_.mean_, "components": estimator.pca_.components_, "nipple": nipple})
+        "mean": estimator.pca_.mean_, "components": estimator.pca_.components_, "nipple": nipple, "range": bounds})
 
 
 def _outwards(side: str) -> float:
@@ -238,12 +270,12 @@ def _across(shift, side: str) -> np.ndarray:
     return np.array([_outwards(side) * shift[0], shift[1]], float)
 
 
-def _skin_at(volumes: BreastVolumes, centre: np.ndarray, side: str) -> np.ndarray:
-    """Her skin's anterior coordinate (body frame, mm) at u, v round `centre`: bilinear over her cells, the
-    wall's where no skin was seen on either side, 0 off the cells."""
+def _skin_at(volumes: BreastVolumes, centre: np.ndarray, side: str, wall: bool = True) -> np.ndarray:
+    """Her skin's anterior coordinate (body frame, mm; or, not `wall`, its height above the wall) at u, v round
+    `centre`: bilinear over her cells, the wall's where no skin was seen on either side, NaN off the cells."""
     cells = volumes.cells
     U, V = np.meshgrid(AXIS, AXIS, indexing="ij")
     at = np.stack([(centre[0] + _outwards(side) * U - cells.x[0]) / CELL_MM, (centre[1] + V - cells.y[0]) / CELL_MM])
-    skin = ndimage.map_coordinates(cells.height_mm + cells.wall_mm, at, order=1, mode="nearest")
+    skin = ndimage.map_coordinates(cells.height_mm + cells.wall_mm * wall, at, order=1, mode="nearest")
     inside = (at >= 0).all(0) & (at[0] <= cells.x.size - 1) & (at[1] <= cells.y.size - 1)
     return np.where(inside, skin, np.nan)
