@@ -241,7 +241,7 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
                          f"down to its chest wall, registered at rms {f.registration.rms_mm:.2f} mm)"
                          + (f"; on her skin, on the earlier wall: {skin.on_wall_cc:+.1f} cc" if skin else ""))
     for s, op in plan.operated.items():
-        stdout.print(f"{s} operated: {', '.join(spec.text for spec in op.written) or 'nothing proposed'}; her volume "
+        stdout.print(f"{s} operated: {', '.join(op.texts) or 'nothing proposed'}; her volume "
                      f"{op.volume_before_cc:.1f} → {op.volume_cc:.1f} cc on her skin, her nipple moved "
                      f"{op.nipple_moved_mm:.0f} mm", markup=False, soft_wrap=True)
         for words in said(op, m):

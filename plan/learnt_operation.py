@@ -24,7 +24,7 @@ Measured as her volume is (`plan.breast_volume`: her skin over 5 mm cells of her
    surface, so that the areola travels with the nipple (as a lift moves her skin, `plan.mastopexy`).
 
 The model does not extrapolate: for a woman whose volume or change lies outside the pairs', the skin change is
-shaped as at the nearest of their range (and still scaled to her change exactly), and the plan says so (`warning`).
+shaped as at the nearest of their range (and still scaled to her change exactly), and the plan says so (`note`).
 
 Learnt: augmentation and reduction. A lift's change is a sliding of her skin that a height field does not hold, and
 a lumpectomy's is tied to a place on her breast.
@@ -66,7 +66,7 @@ class LearntOperation(SkinLift):
     nipple_mm: np.ndarray            # (2,) her nipple before, (x, y) body frame
     shift_mm: np.ndarray             # (2,) how far it moves across her body, (x, y) body frame
     surface_mm: np.ndarray           # (nx, ny) her skin's anterior coordinate before, body frame
-    warning: str | None = None       # where she lies outside the pairs it learnt from
+    note: str | None = None          # where she lies outside the pairs it learnt from
 
     def displacement(self, points_mm) -> np.ndarray:
         """(N, 3) how far input-frame points of her skin move (across her body with her nipple, and forward or back
@@ -162,7 +162,7 @@ class OperationModel:
         return change_cc * self.model.extra["nipple"]
 
     def outside(self, change_cc: float, volume_before_cc: float) -> str | None:
-        """Where her change or her volume lies outside the pairs' (a warning in words), else None."""
+        """Where her change or her volume lies outside the pairs' (a note in words), else None."""
         lo, hi = self.model.extra["range"]
         said = [f"{name} {value:.0f} cc lies outside the pairs' {a:.0f}–{b:.0f} cc"
                 for name, value, a, b in zip(("the change", "her volume"), (change_cc, volume_before_cc), lo, hi)
@@ -192,7 +192,7 @@ class OperationModel:
         return LearntOperation(cells.x, cells.y, lift, grown, volumes.body_from_input, spec=spec, side=side,
                                model=self.path.name, nipple_mm=nipple[:2],
                                shift_mm=_across(self.nipple_shift(change), side),
-                               surface_mm=cells.wall_mm + cells.height_mm, warning=self.outside(change, breast))
+                               surface_mm=cells.wall_mm + cells.height_mm, note=self.outside(change, breast))
 
 
 def load_operation_model(path: str | Path) -> OperationModel:

@@ -53,9 +53,21 @@ class Operated:
                               for spec, op in zip(self.written, self.made))
 
     @property
+    def texts(self) -> tuple[str, ...]:
+        """Each operation as written, in the order made, each made by a clinic's model named."""
+        return tuple(spec.text + (f" (by {op.model})" if hasattr(op, "model") else "")
+                     for spec, op in zip(self.written, self.made))
+
+    @property
     def warnings(self) -> tuple[str, ...]:
         """What a surgeon is warned of (a lumpectomy's excised share), in a surgeon's words."""
         return tuple(w for w in (getattr(op, "warning", None) for op in self.made) if w)
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """What a surgeon is told of how the plan was made: a proposal's unmatched part, a clinic's model's pairs not
+        reaching her."""
+        return tuple(n for n in (self.note, *(getattr(op, "note", None) for op in self.made)) if n)
 
     @property
     def nipple_moved_mm(self) -> float:
@@ -71,12 +83,12 @@ class Operated:
                 "volume_change_cc": round(self.volume_cc - self.volume_before_cc, 1),
                 "nipple_after_input_mm": [round(float(v), 2) for v in self.nipple_mm],
                 "nipple_moved_mm": round(self.nipple_moved_mm, 1), "warnings": list(self.warnings),
-                "note": self.note}
+                "note": "; ".join(self.notes) or None}
 
 
 def said(operated: Operated, measures) -> tuple[str, ...]:
     """What the plan says of one side's operations: its warnings, each with the measures it names as the plan
-    finds them before → after (`plan.result.Measures`: pBRA, the volume's left − right), and a proposal's note."""
+    finds them before → after (`plan.result.Measures`: pBRA, the volume's left − right), and its notes."""
     sym, asym = measures.symmetry, measures.asymmetry
     figures = []
     if sym.get("before", {}).get("pBRA_pct") is not None and sym.get("after", {}).get("pBRA_pct") is not None:
@@ -84,7 +96,7 @@ def said(operated: Operated, measures) -> tuple[str, ...]:
     if asym:
         figures.append(f"volume left − right {asym['before']['volume_cc']:+.0f} → {asym['after']['volume_cc']:+.0f} cc")
     here = f" (this plan: {', '.join(figures)})" if figures else ""
-    return tuple(w + here for w in operated.warnings) + ((operated.note,) if operated.note else ())
+    return tuple(w + here for w in operated.warnings) + operated.notes
 
 
 def operate(volumes: BreastVolumes, nipples: dict, side: str, fold_below_nipple_mm: float,

@@ -100,7 +100,7 @@ def test_a_change_outside_the_pairs_is_shaped_as_the_nearest_of_them_and_said(mo
     """Learnt from 150–450 cc: 600 cc has the bump's shape, 600 cc of it, and the plan says she lies outside."""
     volumes = measured(BODY)
     op = model.operate(volumes, scanned(BODY)[1]["left"], "left", OperationSpec.parse("augmentation:600"))
-    assert op.warning is not None and "600 cc lies outside the pairs' 150–450 cc" in op.warning
+    assert op.note is not None and "600 cc lies outside the pairs' 150–450 cc" in op.note
     assert np.allclose(model.field(600.0, 500.0), model.field(450.0, 500.0))
     bump, _ = _bump(volumes, "left")
     inside = op.footprint & (volumes.cells.x > 0)[:, None]
@@ -110,7 +110,7 @@ def test_a_change_outside_the_pairs_is_shaped_as_the_nearest_of_them_and_said(mo
     assert replace(cells, height_mm=op.heights(cells.height_mm)).volume_cc("left") - cells.volume_cc("left") \
         == pytest.approx(600.0, abs=0.01)
     assert model.operate(volumes, scanned(BODY)[1]["left"], "left",
-                         OperationSpec.parse("augmentation:300")).warning is None
+                         OperationSpec.parse("augmentation:300")).note is None
 
 
 def test_a_model_learnt_on_left_breasts_makes_the_mirror_change_on_a_right_one(model):
