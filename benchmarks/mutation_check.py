@@ -374,6 +374,19 @@ MUTANTS = [
     one("batch-plan-file-ignored", "a batch planning a scan with its own plan file as every other",
         "batch/run.py", "plan = {**_her_plan(options.plan, i.plan_file).as_dict(), \"wall_from\": earlier}",
         "plan = {**options.plan.as_dict(), \"wall_from\": earlier}", ("tests/test_batch_plan_files.py",)),
+    # --- a clinic's own model of an operation -----------------------------------------------------------
+    one("learnt-field-not-mirrored", "a clinic's model laying its field on a right breast unmirrored",
+        "plan/learnt_operation.py", "np.meshgrid((cells.x - nipple[0]) * _outwards(side),",
+        "np.meshgrid((cells.x - nipple[0]),",
+        ("tests/test_learnt_operation.py",)),
+    one("learnt-skin-not-sliding", "her skin left in place across her body where a clinic's model moves her nipple",
+        "plan/learnt_operation.py", "return np.column_stack([across, forward]) @ T[:3, :3]",
+        "return np.column_stack([0.0 * across, forward]) @ T[:3, :3]", ("tests/test_learnt_operation.py",)),
+    one("learnt-fall-behind-wall", "a clinic's reduction sinking her skin behind her chest wall",
+        "plan/learnt_operation.py", "lift = np.maximum(lift, -np.clip(cells.height_mm, 0.0, None))", "lift = lift",
+        ("tests/test_learnt_operation.py",)),
+    one("operation-model-unused", "a plan making an operation by the built-in model where a clinic's was given",
+        "plan/operated.py", "if spec.kind in models", "if False", ("tests/test_learnt_operation_cli.py",)),
 ]
 
 

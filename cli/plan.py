@@ -72,7 +72,7 @@ def plan(
     deform, operations, symmetrise = _written(plan_file, deform, left, right, symmetrise)
     try:
         options = PlanOptions.parse(deform, side, method, units, up, None if wall_from is None else str(wall_from),
-                                    operations, symmetrise, tuple(map(str, operation_model)))
+                                    operations, symmetrise, tuple(str(p.absolute()) for p in operation_model))
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
     who = _patient(patient, patient_id, surgeon, date)

@@ -70,7 +70,8 @@ def read_operation_pairs(folder: str | Path) -> list[OperationRow]:
             raise bad(f"a model learns {' or '.join(LEARNT)}, not {spec.kind}")
         kinds.add(spec.kind)
         if len(kinds) > 1:
-            raise bad(f"is a {spec.kind} where the rows above are {kinds - {spec.kind}}: a model learns one operation")
+            raise bad(f"is a {spec.kind} where the rows above are {(kinds - {spec.kind}).pop()}s: a model learns one "
+                      "operation")
         side = value["side"].lower()
         if side not in SIDES:
             raise bad(f"side '{value['side']}' is none of left, right or both")

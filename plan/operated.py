@@ -49,8 +49,8 @@ class Operated:
     def words(self) -> str:
         """The operations in a surgeon's words, in the order made, each made by a clinic's model named ("" for
         none)."""
-        return "; then ".join(spec.words + (f" (as {op.model} makes it)" if hasattr(op, "model") else "")
-                              for spec, op in zip(self.written, self.made))
+        return "; then ".join(spec.words + (f" (as {op.model} makes it, from its volume alone)" if hasattr(op, "model")
+                                            else "") for spec, op in zip(self.written, self.made))
 
     @property
     def texts(self) -> tuple[str, ...]:
