@@ -203,3 +203,27 @@ def test_a_pairs_table_the_models_do_not_learn_from_is_refused_naming_it_and_the
 def test_a_deformation_models_options_with_an_operations_pairs_are_usage_errors(cli, clinic, tmp_path, args, flag):
     res = run(cli, "train-statistical", "--pairs", clinic / "pairs", "--out", tmp_path / "out.npz", *args)
     _usage_error(res, flag, tmp_path / "out.npz")
+
+
+def test_a_batch_makes_a_patients_planned_operation_by_the_clinics_model_and_the_others_by_the_built_in(cli, clinic,
+                                                                                                     tmp_path):
+    """Her scan with her plan file (an augmentation, which the model makes) and a scan with a reduction (which it
+    does not): each volume changes by its own operation exactly; plan.json names the model beside hers alone."""
+    folder, out = tmp_path / "scans", tmp_path / "cases"
+    folder.mkdir()
+    for name in ("her", "ida"):
+        os.link(clinic / "her.ply", folder / f"{name}.ply")
+    (folder / "her.plan.yaml").write_text(f"left: augmentation:{IMPLANT_CC:g}\n")
+    (folder / "ida.plan.yaml").write_text("right: reduction:30\n")
+    res = run(cli, "batch", folder, "--out", out, "--operation-model", clinic / "model.npz")
+    assert res.returncode == 0, res.stderr
+    her, ida = (_plan(out / name) for name in ("her", "ida"))
+    assert her["options"]["operation_models"] == [str(clinic / "model.npz")]
+    made = her["sides"]["left"]["operations"]
+    assert made["operations"][0]["model"] == "model.npz"
+    assert made["volume_change_cc"] == pytest.approx(IMPLANT_CC, abs=0.1)
+    cut = ida["sides"]["right"]["operations"]
+    assert "model" not in cut["operations"][0] and cut["volume_change_cc"] == pytest.approx(-30.0, abs=0.1)
+    res = run(cli, "batch", folder, "--out", tmp_path / "none", "--operation-model", tmp_path / "missing.npz")
+    assert_bad_input(res, tmp_path / "missing.npz", tmp_path)
+    assert not (tmp_path / "none").exists()
