@@ -90,4 +90,4 @@ def _operation_model(pairs: Path, out: Path, regressor: str, as_json: bool, cloc
     meta = trained[-1]
     report({"model": str(out), "operation": meta["kind"], "pairs": meta["training"]["pairs"],
             "women": meta["training"]["women"], "regressor": regressor, "hyper": meta["hyper"],
-            "cv_field_rmse_mm": meta["cv_field_rmse_mm"], "seconds": clock.seconds}, as_json, f"model → {out}")
+            "cv_rmse": meta["cv_rmse"], "seconds": clock.seconds}, as_json, f"model → {out}")

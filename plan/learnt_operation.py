@@ -235,6 +235,7 @@ def train(pairs: list[Pair], regressor: str = "kernel-ridge"):
     from breastplan.learn.statistical import FieldModel
     from breastplan.learn.statistical_study import GRIDS, grid_select
 
+    pairs = sorted(pairs, key=lambda p: (p.group, p.side))        # the folds and the fit, whatever the table's order
     kinds = {p.spec.kind for p in pairs}
     if len(kinds) != 1 or not kinds <= set(LEARNT):
         raise ValueError(f"one operation's pairs are learnt at a time, of {' or '.join(LEARNT)}; got {sorted(kinds)}")
@@ -247,9 +248,10 @@ def train(pairs: list[Pair], regressor: str = "kernel-ridge"):
     else:
         est, hyper, cv = FieldModel(regressor).fit(X, fields), {}, float("nan")
     meta = {"model": OPERATION, "kind": kinds.pop(), "regressor": regressor, "features": list(FEATURES),
-            "hyper": {k: float(v) for k, v in hyper.items()}, "cv_field_rmse_mm": cv / 100.0,
+            "hyper": {k: float(v) for k, v in hyper.items()}, "cv_rmse": cv / 100.0,
             "grid_mm": GRID_MM, "cell_mm": CELL_MM,
-            "target": "PCA weights of her skin's change along her anterior axis round her nipple, mm",
+            "target": "PCA weights of what a pair shows round her nipple: an augmentation's rise of her skin (mm), a "
+                      "reduction's share of her tissue taken (−1..0)",
             "training": {"pairs": len(pairs), "women": len(set(groups))}}
     return est, nipple, np.stack([X.min(axis=0), X.max(axis=0)]), meta
 
