@@ -11,7 +11,7 @@ from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, BatchOptions, OptionE
 from .app import JSON, UNITS_HELP, UP_HELP, command
 from .output import read_only, real, report, stderr, stdout, usage_error, writable
 from .plan import FLAGS as PLAN_FLAGS
-from .plan import check_method
+from .plan import check_method, check_operation_models
 
 FLAGS = {**PLAN_FLAGS, "jobs": "--jobs", "executor": "--executor", "scheduler": "--scheduler"}
 
@@ -45,7 +45,7 @@ def batch(
     """Plan every scan and recording of a folder, one case folder each, with a manifest; resumable.
     Exit 0 when any input was planned, 3 when none was."""
     from breastplan import BadInputError
-    from breastplan.errors import require_file, require_folder
+    from breastplan.errors import require_folder
 
     try:
         models = tuple(str(p.absolute()) for p in operation_model)
@@ -54,11 +54,7 @@ def batch(
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
     check_method(method)
-    for path in operation_model:
-        require_file(path, "model file")
-    from breastplan.plan.learnt_operation import operation_models
-
-    operation_models(models)
+    check_operation_models(options.plan, planned=False)
     if wall_from is not None:
         read_only(wall_from, out)
     if real(out) == real(input):

@@ -281,17 +281,18 @@ def check_method(method: str):
     return resolved
 
 
-def check_operation_models(options: PlanOptions) -> None:
+def check_operation_models(options: PlanOptions, planned: bool = True) -> None:
     """--operation-model's files loaded before any work: bad input (exit 3) for a file that is missing or no
-    operation's model, or a second model of one operation; a usage error for a model of an operation not planned."""
+    operation's model, or a second model of one operation; with `planned`, a usage error for a model of an
+    operation the options do not plan (a batch's patients plan theirs in their own files)."""
     from breastplan.plan.learnt_operation import operation_models
     from breastplan.plan.operation_spec import OperationSpec
 
     for path in options.operation_models:
         require_file(Path(path), "model file")
-    planned = {OperationSpec.parse(text).kind for _, text in options.operations}
+    kinds = {OperationSpec.parse(text).kind for _, text in options.operations}
     for kind, model in operation_models(options.operation_models).items():
-        if kind not in planned and options.symmetrise is None:
+        if planned and kind not in kinds and options.symmetrise is None:
             raise usage_error(f"{model.path} makes {kind}s, and no {kind} is planned", "--operation-model")
 
 
