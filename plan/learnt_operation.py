@@ -21,7 +21,10 @@ Measured as her volume is (`plan.breast_volume`: her skin over 5 mm cells of her
 4. **Her nipple**: where the pairs show it move across her body (down and outwards under a larger breast), in
    proportion to the volume change, fitted by least squares. Her skin slides with it, by the nipple's shift
    times a Gaussian of the distance from her nipple (σ SLIDE_MM), and comes forward or back onto the changed
-   surface, so that the areola travels with the nipple (as a lift moves her skin, `plan.mastopexy`).
+   surface, so that the areola travels with the nipple (as a lift moves her skin, `plan.mastopexy`). Away from the
+   nipple the slide fades where her skin turns away from the front (times cos² of its tilt over the cells, but not
+   below the square of the Gaussian): a height field holds her front, not the underside of a breast curling back
+   beneath it, which, slid whole, tore in oblique views.
 
 The model does not extrapolate: for a woman whose volume or change lies outside the pairs', the skin change is
 shaped as at the nearest of their range (and still scaled to her change exactly), and the plan says so (`note`).
@@ -55,6 +58,7 @@ SLIDE_MM = 40.0
 """σ of the Gaussian her skin slides with her nipple by (mm)."""
 
 
+
 @dataclass(frozen=True, eq=False, kw_only=True)
 class LearntOperation(SkinLift):
     """An operation made by a clinic's model (`SkinLift`: her skin's change over the cells, the footprint it is
@@ -74,10 +78,12 @@ class LearntOperation(SkinLift):
         T = self.body_from_input
         body = transform_points(T, np.asarray(points_mm, float).reshape(-1, 3))
         near = np.exp(-0.5 * np.sum((body[:, :2] - self.nipple_mm) ** 2, axis=1) / SLIDE_MM ** 2)
-        across = np.outer(near * (np.sign(body[:, 0]) == _outwards(self.side)), self.shift_mm)
-        moved = body[:, :2] + across
-        forward = self.sampled(self.surface_mm + self.lift_mm, moved, "nearest") - self.sampled(self.surface_mm, body,
-                                                                                                  "nearest")
+        surface = self.sampled(self.surface_mm, body, "nearest")
+        slope = np.hypot(*np.gradient(self.surface_mm, CELL_MM))
+        facing = self.sampled(1.0 / (1.0 + slope ** 2), body, "nearest")        # cos² of her skin's tilt from ahead
+        slide = near * np.maximum(facing, near ** 2)                           # the nipple and areola slide whole
+        across = np.outer(slide * (np.sign(body[:, 0]) == _outwards(self.side)), self.shift_mm)
+        forward = self.sampled(self.surface_mm + self.lift_mm, body[:, :2] + across, "nearest") - surface
         return np.column_stack([across, forward]) @ T[:3, :3]                  # body → input frame
 
 
