@@ -181,7 +181,7 @@ class OperationModel:
         BadInputError where her breast rules it out (a resection no smaller than it)."""
         cells, breast = volumes.cells, volumes.sides[side].volume_cc
         change = signed_change_cc(spec, breast)
-        if not change > -breast:
+        if spec.kind == "reduction" and not -breast < change < 0.0:
             raise BadInputError(None, f"gives a resection of {-change:g} cc from her {side} breast of {breast:.0f} cc "
                                       "on her skin: a reduction takes more than nothing and less than the breast")
         nipple = volumes.in_body(nipple_mm)

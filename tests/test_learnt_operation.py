@@ -150,8 +150,9 @@ def test_a_reduction_model_lowers_her_skin_by_the_resection_exactly(tmp_path):
     assert (cells.height_mm + most.lift_mm >= -1e-9)[cells.side("right") & (cells.height_mm > 0)].all()
     assert replace(cells, height_mm=most.heights(cells.height_mm)).volume_cc("right") - cells.volume_cc("right") \
         == pytest.approx(-round(0.9 * breast, 1), abs=0.01)                     # her skin to her wall, not behind it
-    with pytest.raises(BadInputError, match="less than the breast"):
-        model.operate(volumes, nipple, "right", OperationSpec.parse(f"reduction:{breast + 1:.0f}"))
+    for cut in (f"reduction:{breast + 1:.0f}", f"reduction:to={breast + 1:.0f}"):     # more than she has, or nothing
+        with pytest.raises(BadInputError, match="more than nothing and less than the breast"):
+            model.operate(volumes, nipple, "right", OperationSpec.parse(cut))
 
 
 def test_a_file_that_is_no_operation_model_and_two_models_of_one_operation_are_refused(model, tmp_path):
