@@ -276,7 +276,7 @@ def _operations_table(plan: Plan) -> str:
     after = ("Every state shown is after them: the changes by degree start from her breasts as operated."
              if plan.grid.kinds else "")
     return ('<section id="operations"><h2>Operations planned</h2>' + _table(
-        ["breast", "operations, in the order made", "her volume cc", "her nipple moves mm", "warnings"], rows,
+        ["breast", "operations, in the order made", "her volume cc", "her nipple moves mm", "warnings and notes"], rows,
         "operations") + (f"<p>{after}</p>" if after else "") + "</section>")
 
 
