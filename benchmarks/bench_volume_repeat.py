@@ -40,8 +40,11 @@ model (`fit_scan(ingested).volume_cc` per side, BLAS on one thread as `breastpla
    ±BLEND_MM by a smooth step; the truth is the blended mesh's own half volumes, 135 and 390 cc apart;
    the vertices the cup targets move all lie within 145 mm of the nipple), 2 bodies in 2 views each:
    |error| in % of the true difference — target ≤ 10 % (bench_realistic's for a cup change). To
-   explain it, each scene's front-seen difference: her skin's left minus its mirror image on the right,
-   summed over the cells seen on both sides (no wall, no footprint), as a share of the true difference.
+   explain it, what a perfect front view holds of the true difference: the body's true surface seen along
+   her found anterior axis (every cell seen, no perspective, `true_front_mm`), its left less its mirror
+   image on the right, summed over the whole grid (no wall, no outline) and, clipped at the measured wall,
+   over the footprint the measure drew; and the measure's own left − right over the cells it saw against
+   that perfect view's on the same cells.
 
 4. the other room: each re-scan body scanned once more with a wall where its re-scans had none (or
    none where they had one), whose up axis then comes from the other source: its nipple and volume
@@ -191,7 +194,7 @@ class SceneResult:
     new: dict = field(default_factory=dict)      # side → {volume_cc, uncertainty_cc, nipple_body, ...}
     fitted: dict = field(default_factory=dict)   # side → volume_cc
     frame: dict = field(default_factory=dict)    # the found landmarks in the true body frame: notch, up, left
-    seen_lr_cc: float | None = None             # her skin, left − mirrored right, over the cells seen on both sides
+    front_lr_cc: dict = field(default_factory=dict)  # a perfect front view's left − right: `front_difference_cc`
 
     def as_dict(self) -> dict:
         s = self.shot
@@ -242,7 +245,7 @@ def run_scene(shot: Shot) -> SceneResult:
         lm = m.landmarks
         out.frame = {"notch": transform_points(true_T, np.asarray(lm.sternal_notch)[None])[0],
                      "up": true_T[:3, :3] @ lm.up_axis, "left": true_T[:3, :3] @ lm.left_axis}
-        out.seen_lr_cc = seen_difference_cc(m.cells)
+        out.front_lr_cc = front_difference_cc(m, scene) if shot.body in HYBRIDS else {}
         for side, b in m.sides.items():
             out.new[side] = {
                 "volume_cc": float(b.volume_cc), "uncertainty_cc": float(b.uncertainty_cc),
@@ -263,12 +266,39 @@ def run_scene(shot: Shot) -> SceneResult:
     return out
 
 
-def seen_difference_cc(cells) -> float:
-    """Her skin on her left less its mirror image on her right, summed over the cells seen on both sides (cc):
-    the difference a front view sees, whatever the footprint (the wall's mirror-symmetric part cancels)."""
-    h = np.where(cells.seen, cells.height_mm, np.nan)
-    d = (h - h[::-1])[cells.x > 0]
-    return float(np.nansum(d)) * CELL_MM ** 2 / 1000.0
+def true_front_mm(m, scene: BodyScene) -> np.ndarray:
+    """(nx, ny) the body's true surface on the measure's cells as a perfect front view sees it: the first hit
+    of a ray along her found anterior axis (−z of her found body frame) through each cell's centre, in that
+    frame (mm; NaN: no body there)."""
+    import open3d as o3d
+
+    V = transform_points(m.body_from_input @ scene.camera_from_body, scene.body.vertices)
+    rc = o3d.t.geometry.RaycastingScene()
+    rc.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(scene.body.faces.astype(np.uint32)))
+    X, Y = np.meshgrid(m.cells.x, m.cells.y, indexing="ij")
+    top = float(V[:, 2].max()) + 100.0
+    rays = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, top), np.zeros((X.size, 2)), -np.ones(X.size)])
+    t = rc.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))["t_hit"].numpy().astype(float)
+    return np.where(np.isfinite(t), top - t, np.nan).reshape(X.shape)
+
+
+def front_difference_cc(m, scene: BodyScene) -> dict:
+    """Left less mirrored right (cc) of a perfect front view (`true_front_mm`): over the whole grid (her skin, no
+    wall, no outline: the wall's mirror-symmetric part cancels), over the measured footprint (heights above the
+    measured wall, those above 0, as the measure sums them), and over the footprint's cells the camera saw,
+    beside the measure's own left − right on those same cells."""
+    c = m.cells
+    front = true_front_mm(m, scene)
+    left = (c.x > 0)[:, None] & np.ones_like(c.footprint)
+
+    def lr(h, mask):
+        h = np.clip(np.nan_to_num(h), 0.0, None)
+        return float(h[mask & left].sum() - h[mask & ~left].sum()) * CELL_MM ** 2 / 1000.0
+
+    seen = c.footprint & c.seen
+    return {"whole_grid": float(np.nansum((front - front[::-1])[c.x > 0])) * CELL_MM ** 2 / 1000.0,
+            "footprint": lr(front - c.wall_mm, c.footprint),
+            "seen_cells": lr(front - c.wall_mm, seen), "measured_seen_cells": lr(c.height_mm, seen)}
 
 
 # --- figures ---------------------------------------------------------------------------------
@@ -404,7 +434,7 @@ def asymmetry_rows(results: list[SceneResult]) -> list[dict]:
             new, fit = lr(volumes(r, "new")), lr(volumes(r, "fitted"))
             rows.append({"kind": "one-sided cup" if r.shot.body in HYBRIDS else "asymmetry target",
                          "body": r.shot.body, "view": r.shot.label, "true_lr_cc": true,
-                         "new_lr_cc": new, "fitted_lr_cc": fit, "seen_lr_cc": r.seen_lr_cc,
+                         "new_lr_cc": new, "fitted_lr_cc": fit, "front_lr_cc": r.front_lr_cc,
                          "new_error_cc": None if new is None else new - true,
                          "fitted_error_cc": None if fit is None else fit - true})
     return rows
@@ -433,6 +463,11 @@ def visit_rows(results: list[SceneResult]) -> list[dict]:
 def relative(row: dict, which: str) -> float | None:
     e = row[f"{which}_error_cc"]
     return None if e is None else 100.0 * e / abs(row["true_lr_cc"])
+
+
+def share(row: dict, key: str) -> float | None:
+    """A perfect front view's left − right (`front_difference_cc`, `key`) as % of the row's true difference."""
+    return None if not row["front_lr_cc"] else 100.0 * row["front_lr_cc"][key] / row["true_lr_cc"]
 
 
 def worst_abs(values) -> float | None:
@@ -513,12 +548,17 @@ def figures_of(resc: list[dict], sym: list[dict], asym: list[dict], results: lis
                worst_cc=worst_abs(a["new_error_cc"] for a in cups),
                baseline_worst_cc=worst_abs(a["fitted_error_cc"] for a in cups),
                true_lr_cc_range=[min(a["true_lr_cc"] for a in cups), max(a["true_lr_cc"] for a in cups)],
-               front_seen_share_pct=[None if a["seen_lr_cc"] is None else 100.0 * a["seen_lr_cc"] / a["true_lr_cc"]
-                                     for a in cups],
+               perfect_front_whole_grid_pct=[share(a, "whole_grid") for a in cups],
+               perfect_front_footprint_pct=[share(a, "footprint") for a in cups],
+               measured_vs_perfect_on_seen_cells_cc=[
+                   None if not a["front_lr_cc"] else
+                   a["front_lr_cc"]["measured_seen_cells"] - a["front_lr_cc"]["seen_cells"] for a in cups],
                over=f"{sum(a['new_error_cc'] is not None for a in cups)}/{len(cups)} scenes of one-sided cup "
-                    "bodies: |measured − true (left − right)| / |true|"
-                    "; front_seen_share_pct: her skin, left less mirrored right, over the cells seen on both "
-                    "sides, % of the true difference"),
+                    "bodies: |measured − true (left − right)| / |true|; perfect_front: the true surface seen "
+                    "along her found anterior axis, left less mirrored right, % of the true difference, over "
+                    "the whole grid (no wall) and inside the measured footprint (above the measured wall); "
+                    "measured_vs_perfect: the measure's left − right less the perfect view's, on the "
+                    "footprint's cells the camera saw"),
         figure("single_scan_change_worst_pct", worst_abs(v["new_pct_of_true"] - 100.0 for v in visits
                                                           if v["new_pct_of_true"] is not None), None,
                worst_abs(v["fitted_pct_of_true"] - 100.0 for v in visits if v["fitted_pct_of_true"] is not None), "%",

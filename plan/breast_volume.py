@@ -43,9 +43,10 @@ from .measures import BodyLandmarks, find_landmarks
 
 CELL_MM = 5.0
 """Side of the square cells of the skin's height field."""
-MIN_POINTS = 4
-"""A cell with fewer points is unseen (a cell seen at a grazing angle holds one or two points of a steep
-surface, whose median is no height of her skin)."""
+MIN_POINTS = 3
+"""A cell with fewer points is unseen: the fewest whose median sets one stray point aside. A cell seen at a
+grazing angle holds a few points of a steep surface; the middle one of three is a height of her skin there,
+of one or two it may be a stray."""
 WALL_DEGREE = 3
 WALL_REACH, WALL_ABOVE = 1.9, 0.8
 """The wall is fitted within WALL_REACH times the nipples' distance from the midline of their mean place,

@@ -213,13 +213,13 @@ def test_a_breasts_volume_is_its_skins_heights_above_the_wall_over_its_footprint
 
 def _skin_points(cells, skin, hidden=None) -> np.ndarray:
     """Body-frame points whose median anterior coordinate on each cell is `skin` (nx, ny), mm: five points
-    round each cell's centre, three (too few to be seen) on the `hidden` cells."""
+    round each cell's centre, two (too few to be seen) on the `hidden` cells."""
     offsets = np.array([[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0], [0.0, 0.0]])
     spread = np.array([-0.5, 0.5, 0.0, -0.2, 0.2])
     points = []
     for i in range(len(cells.x)):
         for j in range(len(cells.y)):
-            k = 3 if hidden is not None and hidden[i, j] else 5
+            k = 2 if hidden is not None and hidden[i, j] else 5
             xy = np.array([cells.x[i], cells.y[j]]) + offsets[:k]
             points.append(np.column_stack([xy, skin[i, j] + spread[:k]]))
     return np.concatenate(points)
@@ -228,7 +228,7 @@ def _skin_points(cells, skin, hidden=None) -> np.ndarray:
 @pytest.mark.parametrize("left_scale", [0.95, 0.5])
 def test_a_cell_the_camera_did_not_see_takes_its_mirror_cells_height_at_her_sides_scale(left_scale):
     """`SkinCells.moved`: her skin's height on each cell is the median anterior coordinate of its points
-    less the wall; a cell with under four points is unseen. An unseen cell takes the height of its mirror
+    less the wall; a cell with under three points is unseen. An unseen cell takes the height of its mirror
     image across her midline (x → −x, the same y), or 0 when that is unseen too. Where her left side's skin
     stands `left_scale` times as high as her right's: within 0.9 of it the sides count as alike and the
     mirror's height is taken as it is; at half of it (one breast smaller) the left takes the right's
