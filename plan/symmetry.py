@@ -44,8 +44,8 @@ the breast has reached it (the fold) within FLOOR_MM of their median height."""
 HANG_SLOPE = 0.45
 """A hidden fold is put this many mm above the breast's lowest point per mm that point stands in front of
 the wall: its underside taken to rise back to the wall at about 24°. A prior, about the least-squares
-slope (0.47) over the 26 hidden folds of 15 MakeHuman scans whose folds are known (docs/symmetry.md
-gives the error)."""
+slope (0.47) over 26 hidden folds of MakeHuman scans whose folds are known (benchmarks/bench_folds.py
+measures the error)."""
 AT_FOLD_MM = 5.0
 """A nipple less than this above the fold is at the fold (half a cell: the fold's precision)."""
 GRADE_I_MM, GRADE_II_MM = 10.0, 30.0
@@ -151,17 +151,19 @@ def ptosis_from_cells(nipple_body, cells: SkinCells, side: str) -> dict:
     else:
         lowest = float(np.median(edge[under[cliff]]))
         fold, fold_from = lowest + HANG_SLOPE * float(np.median(depth[cliff])), "estimated"
-    to_fold, low_to_fold, to_lowest = float(nipple[1] - fold), lowest - fold, float(nipple[1] - lowest)
+    to_fold, to_lowest = float(nipple[1] - fold), float(nipple[1] - lowest)
+    return {"grade": regnault_grade(to_fold, to_lowest), "nipple_to_lowest_mm": to_lowest,
+            "nipple_to_fold_mm": to_fold, "lowest_to_fold_mm": lowest - fold, "fold_from": fold_from}
+
+
+def regnault_grade(to_fold: float, to_lowest: float) -> str:
+    """Regnault's grade from the nipple's height above the fold and above the breast's lowest point (mm, along
+    her up axis): `ptosis_from_cells`'s bands."""
     if to_fold > AT_FOLD_MM:
-        grade = "pseudoptosis" if low_to_fold < -PSEUDO_MM else "0"
-    elif to_fold >= -GRADE_I_MM:
-        grade = "I"
-    elif to_fold >= -GRADE_II_MM and to_lowest > AT_LOWEST_MM:
-        grade = "II"
-    else:
-        grade = "III"
-    return {"grade": grade, "nipple_to_lowest_mm": to_lowest, "nipple_to_fold_mm": to_fold,
-            "lowest_to_fold_mm": low_to_fold, "fold_from": fold_from}
+        return "pseudoptosis" if to_fold - to_lowest < -PSEUDO_MM else "0"
+    if to_fold >= -GRADE_I_MM:
+        return "I"
+    return "II" if to_fold >= -GRADE_II_MM and to_lowest > AT_LOWEST_MM else "III"
 
 
 def _fold_in_column(cells: SkinCells, i: int, j: int, edge: float) -> float:
