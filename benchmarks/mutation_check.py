@@ -385,6 +385,8 @@ MUTANTS = [
     one("learnt-fall-behind-wall", "a clinic's reduction sinking her skin behind her chest wall",
         "plan/learnt_operation.py", "lift = np.maximum(lift, -np.clip(cells.height_mm, 0.0, None))", "lift = lift",
         ("tests/test_learnt_operation.py",)),
+    one("learnt-share-per-cell", "a clinic's reduction learning each cell's share alone, one stray height and all",
+        "plan/learnt_operation.py", "SHARE_SIGMA_MM = CELL_MM", "SHARE_SIGMA_MM = 0.0", ("tests/test_learnt_operation.py",)),
     one("operation-model-unused", "a plan making an operation by the built-in model where a clinic's was given",
         "plan/operated.py", "if spec.kind in models", "if False", ("tests/test_learnt_operation_cli.py",)),
 ]

@@ -8,8 +8,9 @@ Measured as her volume is (`plan.breast_volume`: her skin over 5 mm cells of her
    around her nipple before (each scan in its own body frame, found from her body: the sternal notch its origin),
    the square turned so that u runs from her midline outwards: a left and a right breast share one field. Of an
    augmentation, the rise is learnt (mm: an implant adds its thickness whatever lies over it); of a reduction, the
-   share of her tissue taken at each place (the fall over her skin's height above the wall), which is then laid on
-   her own tissue, as the built-in reduction takes it.
+   share of her tissue taken at each place (the fall over her skin's height above the wall, each summed round the
+   place over a Gaussian of σ SHARE_SIGMA_MM: a cell her camera saw at a grazing angle holds a height of a few
+   points), which is then laid on her own tissue, as the built-in reduction takes it.
 2. **What is learnt** (`learn.statistical.FieldModel`): the PCA modes of these fields and a regressor of their
    weights from her signed volume change (cc: an implant's volume, a resection's less) and her breast's volume on
    her skin before it (cc).
@@ -56,6 +57,9 @@ AXIS = np.arange(-GRID_MM, GRID_MM + CELL_MM / 2, CELL_MM)
 FEATURES = ("volume change, cc", "her volume before, cc")
 SLIDE_MM = 40.0
 """σ of the Gaussian her skin slides with her nipple by (mm)."""
+SHARE_SIGMA_MM = CELL_MM
+"""σ of the Gaussian a reduction's fall and her tissue's height are summed over round each place (mm): the share
+of one cell's, a few points at the side of her breast against a height of a few millimetres, is noise."""
 
 
 
@@ -127,13 +131,14 @@ class Pair:
 
     def learnt(self) -> np.ndarray:
         """(len(AXIS), len(AXIS)) what a model learns of this pair: an augmentation's rise of her skin (mm); a
-        reduction's share of her tissue taken at each place (her skin's fall over its height above the wall, at
-        least FOOT_MM: −1..0)."""
+        reduction's share of her tissue taken at each place (her skin's fall over its height above the wall, each
+        summed round it over a Gaussian of σ SHARE_SIGMA_MM, the height at least FOOT_MM: −1..0)."""
         change = self.skin_change()
         if self.spec.kind == "augmentation":
             return change
-        height = _skin_at(self.before, self.before.in_body(self.nipple_mm), self.side, wall=False)
-        return np.clip(change / np.maximum(np.nan_to_num(height), FOOT_MM), -1.0, 0.0)
+        height = np.nan_to_num(_skin_at(self.before, self.before.in_body(self.nipple_mm), self.side, wall=False))
+        fall, tissue = (ndimage.gaussian_filter(a, SHARE_SIGMA_MM / CELL_MM, mode="nearest") for a in (change, height))
+        return np.clip(fall / np.maximum(tissue, FOOT_MM), -1.0, 0.0)
 
 
 def features(change_cc: float, volume_before_cc: float) -> np.ndarray:

@@ -155,6 +155,28 @@ def test_a_reduction_model_lowers_her_skin_by_the_resection_exactly(tmp_path):
             model.operate(volumes, nipple, "right", OperationSpec.parse(cut))
 
 
+
+def test_a_reductions_share_is_learnt_round_each_place_so_one_cells_stray_height_does_not_reach_the_model():
+    """A resection of 30 % of her tissue everywhere (her skin after at 0.7 of its height above the wall), scanned
+    after with 3 % of the cells off by 15 mm (a cell seen at a grazing angle holds a few points): the share learnt
+    over her breast (where her tissue stands over 10 mm) stays within 0.25 of the truth, −0.3, at every place, and
+    within 0.02 at most; one cell's stray height over one cell's tissue would read up to −1 or 0 there."""
+    volumes = measured(BODY)
+    nipple = scanned(BODY)[1]["left"]
+    h = volumes.cells.height_mm
+    cut = np.where(h > 0.0, 0.7 * h, h)
+    rng = np.random.default_rng(5)
+    stray = (rng.random(h.shape) < 0.03) * rng.choice([-15.0, 15.0], h.shape)
+
+    def pair(after_mm):
+        after = replace(volumes, cells=replace(volumes.cells, height_mm=after_mm))
+        return Pair(volumes, after, nipple, nipple, "left", OperationSpec.parse("reduction:100:none"), "woman")
+
+    tissue = -pair(cut).skin_change() / 0.3                                   # her tissue's height at each place
+    error = np.abs(pair(cut + stray).learnt() + 0.3)[tissue > 10.0]
+    assert error.size > 300
+    assert error.max() < 0.25 and np.median(error) < 0.02
+
 def test_a_file_that_is_no_operation_model_and_two_models_of_one_operation_are_refused(model, tmp_path):
     bad = tmp_path / "bad.npz"
     np.savez(bad, a=np.zeros(3))
