@@ -155,12 +155,11 @@ def test_a_reduction_model_lowers_her_skin_by_the_resection_exactly(tmp_path):
             model.operate(volumes, nipple, "right", OperationSpec.parse(cut))
 
 
-
 def test_a_reductions_share_is_learnt_round_each_place_so_one_cells_stray_height_does_not_reach_the_model():
     """A resection of 30 % of her tissue everywhere (her skin after at 0.7 of its height above the wall), scanned
     after with 3 % of the cells off by 15 mm (a cell seen at a grazing angle holds a few points): the share learnt
     over her breast (where her tissue stands over 10 mm) stays within 0.25 of the truth, −0.3, at every place, and
-    within 0.02 at most; one cell's stray height over one cell's tissue would read up to −1 or 0 there."""
+    within 0.02 at the median; one cell's stray height over one cell's tissue would read up to −1 or 0 there."""
     volumes = measured(BODY)
     nipple = scanned(BODY)[1]["left"]
     h = volumes.cells.height_mm
