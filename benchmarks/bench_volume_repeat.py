@@ -268,17 +268,17 @@ def run_scene(shot: Shot) -> SceneResult:
 
 def true_front_mm(m, scene: BodyScene) -> np.ndarray:
     """(nx, ny) the body's true surface on the measure's cells as a perfect front view sees it: the first hit
-    of a ray along her found anterior axis (−z of her found body frame) through each cell's centre, in that
-    frame (mm; NaN: no body there)."""
+    on the body of a ray along her found anterior axis (−z of her found body frame) through each cell's centre,
+    in that frame (mm; NaN: no body there). The scene's own ray casting, in its camera (the input) frame."""
     import open3d as o3d
 
-    V = transform_points(m.body_from_input @ scene.camera_from_body, scene.body.vertices)
-    rc = o3d.t.geometry.RaycastingScene()
-    rc.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(scene.body.faces.astype(np.uint32)))
+    to_input = np.linalg.inv(m.body_from_input)
+    top = float(transform_points(m.body_from_input @ scene.camera_from_body, scene.body.vertices)[:, 2].max()) + 100.0
     X, Y = np.meshgrid(m.cells.x, m.cells.y, indexing="ij")
-    top = float(V[:, 2].max()) + 100.0
-    rays = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, top), np.zeros((X.size, 2)), -np.ones(X.size)])
-    t = rc.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))["t_hit"].numpy().astype(float)
+    origins = transform_points(to_input, np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, top)]))
+    rays = np.column_stack([origins, np.tile(to_input[:3, :3] @ [0.0, 0.0, -1.0], (X.size, 1))])
+    hit = scene.raycasting().cast_rays(o3d.core.Tensor(rays.astype(np.float32)))
+    t = np.where(hit["geometry_ids"].numpy() == 0, hit["t_hit"].numpy(), np.inf).astype(float)   # 0: the body
     return np.where(np.isfinite(t), top - t, np.nan).reshape(X.shape)
 
 
