@@ -18,8 +18,8 @@ from breastplan.options import PlanOptions
 
 from .breast_volume import BreastVolumes, change_on_earlier_wall, measure_breasts
 from .changes import UNCHANGED, Change, Method, change_name, combine, solve_change
-from .measures import asymmetry, breast_measures, breast_measures_each
 from .learnt_operation import operation_models
+from .measures import asymmetry, breast_measures, breast_measures_each
 from .operated import Operated, operate
 from .operation_spec import OperationSpec
 from .result import COMBINED, OPERATED, Measures, Plan, PlanState, SidePlan, SkinChange, StateGrid, planned_states

@@ -62,7 +62,6 @@ SHARE_SIGMA_MM = CELL_MM
 of one cell's, a few points at the side of her breast against a height of a few millimetres, is noise."""
 
 
-
 @dataclass(frozen=True, eq=False, kw_only=True)
 class LearntOperation(SkinLift):
     """An operation made by a clinic's model (`SkinLift`: her skin's change over the cells, the footprint it is
