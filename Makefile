@@ -88,7 +88,10 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_repeatability.py
 	$(BIN)/python benchmarks/bench_volume_repeat.py
 	$(BIN)/python benchmarks/bench_follow_up.py
+	$(BIN)/python benchmarks/bench_folds.py
+	$(BIN)/python benchmarks/bench_symmetry.py
 	$(BIN)/python benchmarks/bench_operations.py
+	$(BIN)/python benchmarks/bench_learnt_operation.py
 	$(BIN)/python benchmarks/bench_shifted_pairs.py
 	$(BIN)/python benchmarks/bench_refusal.py
 	$(BIN)/python benchmarks/bench_plan.py
