@@ -1,5 +1,6 @@
-"""Running the `breastplan` command in tests, and checking its bad-input contract."""
+"""Running the `breastplan` command in tests, checking its bad-input contract, and the processes it starts."""
 import subprocess
+from pathlib import Path
 
 
 def run(cli, *args):
@@ -14,3 +15,16 @@ def assert_bad_input(res, path, folder):
     assert len(lines) == 1 and str(path) in lines[0] and "Traceback" not in res.stderr
     assert res.stdout == ""
     assert not any(p.name.endswith(".part") or p.name.startswith("out") for p in folder.iterdir())
+
+
+def child_processes(pid: int) -> set[int]:
+    """The live processes whose parent is `pid` (from /proc)."""
+    kids = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and fields[0] != "Z":
+            kids.add(int(stat.parent.name))
+    return kids

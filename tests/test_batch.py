@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
-from clitools import run
+from clitools import child_processes, run
 
 from breastplan.batch.inputs import find_inputs
 from breastplan.case import sha256
@@ -260,19 +260,6 @@ def test_batch_options_check_themselves():
         assert BatchOptions(executor="dask", scheduler=address).scheduler == address
 
 
-def _children(pid: int) -> set[int]:
-    """The live processes whose parent is `pid` (from /proc)."""
-    kids = set()
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == pid and fields[0] != "Z":
-            kids.add(int(stat.parent.name))
-    return kids
-
-
 def _alive(pid: int) -> bool:
     try:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
@@ -302,7 +289,7 @@ def test_kill_9_at_a_random_moment_loses_no_finished_case_and_leaves_none_half_w
         cli, tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     delay = random.uniform(0.0, 4.0)
     time.sleep(delay)
-    workers = _children(batch.pid)
+    workers = child_processes(batch.pid)
     batch.send_signal(signal.SIGKILL)
     batch.wait()
     while any(_alive(w) for w in workers):               # the workers die with the batch

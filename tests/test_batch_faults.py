@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
-from clitools import assert_bad_input, run
+from clitools import assert_bad_input, child_processes, run
 
 from breastplan.options import MAX_JOBS, BatchOptions, OptionError
 
@@ -85,19 +85,6 @@ def test_the_bound_on_jobs_is_64_or_twice_the_cpus():
         BatchOptions(jobs=MAX_JOBS + 1, executor="dask")
 
 
-def _children(pid: int) -> set[int]:
-    """The live processes whose parent is `pid` (from /proc)."""
-    kids = set()
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == pid and fields[0] != "Z":
-            kids.add(int(stat.parent.name))
-    return kids
-
-
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="counts child processes in /proc")
 def test_a_dask_batch_of_the_most_jobs_on_one_input_starts_one_worker(cli, tmp_path):
     """The fault: --jobs 10000 on one input started 10000 Dask workers, which ran out of files."""
@@ -108,7 +95,7 @@ def test_a_dask_batch_of_the_most_jobs_on_one_input_starts_one_worker(cli, tmp_p
                               "--jobs", str(MAX_JOBS)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     most = set()
     while batch.poll() is None:
-        kids = _children(batch.pid)
+        kids = child_processes(batch.pid)
         most = max(most, kids, key=len)
         time.sleep(0.05)
     _, err = batch.communicate()
