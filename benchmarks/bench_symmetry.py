@@ -73,10 +73,11 @@ def photographed(scene: BodyScene, point_body: np.ndarray) -> np.ndarray:
     return uvw[:2] / uvw[2]
 
 
-def moved_left(m, torso: np.ndarray, nipples: dict, body: Body):
-    """(the scan's body with the left breast moved MOVE_MM down her up axis, the moved nipples)."""
+def moved_left(m, body: Body, nipples: dict):
+    """(the scan's body with the left breast moved MOVE_MM down her up axis, the moved nipples); `m` its
+    `measure_breasts`, whose body frame the move is made in."""
     T = m.body_from_input
-    points = transform_points(T, torso)
+    points = transform_points(T, body.torso_input)
     nipple = transform_points(T, nipples["left"][None])[0]
     d = np.linalg.norm(points[:, :2] - nipple[:2], axis=1)
     shift = MOVE_MM * np.where(d < 100.0, 1.0, np.where(d < 150.0, 0.5 * (1 + np.cos(np.pi * (d - 100.0) / 50.0)), 0.0))
@@ -121,7 +122,7 @@ def run(shot) -> dict:
         return {**row, "error": str(exc)}
     row["measured"] = symmetry_measures(m, nipples)
     if shot.body in MIRROR_BODIES:
-        moved_body, moved_nipples = moved_left(m, body.torso_input, nipples, body)
+        moved_body, moved_nipples = moved_left(m, body, nipples)
         row["moved"] = symmetry_measures(measure_breasts(moved_body, moved_nipples), moved_nipples)
         row["expected"] = expected_after_move(signed(m, nipples), row["measured"])
     return row
