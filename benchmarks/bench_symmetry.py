@@ -19,7 +19,8 @@ re-scanned 5 times each and once in another room, 2 symmetric bodies in 6 views,
    axis, and measured again: UNR, BRA and LBC against what the scan's own left − right differences
    become with the left nipple and lowest point MOVE_MM lower (`expected_after_move`; the measures are
    unsigned, and a scan's own small difference adds to the move or takes from it), BCE against its
-   value before: error of each.
+   value before: error of each; and LBC's worst where the measures say a lowest point lay on a hidden
+   cell (`lower_contours_hidden`) and where they do not.
 
 A scene whose ingest or measure raises is counted and listed. Nothing is asserted; the last line is the
 JSON of the figures.
@@ -142,6 +143,8 @@ def figures(rows: list[dict]) -> dict:
     spread = {k: max(b[k] for b in by_body.values()) for k in (*MEASURES, "overlap_pct")}
     moved = [r for r in mirror if "moved" in r]
     shift = {k: [r["moved"][k] - r["expected"][k] for r in moved] for k in ("UNR_mm", "BRA_mm", "LBC_mm", "BCE_mm")}
+    said = [r["moved"]["lower_contours_hidden"] > 0 for r in moved]
+    lbc = [abs(e) for e in shift["LBC_mm"]]
     absolute = lambda v: [abs(x) for x in v]  # noqa: E731
     return {
         "scenes": len(rows), "failed": [f"{r['body']} {r['view']}: {r['error']}" for r in rows if "error" in r],
@@ -156,6 +159,10 @@ def figures(rows: list[dict]) -> dict:
         "moved_scans": len(moved),
         "moved_error_mm": {k: {"median": statistics.median(absolute(v)), "worst": max(absolute(v))}
                            for k, v in shift.items()},
+        "contour_hidden_scans": sum(r["measured"]["lower_contours_hidden"] > 0 for r in ok),
+        "moved_lbc_worst_mm_said_hidden": max((e for e, h in zip(lbc, said) if h), default=None),
+        "moved_lbc_worst_mm_said_seen": max((e for e, h in zip(lbc, said) if not h), default=None),
+        "moved_said_hidden": sum(said),
     }
 
 
@@ -199,6 +206,11 @@ def main() -> None:
     for k, v in f["moved_error_mm"].items():
         table.add_row(f"a breast moved {MOVE_MM:g} mm down, {k} against its expected: error median (worst)",
                       f"{v['median']:.2f} ({v['worst']:.2f}) mm", "–")
+    table.add_row("moved: LBC's worst where a lowest point is said hidden (scans) / where not",
+                  f"{f['moved_lbc_worst_mm_said_hidden']:.2f} ({f['moved_said_hidden']}) / "
+                  f"{f['moved_lbc_worst_mm_said_seen']:.2f} mm", "–")
+    table.add_row("scans with a lowest point said hidden, before any move",
+                  f"{f['contour_hidden_scans']} of {len(rows)}", "–")
     console.print(table)
     print(f"{len(rows)} scenes, {len(f['failed'])} failed, {time.perf_counter() - t0:.0f} s")
     print(json.dumps({"benchmark": "bench_symmetry", **rounded(f, 4)}))

@@ -354,8 +354,11 @@ MUTANTS = [
         "transform_points(self.frames.input_to_primitive, self.fit.vertices)",
         ("tests/test_plan_truths.py", "tests/test_plan.py")),
     one("symmetry-lbc-highest", "a breast's lower contour taken at its highest column, not its lowest",
-        "plan/symmetry.py", "np.nanmin(lower_edge(cells, regions[s]))", "np.nanmax(lower_edge(cells, regions[s]))",
+        "plan/symmetry.py", "k = int(np.nanargmin(edge))", "k = int(np.nanargmax(edge))",
         ("tests/test_symmetry.py", "tests/test_plan_truths.py")),
+    one("symmetry-hidden-contour-ignored", "a lower contour on a hidden cell not said to be hidden",
+        "plan/symmetry.py", "return float(edge[k]), bool(cells.seen[k, np.argmax(region[k])])",
+        "return float(edge[k]), True", ("tests/test_symmetry.py",)),
     # --- operations in a plan -----------------------------------------------------------------------
     one("model-not-operated", "the fitted model as planned left without her operations",
         "plan/surface.py", "start = first._before(np.asarray(vertices_mm, dtype=float).reshape(-1, 3))",

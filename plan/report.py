@@ -338,6 +338,11 @@ SYMMETRY_TEXT = ('<p id="symmetry-how">BCCT.core\'s measures of a frontal photog
                  'over it is hidden from a camera in front of her: its place is then estimated, and her '
                  'ptosis grade rests on that estimate; confirm it by examining her.</p>')
 
+CONTOUR_HIDDEN_TEXT = ('<p id="contour-hidden">A breast\'s lowest point lies on skin the camera did not see, '
+                       'under the breast: its height there is her other side\'s, mirrored, and pLBC and pBCE may '
+                       'read the difference between her breasts short by about 5 mm.</p>')
+"""Said under the symmetry table when `lower_contours_hidden` is not 0."""
+
 
 def _symmetry_tables(plan: Plan) -> str:
     """The symmetry measures before and as planned, and each side's ptosis grade beside the fitted
@@ -347,6 +352,8 @@ def _symmetry_tables(plan: Plan) -> str:
     if sym["before"]:
         rows = [[label, sym["before"].get(k), sym["after"].get(k)] for k, label in SYMMETRY_LABELS.items()]
         html += "<h2>Symmetry</h2>" + _table(["measure", "before", "after"], rows, "symmetry")
+        if any(sym[when].get("lower_contours_hidden") for when in ("before", "after")):
+            html += CONTOUR_HIDDEN_TEXT
     rows = []
     for s, sp in plan.sides.items():
         before, after = ptosis["before"][s], ptosis["after"][s]

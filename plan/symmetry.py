@@ -82,6 +82,9 @@ def bcct_measures(nipples_body: dict, cells: SkinCells) -> dict[str, float]:
     * BCD_mm: the mean distance between one breast's outline and the other's mirror image (cells' centres).
     * overlap_pct: the tissue the two breasts share, one mirrored onto the other — Σ min(h_left, h_right
       mirrored) over the footprint — over their mean volume (a Dice overlap: 100 for mirror twins).
+    * lower_contours_hidden: how many of the two lowest points (0, 1 or 2) lie on a cell the camera did not
+      see, whose height is her other side's mirrored (`plan.breast_volume`): LBC and BCE then rest on that
+      estimate, and read a lowered breast's difference short.
 
     Heights are along her up axis. The measures that need a breast's own region are left out when a side
     has none (its skin nowhere FOOT_MM above the wall)."""
@@ -96,7 +99,8 @@ def bcct_measures(nipples_body: dict, cells: SkinCells) -> dict[str, float]:
     regions = {s: own_region(cells, s, n[s]) for s in SIDES}
     if not all(r.any() for r in regions.values()):
         return out
-    lowest = {s: float(np.nanmin(lower_edge(cells, regions[s]))) for s in SIDES}
+    lowest_point = {s: _lowest_point(cells, regions[s]) for s in SIDES}
+    lowest = {s: y for s, (y, _) in lowest_point.items()}
     above = {s: abs(n[s][1] - lowest[s]) for s in SIDES}
     out["LBC_mm"] = float(abs(lowest["left"] - lowest["right"]))
     out["pLBC_pct"] = _pct(out["LBC_mm"], np.mean([drop[s] + above[s] for s in SIDES]))
@@ -108,7 +112,16 @@ def bcct_measures(nipples_body: dict, cells: SkinCells) -> dict[str, float]:
     shared = float(np.minimum(h, h[::-1])[left].sum())
     mean = 0.5 * float(h[left].sum() + h[cells.side("right")].sum())
     out["overlap_pct"] = 100.0 * shared / mean if mean > 0 else 0.0
+    out["lower_contours_hidden"] = float(sum(not seen for _, seen in lowest_point.values()))
     return out
+
+
+def _lowest_point(cells: SkinCells, region: np.ndarray) -> tuple[float, bool]:
+    """(the height (y, mm) of the region's lowest point, its `lower_edge`; whether the camera saw the region's
+    lowest cell in that column, the one the point lies below)."""
+    edge = lower_edge(cells, region)
+    k = int(np.nanargmin(edge))
+    return float(edge[k]), bool(cells.seen[k, np.argmax(region[k])])
 
 
 def ptosis_grade(volumes: BreastVolumes, nipples_input: dict, side: str) -> dict:

@@ -74,25 +74,39 @@ def test_a_lowered_breast_gives_the_retraction_its_true_nipples_give():
     assert 80.0 < s["overlap_pct"] < 97.0             # no longer mirror twins
 
 
-def test_a_breast_moved_down_moves_its_contour_and_nipple_by_as_much():
-    """The symmetric woman's left breast, skin and nipple, moved 10 mm down her up axis (the whole breast
-    within 100 mm of its nipple, tapering to nothing at 150 mm): the nipples and the lower contours
-    differ by 10 mm, and the nipples' heights above their contours alike."""
-    made, torso, nipples, view_from, plumb = scanned("symmetric")
-    before = measured("symmetric")[0]
-    T = before.body_from_input
-    body = transform_points(T, torso)
+def moved_down(body: str) -> dict:
+    """The symmetry measures of `body`'s scan with its left breast, skin and nipple, moved 10 mm down her up
+    axis (the whole breast within 100 mm of its nipple, tapering to nothing at 150 mm)."""
+    made, torso, nipples, view_from, plumb = scanned(body)
+    T = measured(body)[0].body_from_input
+    points = transform_points(T, torso)
     nipple = transform_points(T, nipples["left"][None])[0]
-    d = np.linalg.norm(body[:, :2] - nipple[:2], axis=1)
+    d = np.linalg.norm(points[:, :2] - nipple[:2], axis=1)
     shift = 10.0 * np.where(d < 100.0, 1.0, np.where(d < 150.0, 0.5 * (1.0 + np.cos(np.pi * (d - 100.0) / 50.0)), 0.0))
-    body[:, 1] -= np.where(body[:, 0] > 0, shift, 0.0)
+    points[:, 1] -= np.where(points[:, 0] > 0, shift, 0.0)
     moved = dict(nipples, left=transform_points(np.linalg.inv(T), (nipple - [0.0, 10.0, 0.0])[None])[0])
-    after = measure_breasts(Body(transform_points(np.linalg.inv(T), body), view_from, plumb), moved)
-    s = symmetry_measures(after, moved)
+    after = measure_breasts(Body(transform_points(np.linalg.inv(T), points), view_from, plumb), moved)
+    return symmetry_measures(after, moved)
+
+
+def test_a_breast_moved_down_moves_its_contour_and_nipple_by_as_much():
+    """The symmetric woman's left breast moved 10 mm down (`moved_down`): the nipples and the lower contours
+    differ by 10 mm, and the nipples' heights above their contours alike."""
+    s = moved_down("symmetric")
     assert s["UNR_mm"] == pytest.approx(10.0, abs=2.0)
     assert s["BRA_mm"] == pytest.approx(10.0, abs=2.5)
     assert s["LBC_mm"] == pytest.approx(10.0, abs=3.0)
     assert s["BCE_mm"] < 3.0
+
+
+def test_a_lower_contour_read_from_her_other_side_is_said_to_be():
+    """A soft cup-0.8 breast hangs over skin the camera does not see. Moved 10 mm down, either its lower
+    contour reads the move, or the measures say that a lowest point lay on a hidden cell, whose height is her
+    other side's, mirrored. The small firm breasts' lowest points are seen."""
+    s = moved_down("soft")
+    assert s["UNR_mm"] == pytest.approx(10.0, abs=2.0)
+    assert s["LBC_mm"] > 8.0 or s["lower_contours_hidden"] >= 1
+    assert symmetry_measures(*measured("small"))["lower_contours_hidden"] == 0
 
 
 def test_a_soft_breast_hangs_at_least_as_far_as_a_firm_one():
