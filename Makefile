@@ -90,6 +90,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_follow_up.py
 	$(BIN)/python benchmarks/bench_folds.py
 	$(BIN)/python benchmarks/bench_symmetry.py
+	$(BIN)/python benchmarks/bench_distance.py
 	$(BIN)/python benchmarks/bench_operations.py
 	$(BIN)/python benchmarks/bench_learnt_operation.py
 	$(BIN)/python benchmarks/bench_shifted_pairs.py

@@ -1,0 +1,111 @@
+"""How far from her the camera may stand: her volume, nipples and refusals against the camera's distance.
+
+Four MakeHuman bodies (bench_volume_repeat's: cup 0.8 soft, arms down; cup 0.3 firm and heavy, hands on
+hips; cup 0.6 slim and muscular, A-pose; weight 0.5, cup 0.7, A-pose), each scanned from DISTANCES_MM in
+front of her nipples (pitched 5°, 8 noisy depth frames at 800×600, the depth noise growing with the
+square of the distance, `scenes.realistic`), with a wall WALL_MM behind her and without, both sides
+ingested and measured (`measure_breasts`). Per distance: the scenes refused (BadInputError), the worst
+nipple error against the truth, and each breast's volume against the same body's at REFERENCE_MM, with
+its stated ±; each scene's volumes and footprint areas are logged and in the JSON. Nothing is asserted;
+the last line is the JSON of the figures.
+
+Run:  .venv/bin/python benchmarks/bench_distance.py     (48 scenes, about 1.5 minutes on 2 cores)
+"""
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+from rich.console import Console
+
+from breastplan import BadInputError
+from breastplan.ingest.pipeline import ingest_frames
+from breastplan.ingest.recording import DepthFrames
+from breastplan.options import SIDES, IngestOptions
+from breastplan.plan.breast_volume import measure_breasts
+from breastplan.scenes.makehuman import make_body
+from breastplan.scenes.realistic import BodyScene, CameraOptions, camera_pose
+
+from bench_realistic import new_table
+from bench_volume_repeat import BODIES, FRAMES, RESOLUTION
+from timing import rounded
+
+NAMES = ("R1 cup .8 firm .3", "R2 cup .3 firm .8 wt .8", "R3 cup .6 wt .3 mus .7", "S2 wt .5 cup .7")
+DISTANCES_MM = (500.0, 650.0, 800.0, 900.0, 1000.0, 1200.0)
+REFERENCE_MM = 650.0
+WALL_MM = 400.0
+SEED = 7
+
+
+def scene(name: str, distance: float, wall: float | None) -> dict:
+    """One body scanned from `distance` (mm), with a wall `wall` mm behind her or none: what was refused, the worst
+    nipple error (mm), each breast's volume and its ± (cc)."""
+    made = make_body(BODIES[name])
+    camera = CameraOptions(distance, 5.0, 0.0, RESOLUTION, wall_mm=wall)
+    bench_scene = BodyScene(made, camera, camera_pose(0.5 * (made.nipples["left"] + made.nipples["right"]), camera))
+    frames = DepthFrames(bench_scene.frames(FRAMES, SEED), camera.K, name)
+    out = {"body": name, "distance_mm": distance, "wall": wall is not None, "errors": [], "nipple_mm": None,
+           "volume_cc": {}, "uncertainty_cc": {}, "area_cm2": {}}
+    try:
+        ing = {side: ingest_frames(frames, IngestOptions(side)) for side in SIDES}
+        nipples = {side: np.asarray(i.nipple_camera, float) for side, i in ing.items()}
+        m = measure_breasts(ing["left"].body, nipples)
+    except BadInputError as exc:
+        out["errors"].append(str(exc))
+        return out
+    truth = bench_scene.nipples_camera()
+    out["nipple_mm"] = max(float(np.linalg.norm(nipples[s] - truth[s])) for s in SIDES)
+    out["volume_cc"] = {s: b.volume_cc for s, b in m.sides.items()}
+    out["uncertainty_cc"] = {s: b.uncertainty_cc for s, b in m.sides.items()}
+    out["area_cm2"] = {s: b.area_cm2 for s, b in m.sides.items()}
+    return out
+
+
+def main() -> None:
+    console = Console(width=160)
+    t0 = time.perf_counter()
+    rows = []
+    for name in NAMES:
+        for wall in (WALL_MM, None):
+            for d in DISTANCES_MM:
+                rows.append(scene(name, d, wall))
+                r = rows[-1]
+                said = (f"refused: {r['errors'][0]}" if r["errors"] else f"nipple {r['nipple_mm']:.1f} mm, volume "
+                        + ", ".join(f"{s} {v:.0f} ± {r['uncertainty_cc'][s]:.0f} cc over {r['area_cm2'][s]:.0f} cm²"
+                                    for s, v in r["volume_cc"].items()))
+                console.log(f"{name}, {'wall' if wall else 'open'}, {d:.0f} mm: {said}")
+    reference = {(r["body"], r["wall"]): r for r in rows if r["distance_mm"] == REFERENCE_MM}
+    table = new_table("bench_distance — her volume and nipples against the camera's distance",
+                      ("distance mm", "scenes refused", "nipple error, worst", "volume against 650 mm: least, most",
+                       "beyond its ±"), f"volume: each breast against the same body and wall at {REFERENCE_MM:g} mm")
+    figures = []
+    for d in DISTANCES_MM:
+        at = [r for r in rows if r["distance_mm"] == d]
+        done = [r for r in at if not r["errors"] and len(r["volume_cc"]) == 2]
+        ratio, beyond = [], 0
+        for r in done:
+            ref = reference[(r["body"], r["wall"])]
+            for s, v in r["volume_cc"].items():
+                if s in ref["volume_cc"]:
+                    ratio.append(100.0 * (v / ref["volume_cc"][s] - 1.0))
+                    beyond += abs(v - ref["volume_cc"][s]) > r["uncertainty_cc"][s]
+        nipple = max((r["nipple_mm"] for r in done), default=None)
+        refused = [f"{r['body']}, wall {r['wall']}: {r['errors'][0]}" for r in at if r["errors"]]
+        figures.append({"distance_mm": d, "scenes": len(at), "refused": refused,
+                        "nipple_worst_mm": nipple, "volume_pct": [min(ratio), max(ratio)] if ratio else None,
+                        "beyond_uncertainty": f"{beyond}/{len(ratio)}"})
+        f = figures[-1]
+        table.add_row(f"{d:.0f}", f"{len(f['refused'])} of {len(at)}", "–" if nipple is None else f"{nipple:.1f} mm",
+                      "–" if not ratio else f"{min(ratio):+.1f} %, {max(ratio):+.1f} %", f["beyond_uncertainty"])
+    console.print(table)
+    for f in figures:
+        for refusal in f["refused"]:
+            print(f"refused at {f['distance_mm']:.0f} mm: {refusal}")
+    print(f"{len(rows)} scenes, {time.perf_counter() - t0:.0f} s")
+    print(json.dumps({"benchmark": "bench_distance", "reference_mm": REFERENCE_MM, "figures": rounded(figures, 4),
+                      "scenes": rounded(rows, 4)}))
+
+
+if __name__ == "__main__":
+    main()
