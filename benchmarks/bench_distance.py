@@ -20,15 +20,11 @@ import numpy as np
 from rich.console import Console
 
 from breastplan import BadInputError
-from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.recording import DepthFrames
-from breastplan.options import SIDES, IngestOptions
-from breastplan.plan.breast_volume import measure_breasts
-from breastplan.scenes.makehuman import make_body
-from breastplan.scenes.realistic import BodyScene, CameraOptions, camera_pose
+from breastplan.options import SIDES
+from breastplan.scenes.realistic import CameraOptions, make_body_scene
 
 from bench_realistic import new_table
-from bench_volume_repeat import BODIES, FRAMES, RESOLUTION
+from bench_volume_repeat import BODIES, RESOLUTION, scanned_and_measured
 from timing import rounded
 
 NAMES = ("R1 cup .8 firm .3", "R2 cup .3 firm .8 wt .8", "R3 cup .6 wt .3 mus .7", "S2 wt .5 cup .7")
@@ -41,16 +37,11 @@ SEED = 7
 def scene(name: str, distance: float, wall: float | None) -> dict:
     """One body scanned from `distance` (mm), with a wall `wall` mm behind her or none: what was refused, the worst
     nipple error (mm), each breast's volume and its ± (cc)."""
-    made = make_body(BODIES[name])
-    camera = CameraOptions(distance, 5.0, 0.0, RESOLUTION, wall_mm=wall)
-    bench_scene = BodyScene(made, camera, camera_pose(0.5 * (made.nipples["left"] + made.nipples["right"]), camera))
-    frames = DepthFrames(bench_scene.frames(FRAMES, SEED), camera.K, name)
+    bench_scene = make_body_scene(BODIES[name], CameraOptions(distance, 5.0, 0.0, RESOLUTION, wall_mm=wall))
     out = {"body": name, "distance_mm": distance, "wall": wall is not None, "errors": [], "nipple_mm": None,
            "volume_cc": {}, "uncertainty_cc": {}, "area_cm2": {}}
     try:
-        ing = {side: ingest_frames(frames, IngestOptions(side)) for side in SIDES}
-        nipples = {side: np.asarray(i.nipple_camera, float) for side, i in ing.items()}
-        m = measure_breasts(ing["left"].body, nipples)
+        _, nipples, m = scanned_and_measured(bench_scene, SEED, name)
     except BadInputError as exc:
         out["errors"].append(str(exc))
         return out

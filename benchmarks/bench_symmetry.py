@@ -38,15 +38,13 @@ from rich.console import Console
 
 from breastplan import BadInputError, transform_points
 from breastplan.body import Body
-from breastplan.ingest.pipeline import ingest_frames
-from breastplan.ingest.recording import DepthFrames
-from breastplan.options import SIDES, IngestOptions
+from breastplan.options import SIDES
 from breastplan.plan.breast_volume import measure_breasts
 from breastplan.plan.symmetry import lower_edge, own_region, symmetry_measures
 from breastplan.scenes.realistic import BodyScene, camera_pose
 
 from bench_realistic import new_table
-from bench_volume_repeat import FRAMES, build_body, shots
+from bench_volume_repeat import build_body, scanned_and_measured, shots
 from timing import rounded
 
 MOVE_MM = 10.0
@@ -109,16 +107,12 @@ def run(shot) -> dict:
     made = build_body(shot.body, shot.pose)
     target = 0.5 * (made.nipples["left"] + made.nipples["right"]) + [0.0, shot.dh_mm, 0.0]
     scene = BodyScene(made, shot.camera, camera_pose(target, shot.camera))
-    frames = DepthFrames(scene.frames(FRAMES, shot.seed), scene.camera.K, shot.body)
     row = {"set": shot.set, "body": shot.body, "view": shot.label,
            "true": nipple_measures(made.sternal_notch, made.nipples["left"], made.nipples["right"]),
            "photo": nipple_measures(*(photographed(scene, p) for p in (made.sternal_notch, made.nipples["left"],
                                                                         made.nipples["right"])))}
     try:
-        ing = {side: ingest_frames(frames, IngestOptions(side)) for side in SIDES}
-        body = ing["left"].body
-        nipples = {side: np.asarray(i.nipple_camera, float) for side, i in ing.items()}
-        m = measure_breasts(body, nipples)
+        body, nipples, m = scanned_and_measured(scene, shot.seed, shot.body)
     except BadInputError as exc:
         return {**row, "error": str(exc)}
     row["measured"] = symmetry_measures(m, nipples)

@@ -204,6 +204,17 @@ class SceneResult:
                 "new": new, "fitted": self.fitted, "frame": self.frame}
 
 
+def scanned_and_measured(scene: BodyScene, seed: int, label: str):
+    """(her body as the left side's ingest found it, side → the nipple found (input frame, mm), both breasts'
+    `measure_breasts`): FRAMES depth frames of `scene` (noise seed `seed`) ingested for both sides, as `plan`
+    ingests them. BadInputError as ingest or the measure raise it."""
+    frames = DepthFrames(scene.frames(FRAMES, seed), scene.camera.K, label)
+    ing = {side: ingest_frames(frames, IngestOptions(side)) for side in SIDES}
+    nipples = {side: np.asarray(i.nipple_camera, float) for side, i in ing.items()}
+    body = ing["left"].body
+    return body, nipples, measure_breasts(body, nipples)
+
+
 def true_body_from_camera(scene: BodyScene) -> np.ndarray:
     """(4, 4) camera → MakeHuman's body frame with its origin at the body's sternal notch (her body frame, truly)."""
     T = np.linalg.inv(scene.camera_from_body)

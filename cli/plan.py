@@ -252,7 +252,7 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
                                              for k in ("pBRA_pct", "pLBC_pct", "pUNR_pct", "overlap_pct")
                                              if _finite(sym["before"].get(k)) and _finite(sym["after"].get(k)))
                      + ("; a breast's lowest point was hidden and is estimated from her other side"
-                        if any(sym[when].get("lower_contours_hidden") for when in ("before", "after")) else ""))
+                        if m.contour_hidden else ""))
     stdout.print(f"report → {report_path}  ({seconds:.1f} s)")
     stdout.print(f"handout → {report_path.with_suffix('.pdf')}")
 

@@ -341,7 +341,7 @@ SYMMETRY_TEXT = ('<p id="symmetry-how">BCCT.core\'s measures of a frontal photog
 CONTOUR_HIDDEN_TEXT = ('<p id="contour-hidden">A breast\'s lowest point lies on skin the camera did not see, '
                        'under the breast: its height there is her other side\'s, mirrored, and pLBC and pBCE may '
                        'read the difference between her breasts short by about 5 mm.</p>')
-"""Said under the symmetry table when `lower_contours_hidden` is not 0."""
+"""Said under the symmetry table when `Measures.contour_hidden`."""
 
 
 def _symmetry_tables(plan: Plan) -> str:
@@ -352,7 +352,7 @@ def _symmetry_tables(plan: Plan) -> str:
     if sym["before"]:
         rows = [[label, sym["before"].get(k), sym["after"].get(k)] for k, label in SYMMETRY_LABELS.items()]
         html += "<h2>Symmetry</h2>" + _table(["measure", "before", "after"], rows, "symmetry")
-        if any(sym[when].get("lower_contours_hidden") for when in ("before", "after")):
+        if plan.measures.contour_hidden:
             html += CONTOUR_HIDDEN_TEXT
     rows = []
     for s, sp in plan.sides.items():

@@ -214,6 +214,12 @@ class Measures:
     symmetry: dict[str, dict[str, float]]     # "before"/"after" → measure ({} for one side)
     ptosis: dict[str, dict[str, dict]]        # "before"/"after" → side → grade and what it rests on
 
+    @property
+    def contour_hidden(self) -> bool:
+        """Whether, before or as planned, a breast's lowest point lies on skin the camera did not see (its
+        height her other side's, mirrored: `plan.symmetry.bcct_measures`' `lower_contours_hidden`)."""
+        return any(self.symmetry.get(when, {}).get("lower_contours_hidden") for when in ("before", "after"))
+
 
 def planned_states(states, side: SidePlan) -> tuple[PlanState, ...]:
     """Of `states`, those of `side`'s planned changes, in their order (the combination last)."""

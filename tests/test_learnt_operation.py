@@ -176,6 +176,7 @@ def test_a_reductions_share_is_learnt_round_each_place_so_one_cells_stray_height
     assert error.size > 300
     assert error.max() < 0.25 and np.median(error) < 0.02
 
+
 def test_a_file_that_is_no_operation_model_and_two_models_of_one_operation_are_refused(model, tmp_path):
     bad = tmp_path / "bad.npz"
     np.savez(bad, a=np.zeros(3))
