@@ -6,10 +6,14 @@ front of her nipples (pitched 5°, 8 noisy depth frames at 800×600, the depth n
 square of the distance, `scenes.realistic`), with a wall WALL_MM behind her and without, both sides
 ingested and measured (`measure_breasts`). Per distance: the scenes refused (BadInputError), the worst
 nipple error against the truth, and each breast's volume against the same body's at REFERENCE_MM, with
-its stated ±; each scene's volumes and footprint areas are logged and in the JSON. Nothing is asserted;
-the last line is the JSON of the figures.
+its stated ±; each scene's volumes and footprint areas are logged and in the JSON. Then what moves the small
+breasts of the heavy body (`why_far`): its 650 mm scan thinned to the points a scan from FAR_MM holds, and
+scanned again at 650 mm with the depth noise of FAR_MM, against its scan from FAR_MM; and, for each body at
+650 mm, how much of her skin next to the footprint stands within 1 mm of FOOT_MM above the wall (a plateau
+whose cells a small shift of the wall carries into the footprint or out of it). Nothing is asserted; the last
+line is the JSON of the figures.
 
-Run:  .venv/bin/python benchmarks/bench_distance.py     (48 scenes, about 1.5 minutes on 2 cores)
+Run:  .venv/bin/python benchmarks/bench_distance.py     (48 scenes and 7 more, about 1 minute on 2 cores)
 """
 from __future__ import annotations
 
@@ -18,9 +22,12 @@ import time
 
 import numpy as np
 from rich.console import Console
+from scipy import ndimage
 
 from breastplan import BadInputError
+from breastplan.body import Body
 from breastplan.options import SIDES
+from breastplan.plan.breast_volume import FOOT_MM, measure_breasts
 from breastplan.scenes.realistic import CameraOptions, make_body_scene
 
 from bench_realistic import new_table
@@ -32,6 +39,8 @@ DISTANCES_MM = (500.0, 650.0, 800.0, 900.0, 1000.0, 1200.0)
 REFERENCE_MM = 650.0
 WALL_MM = 400.0
 SEED = 7
+FAR_MM = 1000.0
+HEAVY = "R2 cup .3 firm .8 wt .8"
 
 
 def scene(name: str, distance: float, wall: float | None) -> dict:
@@ -51,6 +60,41 @@ def scene(name: str, distance: float, wall: float | None) -> dict:
     out["uncertainty_cc"] = {s: b.uncertainty_cc for s, b in m.sides.items()}
     out["area_cm2"] = {s: b.area_cm2 for s, b in m.sides.items()}
     return out
+
+
+def left_breast(m) -> dict:
+    """One measure's left breast: volume (cc), footprint area (cm²)."""
+    return {"volume_cc": m.sides["left"].volume_cc, "area_cm2": m.sides["left"].area_cm2}
+
+
+def plateau_pct(m) -> float:
+    """The area of her skin within 1 mm of FOOT_MM above the wall, seen, within 3 cells outside either footprint
+    or on its outer 3 cells, as a share of the footprints' area (%)."""
+    c = m.cells
+    near = ndimage.binary_dilation(c.footprint, iterations=3) & ~ndimage.binary_erosion(c.footprint, iterations=3)
+    return 100.0 * float((near & c.seen & (np.abs(c.height_mm - FOOT_MM) <= 1.0)).sum() / c.footprint.sum())
+
+
+def why_far() -> dict:
+    """The heavy body's left breast from 650 mm (REFERENCE_MM), from FAR_MM, from 650 mm with its points thinned
+    to FAR_MM's density (each kept with probability (650 / FAR_MM)², a fixed seed) and from 650 mm with FAR_MM's
+    depth noise (noise_mm scaled by (FAR_MM / 650)², as the noise grows); the thinned scan's wall moved against her
+    skin (mean over the footprint, mm: > 0 the wall further back); and each body's plateau at 650 mm."""
+    near_scene = make_body_scene(BODIES[HEAVY], CameraOptions(REFERENCE_MM, 5.0, 0.0, RESOLUTION, wall_mm=WALL_MM))
+    body, nipples, near = scanned_and_measured(near_scene, SEED, HEAVY)
+    keep = np.random.default_rng(0).random(len(body.torso_input)) < (REFERENCE_MM / FAR_MM) ** 2
+    thinned = measure_breasts(Body(body.torso_input[keep], body.input_to_view, body.plumb_input), nipples)
+    far = scanned_and_measured(make_body_scene(BODIES[HEAVY], CameraOptions(FAR_MM, 5.0, 0.0, RESOLUTION,
+                                                                             wall_mm=WALL_MM)), SEED, HEAVY)[2]
+    noisy = scanned_and_measured(make_body_scene(BODIES[HEAVY], CameraOptions(
+        REFERENCE_MM, 5.0, 0.0, RESOLUTION, noise_mm=(FAR_MM / REFERENCE_MM) ** 2, wall_mm=WALL_MM)), SEED, HEAVY)[2]
+    a, b = near.cells, thinned.cells                    # the same nipples: the same cells
+    both = a.footprint & b.footprint & a.seen & b.seen
+    moved = float(np.mean((b.height_mm - a.height_mm)[both]))      # her skin higher above the wall: the wall back
+    plateau = {name: plateau_pct(scanned_and_measured(make_body_scene(BODIES[name], CameraOptions(
+        REFERENCE_MM, 5.0, 0.0, RESOLUTION, wall_mm=WALL_MM)), SEED, name)[2]) for name in NAMES}
+    return {"body": HEAVY, "near": left_breast(near), "far": left_breast(far), "thinned": left_breast(thinned),
+            "noisier": left_breast(noisy), "thinned_wall_back_mm": moved, "plateau_pct_at_650": plateau}
 
 
 def main() -> None:
@@ -93,9 +137,18 @@ def main() -> None:
     for f in figures:
         for refusal in f["refused"]:
             print(f"refused at {f['distance_mm']:.0f} mm: {refusal}")
+    why = why_far()
+    said = {k: f"{why[k]['volume_cc']:.1f} cc over {why[k]['area_cm2']:.0f} cm²" for k in ("near", "far", "thinned",
+                                                                                        "noisier")}
+    print(f"{HEAVY}, left breast: {said['near']} from {REFERENCE_MM:g} mm, {said['far']} from {FAR_MM:g} mm; "
+          f"from {REFERENCE_MM:g} mm thinned to {FAR_MM:g} mm's points {said['thinned']} (its wall "
+          f"{why['thinned_wall_back_mm']:+.2f} mm further back against her skin), with {FAR_MM:g} mm's noise "
+          f"{said['noisier']}")
+    print("skin within 1 mm of FOOT_MM next to the footprint's edge, share of the footprint at 650 mm: "
+          + ", ".join(f"{k} {v:.0f} %" for k, v in why["plateau_pct_at_650"].items()))
     print(f"{len(rows)} scenes, {time.perf_counter() - t0:.0f} s")
     print(json.dumps({"benchmark": "bench_distance", "reference_mm": REFERENCE_MM, "figures": rounded(figures, 4),
-                      "scenes": rounded(rows, 4)}))
+                      "why_far": rounded(why, 4), "scenes": rounded(rows, 4)}))
 
 
 if __name__ == "__main__":
