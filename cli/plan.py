@@ -104,6 +104,8 @@ def plan(
         report(_json(planned, out, clock.seconds), True, "")
     else:
         _print_plan(planned, out / "report.html", clock.seconds)
+    for note in planned.camera_notes:
+        stderr.print(f"note: {note[0].lower()}{note[1:]} The report says so.", markup=False, soft_wrap=True)
     for s, sp in planned.sides.items():
         differs = planned.volumes.sides[s].model_differs_pct(sp.fit.volume_cc)
         if model_differs_much(differs):
@@ -171,7 +173,8 @@ def _patient(name: str | None, patient_id: str | None, surgeon: str | None, date
 
 def _json(plan, out: Path, seconds: float) -> dict:
     """`plan --json`: where the case and its report are, each side's volume, fit and changes, the measures."""
-    from breastplan.plan.record import follow_up_record, measures_record, skin_change_record, volume_record
+    from breastplan.plan.record import (follow_up_record, input_record, measures_record, skin_change_record,
+                                        volume_record)
 
     sides = {}
     for s, sp in plan.sides.items():
@@ -186,7 +189,8 @@ def _json(plan, out: Path, seconds: float) -> dict:
                                      **skin_change_record(plan.skin_changes.get(s))}
     return {"case": str(out), "report": str(out / "report.html"), "handout": str(out / "report.pdf"),
             "plan": str(out / "plan.json"),
-            "input": str(plan.input), "sides": sides, "measures": measures_record(plan), "seconds": seconds}
+            "input": str(plan.input), **{k: v for k, v in input_record(plan).items() if k.startswith("camera_")},
+            "sides": sides, "measures": measures_record(plan), "seconds": seconds}
 
 
 def _print_plan(plan, report_path: Path, seconds: float) -> None:

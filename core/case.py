@@ -121,6 +121,12 @@ class Scan:
         T = np.asarray(self.input_to_breast, float)
         return T[:3, :3] @ self.nipple_camera_mm + T[:3, 3]
 
+    @property
+    def nipple_from_camera_mm(self) -> np.ndarray | None:
+        """(3,) the nipple from the depth camera that saw it (a recording's input frame is the camera's, mm); None
+        for a scan file, whose frame holds no camera."""
+        return np.asarray(self.nipple_camera_mm, float) if self.source.kind in ("recording", "device") else None
+
 
 @dataclass(frozen=True, eq=False)
 class Fit:

@@ -17,6 +17,7 @@ from breastplan.clock import Clock
 from breastplan.options import PlanOptions
 
 from .breast_volume import BreastVolumes, change_on_earlier_wall, measure_breasts
+from .camera_distance import camera_distance_mm, distance_notes
 from .changes import UNCHANGED, Change, Method, change_name, combine, solve_change
 from .learnt_operation import operation_models
 from .measures import asymmetry, breast_measures, breast_measures_each
@@ -57,8 +58,12 @@ def compute_plan(source: Path, fitted: dict[str, SidePlan], options: PlanOptions
         measures = plan_measures(sides, volumes, requested[-1], torsos[-1], fitted_measures,
                                  grid.measures_at(grid.planned_index))
         skin = {} if earlier is None else skin_changes(body, sides, volumes, earlier)
+    now = camera_distance_mm({s: sp.scan.nipple_from_camera_mm for s, sp in sides.items()})
+    then = None if any(sp.follow_up is None for sp in sides.values()) else camera_distance_mm(
+        {s: sp.follow_up.earlier_nipple_from_camera_mm for s, sp in sides.items()})
     return Plan(source, options, body, sides, volumes, states, torsos, measures, earlier, skin,
-                None if source.is_dir() else sha256(source), versions(), clock.ms, grid=grid, operated=operated)
+                None if source.is_dir() else sha256(source), versions(), clock.ms, grid=grid, operated=operated,
+                camera_mm=now, camera_notes=distance_notes(now, then))
 
 
 def versions() -> dict[str, str]:

@@ -99,9 +99,12 @@ def _shots(views, state, parallel: bool, report: Path, page) -> dict:
 
 
 def input_record(plan: Plan) -> dict:
-    """The plan's input as plan.json records it: path, kind and content hash."""
+    """The plan's input as plan.json records it: path, kind and content hash, how far the depth camera stood from
+    her nipples (mm; None for a scan file) and what the plan says of it."""
     return {"path": str(plan.input), "kind": plan.input_kind,
-            **({} if plan.input_sha256 is None else {"sha256": plan.input_sha256})}
+            **({} if plan.input_sha256 is None else {"sha256": plan.input_sha256}),
+            "camera_mm": None if plan.camera_mm is None else round(plan.camera_mm, 1),
+            "camera_notes": list(plan.camera_notes)}
 
 
 def _remove_earlier_plans(folder: Path, record: dict) -> None:

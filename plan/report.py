@@ -228,7 +228,8 @@ def tables(plan: Plan) -> str:
     parts.append("<h2>Volume, measured on her skin</h2>" + _table(
         ["side", "volume cc", "footprint cm²", "estimated where unseen %", "the model's volume cc",
          "the model differs by %"], rows, "volume") + VOLUME_TEXT
-        + "".join(DIFFERS_TEXT.format(side=s, pct=pct) for s, pct in differs.items() if model_differs_much(pct)))
+        + "".join(DIFFERS_TEXT.format(side=s, pct=pct) for s, pct in differs.items() if model_differs_much(pct))
+        + "".join(f'<p class="camera-distance">{html.escape(note)}</p>' for note in plan.camera_notes))
     parts.append(_symmetry_tables(plan))
     surgeon = []
     rows = [[s, sp.fit.volume_cc, sp.fit.volume_cc_below_base, sp.fit.residuals_mm["rms"], sp.fit.normalised_residual,
@@ -258,6 +259,7 @@ def tables(plan: Plan) -> str:
     surgeon.append("<h2>Planned changes</h2>" + _table(["side", "change", "how (parameters in model units)",
                                                        "degree reached"], rows))
     rows = [["input", str(plan.input)], ["input kind", plan.input_kind], ["input sha256", plan.input_sha256 or "—"],
+            ["the camera from her nipples", "—" if plan.camera_mm is None else f"{plan.camera_mm:.0f} mm"],
             ["options", json.dumps(plan.options.as_dict())]] + [[k, v] for k, v in plan.versions.items()]
     surgeon.append("<h2>Inputs, options and versions</h2>" + _table(["", ""], rows, "about"))
     parts.append('<details id="for-surgeon"><summary>For the surgeon: the fits\' quality, the changes\' parameters, '

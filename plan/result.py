@@ -77,6 +77,7 @@ class FollowUp:
     earlier_volume_cc: float
     earlier_surface_input: np.ndarray       # (V, 3)
     earlier_faces: np.ndarray               # (F, 3)
+    earlier_nipple_from_camera_mm: np.ndarray | None = None   # (3,) the earlier nipple from its camera; None: a file
 
 
 @dataclass(frozen=True, eq=False)
@@ -272,6 +273,8 @@ class Plan:
     patient: Patient = field(default_factory=Patient)
     grid: StateGrid | None = None             # every state the report's sliders reach
     operated: dict[str, Operated] = field(default_factory=dict)   # side → its operations, under every state
+    camera_mm: float | None = None            # the depth camera's distance from her nipples; None: a scan file
+    camera_notes: tuple[str, ...] = ()        # what the plan says of that distance (`plan.camera_distance`)
 
     @property
     def input_kind(self) -> str:

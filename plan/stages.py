@@ -191,7 +191,8 @@ def _to_fit(case: Case, scan: Scan, earlier: Case | None) -> _ToFit:
         then = _own_wall_fit(earlier, earlier_scan)
         later_from_earlier = np.linalg.inv(earlier_scan.input_to_breast @ registration.earlier_from_later)
         follow_up = FollowUp(earlier.folder, registration, then.volume_cc,
-                             transform_points(later_from_earlier, then.vertices), then.faces)
+                             transform_points(later_from_earlier, then.vertices), then.faces,
+                             earlier_scan.nipple_from_camera_mm)
     wanted = Provenance.of(inputs, options)
     return _ToFit(_reused(case.load_fit, case.is_fresh(Case.FIT_NPZ, wanted)), scan, wanted, scan_ply, follow_up)
 

@@ -164,6 +164,27 @@ def test_plan_wall_from_reports_each_sides_change_since_the_earlier_plan(cli, ca
     assert all("fit" in s["reused"] for s in json.loads(again.stdout)["sides"].values())
 
 
+def test_a_follow_up_scanned_from_further_away_says_so(cli, cases, earlier_plan):
+    """The larger breasts scanned from 1 m, against the earlier visit from where scan-synth stands by default:
+    the plan records the camera's distance from her nipples (the truth's, within a few mm) and says, on the
+    terminal, in plan.json and in the report, that it stood too far and further than at the earlier visit."""
+    res = run(cli, "scan-synth", "--body", "makehuman", "--cup", CUPS[1], "--frames", FRAMES, "--resolution",
+              "640x400", "--distance", "1000", "--out", cases / "far.mcap", "--truth", cases / "far.npz")
+    assert res.returncode == 0, res.stderr
+    res = run(cli, "plan", cases / "far.mcap", "--wall-from", earlier_plan, "--out", cases / "plan-far")
+    assert res.returncode == 0, res.stderr
+    then, now = (json.loads((p / "plan.json").read_text())["input"] for p in (earlier_plan, cases / "plan-far"))
+    truth = np.load(cases / "far.npz")
+    true_mm = np.linalg.norm(0.5 * (truth["left_nipple_camera_mm"] + truth["right_nipple_camera_mm"]))
+    assert now["camera_mm"] == pytest.approx(true_mm, abs=5.0) and then["camera_notes"] == []
+    far, apart = now["camera_notes"]
+    assert far.startswith("The camera stood 1.00 m") and apart.startswith(
+        f"Her earlier visit was scanned from {then['camera_mm'] / 1000:.2f} m, this one from 1.00 m")
+    assert "note: the camera stood 1.00 m" in res.stderr and "note: her earlier visit was scanned" in res.stderr
+    page = (cases / "plan-far" / "report.html").read_text()
+    assert page.count('<p class="camera-distance">') == 2
+
+
 def test_plan_wall_from_one_sides_case_plans_that_side(cli, cases):
     earlier = cases / f"left{CUPS[0]}"
     res = run(cli, "plan", cases / f"cup{CUPS[1]}.mcap", "--wall-from", earlier, "--out", cases / "out-both")

@@ -88,6 +88,14 @@ def test_plan_finds_both_nipples_of_the_sample(planned):
         assert np.linalg.norm(found - truth[f"{side}_nipple_camera_mm"]) < 8.0
 
 
+def test_plan_json_says_how_far_the_camera_stood_from_her_nipples_and_nothing_more_within_range(planned):
+    _, record, res = planned
+    truth = np.load(TRUTH)
+    true_mm = np.linalg.norm(0.5 * (truth["left_nipple_camera_mm"] + truth["right_nipple_camera_mm"]))
+    assert record["input"]["camera_mm"] == pytest.approx(true_mm, abs=5.0)
+    assert record["input"]["camera_notes"] == [] and "camera stood" not in res.stderr
+
+
 def test_the_measures_know_her_midline_and_the_asymmetry_of_her_nipples(planned):
     """Against the sample's truth: the nipples' distances from her mid-sagittal plane (x = 0 of the
     MakeHuman body) and the height difference between her nipples along her up axis."""
@@ -452,6 +460,7 @@ def test_plan_reads_a_scan_file_with_its_own_units_and_up_axis(cli, tmp_path):
     for side in ("left", "right"):
         truth = transform_points(file_mm, scene.body.nipples[side][None])[0]
         assert np.linalg.norm(np.array(record["sides"][side]["nipple_input_mm"]) - truth) <= 8.0
+    assert record["input"]["camera_mm"] is None and record["input"]["camera_notes"] == []    # a file holds no camera
 
 
 def test_plan_of_a_patients_back_says_no_breast_and_leaves_no_case(cli, tmp_path):
