@@ -75,6 +75,10 @@ class LearntOperation(SkinLift):
     surface_mm: np.ndarray           # (nx, ny) her skin's anterior coordinate before, body frame
     note: str | None = None          # where she lies outside the pairs it learnt from
 
+    @property
+    def made_by(self) -> str | None:
+        return self.model
+
     def displacement(self, points_mm) -> np.ndarray:
         """(N, 3) how far input-frame points of her skin move (across her body with her nipple, and forward or back
         onto the changed surface), input frame, mm."""

@@ -49,13 +49,13 @@ class Operated:
     def words(self) -> str:
         """The operations in a surgeon's words, in the order made, each made by a clinic's model named ("" for
         none)."""
-        return "; then ".join(spec.words + (f" (as {op.model} makes it, from its volume alone)" if hasattr(op, "model")
+        return "; then ".join(spec.words + (f" (as {op.made_by} makes it, from its volume alone)" if op.made_by
                                             else "") for spec, op in zip(self.written, self.made))
 
     @property
     def texts(self) -> tuple[str, ...]:
         """Each operation as written, in the order made, each made by a clinic's model named."""
-        return tuple(spec.text + (f" (by {op.model})" if hasattr(op, "model") else "")
+        return tuple(spec.text + (f" (by {op.made_by})" if op.made_by else "")
                      for spec, op in zip(self.written, self.made))
 
     @property
@@ -77,7 +77,7 @@ class Operated:
     def as_dict(self) -> dict:
         """plan.json's record of the operations: each as written, her volume and nipple before and after."""
         return {"operations": [{"written": spec.text, "kind": spec.kind, **spec.settings,
-                                **({"model": op.model} if hasattr(op, "model") else {})}
+                                **({"model": op.made_by} if op.made_by else {})}
                                for spec, op in zip(self.written, self.made)],
                 "volume_before_cc": round(self.volume_before_cc, 1), "volume_after_cc": round(self.volume_cc, 1),
                 "volume_change_cc": round(self.volume_cc - self.volume_before_cc, 1),

@@ -33,6 +33,11 @@ class SkinLift:
         """Her skin's heights above the chest wall over the cells (`SkinCells.height_mm`, mm) after it."""
         return height_mm + self.lift_mm
 
+    @property
+    def made_by(self) -> str | None:
+        """The file name of the clinic's model that made this operation; None: the built-in model made it."""
+        return None
+
     def displacement(self, points_mm) -> np.ndarray:
         """(N, 3) how far input-frame points of her skin move, input frame, mm."""
         body = transform_points(self.body_from_input, np.asarray(points_mm, float).reshape(-1, 3))
