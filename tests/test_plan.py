@@ -94,6 +94,8 @@ def test_plan_json_says_how_far_the_camera_stood_from_her_nipples_and_nothing_mo
     true_mm = np.linalg.norm(0.5 * (truth["left_nipple_camera_mm"] + truth["right_nipple_camera_mm"]))
     assert record["input"]["camera_mm"] == pytest.approx(true_mm, abs=5.0)
     assert record["input"]["camera_notes"] == [] and "camera stood" not in res.stderr
+    printed = json.loads(res.stdout)                                        # plan --json says the same
+    assert (printed["camera_mm"], printed["camera_notes"]) == (record["input"]["camera_mm"], [])
 
 
 def test_the_measures_know_her_midline_and_the_asymmetry_of_her_nipples(planned):
