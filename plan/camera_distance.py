@@ -11,12 +11,11 @@ from __future__ import annotations
 import numpy as np
 
 NEAREST_MM, FARTHEST_MM = 450.0, 850.0
-"""Outside these, a plan says how far the camera stood: 500–800 mm is what the benchmarks measured well (her
-volume within −3.2 … +5.6 % of its reading from 650 mm); from 900 mm on a small breast read up to 12 % more, and
-nearer than 500 mm was not measured."""
+"""Outside these distances (mm), a plan says how far the camera stood: just outside the span the benchmarks found
+her volume steady over, and beyond the nearest they tried (`benchmarks/bench_distance.py`, docs/volume.md)."""
 APART_MM = 100.0
-"""A follow-up whose two visits were scanned further apart than this says so: between 650 and 800 mm her volume
-moved by up to 5.6 %, several times what re-scans from alike distances move."""
+"""A follow-up whose two visits were scanned further apart than this (mm) says so: her volume moves more across such
+a change of distance than between re-scans from alike ones (docs/volume.md)."""
 
 
 def camera_distance_mm(nipples_from_camera: dict) -> float | None:
