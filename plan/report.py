@@ -542,7 +542,9 @@ function put(upd){ids.forEach((t,n)=>{traces[t]=Object.assign({},traces[t],{x:up
  if(colourBy==='moved'){const [mm,top]=movedMM(upd);delete skin.vertexcolor;
   Object.assign(skin,{intensity:mm,cmin:0,cmax:Math.max(1,Math.ceil(top)),colorscale:[[0,'#f3ece6'],[0.5,'#f4a582'],[1,'#b2182b']],
    showscale:true,colorbar:{title:{text:'mm moved'},len:0.6,x:1.0,xanchor:'right'},hovertemplate:'moved %{intensity:.1f} mm<extra></extra>',hoverinfo:undefined});}
- else{delete skin.intensity;Object.assign(skin,{vertexcolor:shade(upd.x[0],upd.y[0],upd.z[0]),showscale:false,hoverinfo:'skip',hovertemplate:undefined});}
+ else{for(const k of ['intensity','cmin','cmax','colorscale','colorbar'])delete skin[k];
+  Object.assign(skin,{vertexcolor:shade(upd.x[0],upd.y[0],upd.z[0]),showscale:false,hoverinfo:'skip',hovertemplate:undefined});}
+ skin.uid='her-skin-'+colourBy;   // a new mesh for each colouring: updated in place, plotly keeps the moved colours
  traces[idx.skin]=skin;}
 let current=null;   // the state shown (null: the original)
 let beside=false;   // her skin before (left) beside the state shown (right), one camera for both

@@ -915,6 +915,28 @@ def test_the_report_fits_1024_and_1920_px_colours_what_moves_compares_and_prints
         assert _skin_share(poster) > 0.9
 
 
+@requires_chromium
+def test_her_skin_coloured_by_millimetres_moved_and_back_is_drawn_as_at_first(planned, tmp_path):
+    """"Millimetres moved", then "Her skin": her picture's colours are those it opened with (the 3-D mesh kept the
+    moved colouring, a red body, when it was only updated in place)."""
+    case, _, _ = planned
+    plot = "document.getElementById('plot')"
+    with chromium(1280, 900) as b:
+        b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
+        box = b.rect("#plot")
+        first = _plot_pixels(b.screenshot(tmp_path / "first.png"), box)
+        for button, drawn in (("#colour-moved", "intensity"), ("#colour-skin", "vertexcolor")):
+            b.driver.find_element("css selector", button).click()
+            for _ in range(200):
+                if b.js(f"{plot}.data[0].{drawn} !== undefined"):
+                    break
+                time.sleep(0.05)
+        time.sleep(0.5)
+        again = _plot_pixels(b.screenshot(tmp_path / "again.png"), box)
+    mean = [p[p.sum(axis=-1) < 3 * 235].mean(axis=0) for p in (first, again)]
+    assert np.abs(mean[0] - mean[1]).max() < 8.0, mean
+
+
 def test_the_report_draws_each_fold_where_nipple_to_fold_is_measured_to(planned):
     """Each breast's fold drawn in the report lies `nipple_to_fold_mm` (plan.json) below its nipple along her up
     axis, spans the nipple's side to side, and is named seen or estimated as plan.json says."""
