@@ -150,9 +150,20 @@ def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], option
             base = breast_measures(volumes.landmarks, op.nipple_mm, op(sp.surface_input), sp.fit.faces)["volume_cc"]
             volume = op.volume_cc
         measures[s]["volume_cc"] += volume - base
+        measures[s] = poles_of_her_volume(measures[s])
     keys = tuple(OPERATED if not kinds else COMBINED if len(kinds) > 1 and combo == requested else
                  "+".join(change_name(k, d) for k, d in zip(kinds, combo)) for combo in combos)
     return StateGrid(kinds, degrees, requested, keys, changes, planned, models, measures)
+
+
+def poles_of_her_volume(measures: dict) -> dict:
+    """`measures` (one side's, scalars or per state) with her volume (`volume_cc`, on her skin) split into its upper
+    and lower poles as the fitted model splits its own (`pole_ratio` kept), so that the poles add up to it."""
+    upper, lower, volume = (np.asarray(measures[k], float) for k in ("upper_pole_cc", "lower_pole_cc", "volume_cc"))
+    share = np.divide(upper, upper + lower, out=np.full_like(upper, 0.5), where=upper + lower > 0)
+    up = volume * share
+    return {**measures, "upper_pole_cc": up if up.ndim else float(up),
+            "lower_pole_cc": volume - up if up.ndim else float(volume - up)}
 
 
 def _model_measures(volumes: BreastVolumes, sp: SidePlan) -> dict[str, float]:
@@ -190,7 +201,7 @@ def plan_measures(sides: dict[str, SidePlan], volumes: BreastVolumes, shown: Pla
     for side, sp in sides.items():
         nipple, planned = sp.scan.nipple_camera_mm, shown.planned[side]
         nipples["before"][side], nipples["after"][side] = nipple, planned.model(nipple[None])[0]
-        before[side] = {**fitted[side], "volume_cc": volumes.sides[side].volume_cc}
+        before[side] = poles_of_her_volume({**fitted[side], "volume_cc": volumes.sides[side].volume_cc})
     asym = {when: {k: v["left_minus_right"] for k, v in asymmetry(m).items()} for when, m in
             (("before", before), ("after", after))}
     symmetry, ptosis = _symmetry(volumes, nipples, torso)

@@ -136,8 +136,9 @@ def _measures_page(plan: Plan) -> Image.Image:
     top, rows = MARGIN_PX + 160, measure_rows(plan)
     draw_rows(pen, rows, (MARGIN_PX, top), font(26), 48)
     notes = (("Volumes are measured on the scan of her skin, down to the chest wall beneath each breast; the ± is "
-              "how far a new scan may read."), "Lengths are measured over her skin in millimetres.",
-             "Her right breast is on the left of a picture from the front, as in a mirror seen by someone facing her.")
+              "how far a new scan may read."),
+             "Lengths are straight lines between points of her skin, in millimetres.",
+             "Her right breast is on the left of a picture from the front, as someone facing her sees it.")
     for i, note in enumerate(notes):
         pen.text((MARGIN_PX, top + 48 * (len(rows) + 1) + 36 * i), note, fill="#333333", font=font(22))
     return page

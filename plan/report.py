@@ -353,7 +353,7 @@ def _symmetry_tables(plan: Plan) -> str:
     html = ""
     if sym["before"]:
         rows = [[label, sym["before"].get(k), sym["after"].get(k)] for k, label in SYMMETRY_LABELS.items()]
-        html += "<h2>Symmetry</h2>" + _table(["measure", "before", "after"], rows, "symmetry")
+        html += "<h2>Symmetry</h2>" + _table(["measure", "before", "as planned"], rows, "symmetry")
         if plan.measures.contour_hidden:
             html += CONTOUR_HIDDEN_TEXT
     rows = []
@@ -362,7 +362,7 @@ def _symmetry_tables(plan: Plan) -> str:
         rows.append([s, before["grade"], after["grade"], before["nipple_to_fold_mm"], before["nipple_to_lowest_mm"],
                      before["fold_from"], [round(v, 4) for v in sp.ptosis_params]])
     return html + "<h2>Ptosis (Regnault)</h2>" + _table(
-        ["side", "grade before", "grade after", "nipple above the fold mm", "nipple above the breast's lowest point mm",
+        ["side", "grade before", "grade as planned", "nipple above the fold mm", "nipple above the breast's lowest point mm",
          "fold", "fitted ptosis b0, b1"], rows, "ptosis") + SYMMETRY_TEXT
 
 
@@ -400,7 +400,7 @@ td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4p
 <div><b>Colour</b><br><button id="colour-skin" class="on">Her skin</button><button id="colour-moved">Millimetres moved</button></div>
 <div><b>Compare</b><br><button id="beside">Before and as planned, side by side</button></div>
 <p id="state"></p>
-<p>Her skin as scanned, moved as the plan shown would move it (or coloured by how far each point moves). Red: the sternal notch, the midline and the nipples the measures start from. Blue: each breast's footprint, the outline her volume is measured inside. Purple: the fold beneath each breast (dotted where the breast hides it and its place is estimated). The legend shows each breast's scanned points and its fitted model on demand.</p>
+<p>Her skin as scanned, moved as the plan shown would move it (or coloured by how far each point moves). Seen from the side, her skin ends where the camera in front of her stopped seeing it: at her sides and beneath a breast that hangs, where nothing is drawn rather than guessed. Red: the sternal notch, the midline and the nipples the measures start from. Blue: each breast's footprint, the outline her volume is measured inside. Purple: the fold beneath each breast (dotted where the breast hides it and its place is estimated). The legend shows each breast's scanned points and its fitted model on demand.</p>
 </div></main>
 <div id="tables">%TABLES%</div>
 <script>%SCRIPT%</script>

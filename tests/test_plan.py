@@ -98,6 +98,14 @@ def test_plan_json_says_how_far_the_camera_stood_from_her_nipples_and_nothing_mo
     assert (printed["camera_mm"], printed["camera_notes"]) == (record["input"]["camera_mm"], [])
 
 
+def test_her_poles_add_up_to_her_volume_before_and_as_planned_in_the_ratio_of_the_fitted_breasts(planned):
+    _, record, _ = planned
+    for when in ("before", "after"):
+        for side, m in record["measures"][when].items():
+            assert m["upper_pole_cc"] + m["lower_pole_cc"] == pytest.approx(m["volume_cc"], abs=0.01), (when, side)
+            assert m["upper_pole_cc"] / m["lower_pole_cc"] == pytest.approx(m["pole_ratio"], rel=1e-3)
+
+
 def test_the_measures_know_her_midline_and_the_asymmetry_of_her_nipples(planned):
     """Against the sample's truth: the nipples' distances from her mid-sagittal plane (x = 0 of the
     MakeHuman body) and the height difference between her nipples along her up axis."""
