@@ -20,6 +20,8 @@ WRAP_CHARS = 130
 """What is planned is written in lines of at most this many characters (22 px type fills a line at about 140)."""
 DISCLAIMER = ("A simulation of a planned change on her scanned body: a guide for discussion, not a promise of "
               "the result.")
+UNSEEN_WORDS = "Gaps in the pictures from the side are skin the camera in front of her could not see."
+"""Said under her pictures: a camera in front of her does not see beneath a breast that hangs or her sides."""
 PLAIN = {"volume_cc": ("breast volume", "cc"),
          "notch_to_nipple_mm": ("nipple to the notch at the base of the neck", "mm"),
          "nipple_to_midline_mm": ("nipple to the middle of the chest", "mm"),
@@ -126,7 +128,7 @@ def _pictures_page(plan: Plan, shots: dict) -> Image.Image:
             page.paste(shot, (x, top + row * h))
     for row, label in enumerate(("before", "as planned")):
         vertical_text(page, label, (left - 40, top + row * h + h // 2), font(24))
-    words = textwrap.wrap(f"As planned: {shown_words(plan)}.", WRAP_CHARS)
+    words = textwrap.wrap(f"As planned: {shown_words(plan)}. {UNSEEN_WORDS}", WRAP_CHARS)
     pen.multiline_text((MARGIN_PX, top + 2 * h + 20), "\n".join(words), fill="#333333", font=font(22), spacing=8)
     return page
 
