@@ -533,6 +533,7 @@ function label(state){   // what is shown, in words; the sliders and the measure
   c.textContent=fmt(state?state.asymmetry[name]:P.asymmetry_before[name],false);}
 }
 let colourBy='skin';   // her skin shaded, or each point's distance moved by the state shown (mm)
+const SCALE_AT=0.88;   // where the scale of millimetres moved stands, her picture to its left
 function movedMM(upd){const mm=new Float32Array(nT+nP);let top=0;
  for(let v=0;v<nP;v++){const d=Math.hypot(upd.x[0][nT+v]-patchBase[3*v],upd.y[0][nT+v]-patchBase[3*v+1],upd.z[0][nT+v]-patchBase[3*v+2]);
   mm[nT+v]=d;if(d>top)top=d;}
@@ -541,7 +542,7 @@ function put(upd){ids.forEach((t,n)=>{traces[t]=Object.assign({},traces[t],{x:up
  const skin=Object.assign({},traces[idx.skin]);
  if(colourBy==='moved'){const [mm,top]=movedMM(upd);delete skin.vertexcolor;
   Object.assign(skin,{intensity:mm,cmin:0,cmax:Math.max(1,Math.ceil(top)),colorscale:[[0,'#f3ece6'],[0.5,'#f4a582'],[1,'#b2182b']],
-   showscale:true,colorbar:{title:{text:'mm moved'},len:0.6,x:1.0,xanchor:'right'},hovertemplate:'moved %{intensity:.1f} mm<extra></extra>',hoverinfo:undefined});}
+   showscale:true,colorbar:{title:{text:'mm moved'},len:0.6,x:SCALE_AT,xanchor:'left'},hovertemplate:'moved %{intensity:.1f} mm<extra></extra>',hoverinfo:undefined});}
  else{for(const k of ['intensity','cmin','cmax','colorscale','colorbar'])delete skin[k];
   Object.assign(skin,{vertexcolor:shade(upd.x[0],upd.y[0],upd.z[0]),showscale:false,hoverinfo:'skip',hovertemplate:undefined});}
  skin.uid='her-skin-'+colourBy;   // a new mesh for each colouring: updated in place, plotly keeps the moved colours
@@ -555,7 +556,8 @@ traces.push({type:'mesh3d',name:'before',scene:'scene2',x:still0.x[0],y:still0.y
  hoverinfo:'skip',showlegend:false});
 function scenes(layout){   // the layout's scenes for one view or two side by side, the camera kept
  const cam=(gd.layout&&gd.layout.scene&&gd.layout.scene.camera)||views.front;
- const one={domain:{x:[0.26,1],y:[0,1]}},two={domain:{x:[0.5,1],y:[0,1]}},left={domain:{x:[0,0.5],y:[0,1]}};
+ const end=colourBy==='moved'?SCALE_AT:1;   // the colour scale beside her, not over her
+ const one={domain:{x:[0.26,end],y:[0,1]}},two={domain:{x:[0.5,end],y:[0,1]}},left={domain:{x:[0,0.5],y:[0,1]}};
  const B=P.bounds,size=B.map(r=>r[1]-r[0]),most=Math.max(...size);   // one box and scale for every scene
  const axes={aspectmode:'manual',aspectratio:{x:size[0]/most,y:size[1]/most,z:size[2]/most},camera:cam,
   xaxis:{visible:false,range:B[0]},yaxis:{visible:false,range:B[1]},zaxis:{visible:false,range:B[2]}};

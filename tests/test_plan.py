@@ -894,11 +894,15 @@ def test_the_report_fits_1024_and_1920_px_colours_what_moves_compares_and_prints
         assert moved.max() == pytest.approx(largest, rel=0.2) and moved.min() == 0.0
         assert b.js(f"{plot}.data[0].cmax") == int(np.ceil(moved.max()))
         assert "mm" in b.js(f"{plot}.data[0].hovertemplate")
+        scale_beside = (f"{plot}.data[0].colorbar.xanchor === 'left' && "                   # beside her, not over her
+                        f"{plot}.data[0].colorbar.x >= {plot}.layout.scene.domain.x[1]")
+        assert b.js(scale_beside)
         b.driver.find_element("css selector", "#beside").click()
         for _ in range(200):
             if b.js(f"{plot}.layout.scene2 !== undefined"):
                 break
             time.sleep(0.05)
+        assert b.js(scale_beside)
         shown = b.js(f"{plot}.data.find(t => t.name === 'before')")
         assert shown["scene"] == "scene2"
         xyz = np.column_stack([shown["x"], shown["y"], shown["z"]])
