@@ -46,7 +46,7 @@ from breastplan.model_file import ModelFile, load_model, save_model
 
 from .breast_volume import CELL_MM, FOOT_MM, BreastVolumes
 from .operation_spec import OperationSpec, implant_of
-from .skin_lift import SkinLift, scaled
+from .skin_lift import SkinLift, facing, scaled
 
 OPERATION = "operation"
 """A model file's `model`: an operation's model (a deformation's statistical model is "statistical")."""
@@ -86,9 +86,8 @@ class LearntOperation(SkinLift):
         body = transform_points(T, np.asarray(points_mm, float).reshape(-1, 3))
         near = np.exp(-0.5 * np.sum((body[:, :2] - self.nipple_mm) ** 2, axis=1) / SLIDE_MM ** 2)
         surface = self.sampled(self.surface_mm, body, "nearest")
-        slope = np.hypot(*np.gradient(self.surface_mm, CELL_MM))
-        facing = self.sampled(1.0 / (1.0 + slope ** 2), body, "nearest")        # cos² of her skin's tilt from ahead
-        slide = near * np.maximum(facing, near ** 2)                           # the nipple and areola slide whole
+        ahead = self.sampled(facing(self.surface_mm), body, "nearest")
+        slide = near * np.maximum(ahead, near ** 2)                            # the nipple and areola slide whole
         across = np.outer(slide * (np.sign(body[:, 0]) == _outwards(self.side)), self.shift_mm)
         forward = self.sampled(self.surface_mm + self.lift_mm, body[:, :2] + across, "nearest") - surface
         return np.column_stack([across, forward]) @ T[:3, :3]                  # body → input frame

@@ -11,7 +11,8 @@ sternal notch the origin):
    to 0 at the footprint's upper border with a C² step (the upper chest stays). The fold rises with the breast.
 3. **Volume kept**: the raised heights are then scaled so that her volume on her skin is as before, exactly.
 4. **Her skin moved**: each point of her skin moves up by δ · w where it lies, and forward or back by the change of
-   the surface's height between its old place and its new one, so that the areola travels with the nipple.
+   the surface's height between its old place and its new one, so that the areola travels with the nipple (that
+   move fading where her skin turns from ahead, STEEP_FADE).
 
 A target at or below her nipple, or more than MAX_RISE of the way from her nipple to her footprint's upper border
 (beyond what a lift can reach: above it her breast has no skin left to bring), is refused in a sentence.
@@ -25,9 +26,13 @@ import numpy as np
 from breastplan import BadInputError, transform_points
 
 from .breast_volume import BreastVolumes
-from .skin_lift import SkinLift, scaled, up_the_breast
+from .skin_lift import SkinLift, facing, scaled, up_the_breast
 from .surface import smoothstep
 
+STEEP_FADE = 2.0
+"""Her skin's move forward or back is scaled by min(1, STEEP_FADE · cos² of its tilt from ahead) (`skin_lift.facing`):
+whole up to 45°, fading to none on skin seen edge-on. At the side of her breast a height field holds her skin poorly,
+and a point risen a few millimetres would otherwise take a height tens of millimetres away, into her or out of her."""
 MAX_RISE = 0.6
 """A lift raises the nipple at most this share of the way to her footprint's upper border above it."""
 
@@ -51,6 +56,7 @@ class Mastopexy(SkinLift):
         moved = body[:, :2] + np.column_stack([np.zeros_like(up), up])
         surface = self.wall_mm + self.height_mm
         forward = (self.sampled(surface + self.lift_mm, moved, "nearest") - self.sampled(surface, body, "nearest"))
+        forward *= self.sampled(np.minimum(1.0, STEEP_FADE * facing(surface)), body, "nearest")
         return np.column_stack([np.zeros_like(up), up, forward * (up > 0)]) @ T[:3, :3]   # body → input frame
 
 

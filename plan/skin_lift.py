@@ -55,6 +55,12 @@ class SkinLift:
         return points + self.displacement(points).reshape(points.shape)
 
 
+def facing(surface_mm: np.ndarray) -> np.ndarray:
+    """(nx, ny) cos² of her skin's tilt from facing ahead over the cells (`surface_mm`: her skin's anterior coordinate
+    over them, body frame, mm): 1 where it faces ahead, towards 0 where it turns to her side."""
+    return 1.0 / (1.0 + np.square(np.hypot(*np.gradient(surface_mm, CELL_MM))))
+
+
 def up_the_breast(cells: SkinCells, side: str, nipple_y_mm: float) -> tuple[np.ndarray, np.ndarray]:
     """(nx, ny) how far up each cell lies from the nipple's height (0) to her `side` footprint's upper border in its
     column (1), clipped to 0..1 (a column whose border lies within a cell of the nipple counts a cell); and (nx, 1)

@@ -53,6 +53,16 @@ def test_her_lower_nipple_lifted_to_her_other_nipples_height_keeps_her_volume_an
     assert np.abs(moved[above]).max() < 0.5                                   # her upper chest stays
 
 
+@pytest.mark.parametrize("rise", [10.0, 20.0, 30.0])
+def test_no_point_of_her_skin_moves_more_than_twice_her_nipples_rise(rise):
+    """Her skin rises by at most the nipple's rise and follows her surface forward or back; at the side of her
+    breast, seen nearly edge-on, a point risen a few mm took a height tens of mm behind it (30 mm for a 10 mm rise)."""
+    torso, nipples, m, body = _her()
+    for side in ("left", "right"):
+        lifted = mastopexy(m, side, nipples[side], body[side][1] + rise)
+        assert np.linalg.norm(lifted.displacement(torso), axis=1).max() <= 2.0 * rise, side
+
+
 def test_a_lift_to_a_distance_from_her_sternal_notch_reaches_it_as_lifted():
     torso, nipples, m, body = _her()
     low, _ = _lower_side(body)
