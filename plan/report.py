@@ -362,8 +362,8 @@ def _symmetry_tables(plan: Plan) -> str:
         rows.append([s, before["grade"], after["grade"], before["nipple_to_fold_mm"], before["nipple_to_lowest_mm"],
                      before["fold_from"], [round(v, 4) for v in sp.ptosis_params]])
     return html + "<h2>Ptosis (Regnault)</h2>" + _table(
-        ["side", "grade before", "grade as planned", "nipple above the fold mm", "nipple above the breast's lowest point mm",
-         "fold", "fitted ptosis b0, b1"], rows, "ptosis") + SYMMETRY_TEXT
+        ["side", "grade before", "grade as planned", "nipple above the fold mm",
+         "nipple above the breast's lowest point mm", "fold", "fitted ptosis b0, b1"], rows, "ptosis") + SYMMETRY_TEXT
 
 
 _TEMPLATE = """<!DOCTYPE html>
