@@ -123,13 +123,22 @@ def _grid(plan: Plan, views: Views) -> dict:
     rounded = lambda values: np.round(values, 3).tolist()  # noqa: E731
     asym = asymmetry(grid.measures)
     return {"kinds": list(grid.kinds), "degrees": [list(d) for d in grid.degrees], "requested": list(grid.requested),
-            "keys": list(grid.keys), "words": [state_words(grid, i) + (" (after the operations)" if plan.operated and
-                                                                      grid.kinds else "") for i in range(len(grid))],
+            "keys": list(grid.keys), "words": [_state_said(plan, i) for i in range(len(grid))],
             "planned": grid.planned_index,
             "measures": {s: {k: rounded(v) for k, v in grid.measures[s].items()} for s in sides},
             "asymmetry": {k: rounded(v["left_minus_right"]) for k, v in asym.items()},
             "coefficients": _b64(stored.coefficients, "<f4"), "modes": _b64(stored.modes, "<i2"),
             "scales": stored.scales.astype(float).tolist(), "worst_mm": stored.worst_mm}
+
+
+def _state_said(plan: Plan, i: int) -> str:
+    """What slider state i shows, in words, with each change a breast does not reach as far as its slider asks
+    (`changes.short_of`)."""
+    grid = plan.grid
+    short = [f"on her {s} breast, {d['kind']} reaches {short_of(d, plan.options.method)}" for s in plan.sides
+             for d in grid.changes[s][i].details if short_of(d, plan.options.method)]
+    return (state_words(grid, i) + (" (after the operations)" if plan.operated and grid.kinds else "")
+            + "".join(f"; {words}" for words in short))
 
 
 def _operated_marks(moved: dict) -> dict:

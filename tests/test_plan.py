@@ -1,6 +1,7 @@
 """`breastplan plan`: the main job on the bundled realistic sample (a MakeHuman patient recorded
 through depthai), checked against the sample's truth and against the reference model; the reuse
 of finished stages; the blend of a change into the chest; bad input."""
+import itertools
 import json
 import os
 import re
@@ -259,6 +260,13 @@ def test_a_change_a_realistic_breast_cannot_reach_is_said_in_the_terminal_plan_j
         assert f"note: on the {side} breast, top-shape 8 reaches {short_of(detail, 'exact')}" in stderr
         assert f"{detail['degree_reached']:.2f}, not 8 (the end of its condition" in report
     assert "ptosis 3 reaches" not in stderr
+    data = json.loads(re.search(r'id="plan-data">(.*?)</script>', report, re.S).group(1).replace("<\\/", "</"))
+    grid = data["grid"]
+    at = grid["kinds"].index("top-shape")
+    for combo, words in zip(itertools.product(*grid["degrees"]), grid["words"]):   # each slider state says so too
+        said = ("on her left breast, top-shape reaches degree" in words, "on her right breast, top-shape" in words)
+        assert said == ((True, True) if combo[at] >= 6 else (False, False)), (combo, words)
+        assert "ptosis reaches" not in words
 
 
 @pytest.mark.parametrize("side", ["left", "right"])
