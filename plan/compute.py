@@ -162,8 +162,8 @@ def poles_of_her_volume(measures: dict) -> dict:
     upper, lower, volume = (np.asarray(measures[k], float) for k in ("upper_pole_cc", "lower_pole_cc", "volume_cc"))
     share = np.divide(upper, upper + lower, out=np.full_like(upper, 0.5), where=upper + lower > 0)
     up = volume * share
-    return {**measures, "upper_pole_cc": up if up.ndim else float(up),
-            "lower_pole_cc": volume - up if up.ndim else float(volume - up)}
+    poles = {"upper_pole_cc": up, "lower_pole_cc": volume - up}
+    return {**measures, **{k: v if v.ndim else float(v) for k, v in poles.items()}}
 
 
 def _model_measures(volumes: BreastVolumes, sp: SidePlan) -> dict[str, float]:

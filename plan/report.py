@@ -135,8 +135,8 @@ def _state_said(plan: Plan, i: int) -> str:
     """What slider state i shows, in words, with each change a breast does not reach as far as its slider asks
     (`changes.short_of`)."""
     grid = plan.grid
-    short = [f"on her {s} breast, {d['kind']} reaches {short_of(d, plan.options.method)}" for s in plan.sides
-             for d in grid.changes[s][i].details if short_of(d, plan.options.method)]
+    short = [f"on her {s} breast, {d['kind']} reaches {why}" for s in plan.sides for d in grid.changes[s][i].details
+             if (why := short_of(d, plan.options.method))]
     return (state_words(grid, i) + (" (after the operations)" if plan.operated and grid.kinds else "")
             + "".join(f"; {words}" for words in short))
 
