@@ -260,6 +260,7 @@ def run_scene(shot: Shot) -> SceneResult:
         for side, b in m.sides.items():
             out.new[side] = {
                 "volume_cc": float(b.volume_cc), "uncertainty_cc": float(b.uncertainty_cc),
+                "unseen_outer_cc": float(b.unseen_outer_cc),
                 "nipple_body": transform_points(m.body_from_input, nipples[side][None])[0],
                 "nipple_true_frame": transform_points(true_T, nipples[side][None])[0],
                 "true_nipple_found_frame": transform_points(m.body_from_input, truth[side][None])[0],
@@ -447,8 +448,17 @@ def asymmetry_rows(results: list[SceneResult]) -> list[dict]:
                          "body": r.shot.body, "view": r.shot.label, "true_lr_cc": true,
                          "new_lr_cc": new, "fitted_lr_cc": fit, "front_lr_cc": r.front_lr_cc,
                          "new_error_cc": None if new is None else new - true,
+                         "range_holds": None if new is None else range_holds(r, true),
                          "fitted_error_cc": None if fit is None else fit - true})
     return rows
+
+
+def range_holds(r: SceneResult, true_lr: float) -> bool:
+    """Whether a true left − right (cc) lies within the measured one's stated range: both breasts' ±, and beyond
+    them what each breast's unseen outer side may add (to its own side of the difference)."""
+    left, right = r.new["left"], r.new["right"]
+    lr, u = left["volume_cc"] - right["volume_cc"], left["uncertainty_cc"] + right["uncertainty_cc"]
+    return lr - u - right["unseen_outer_cc"] <= true_lr <= lr + u + left["unseen_outer_cc"]
 
 
 def visit_rows(results: list[SceneResult]) -> list[dict]:
@@ -557,6 +567,7 @@ def figures_of(resc: list[dict], sym: list[dict], asym: list[dict], results: lis
         figure("one_sided_cup_error_worst", worst_abs(relative(a, "new") for a in cups), T["one_sided_cup_worst_pct"],
                worst_abs(relative(a, "fitted") for a in cups), "%",
                worst_cc=worst_abs(a["new_error_cc"] for a in cups),
+               range_holds=f"{sum(bool(a['range_holds']) for a in cups)}/{len(cups)}",
                baseline_worst_cc=worst_abs(a["fitted_error_cc"] for a in cups),
                true_lr_cc_range=[min(a["true_lr_cc"] for a in cups), max(a["true_lr_cc"] for a in cups)],
                perfect_front_whole_grid_pct=[share(a, "whole_grid") for a in cups],
@@ -569,7 +580,8 @@ def figures_of(resc: list[dict], sym: list[dict], asym: list[dict], results: lis
                     "along her found anterior axis, left less mirrored right, % of the true difference, over "
                     "the whole grid (no wall) and inside the measured footprint (above the measured wall); "
                     "measured_vs_perfect: the measure's left − right less the perfect view's, on the "
-                    "footprint's cells the camera saw"),
+                    "footprint's cells the camera saw; range_holds: scenes whose true difference lies within the "
+                    "measured one's stated range (both ±, and each breast's unseen outer side)"),
         figure("single_scan_change_worst_pct", worst_abs(v["new_pct_of_true"] - 100.0 for v in visits
                                                           if v["new_pct_of_true"] is not None), None,
                worst_abs(v["fitted_pct_of_true"] - 100.0 for v in visits if v["fitted_pct_of_true"] is not None), "%",

@@ -180,7 +180,8 @@ def _json(plan, out: Path, seconds: float) -> dict:
     for s, sp in plan.sides.items():
         volume = volume_record(plan, s)
         sides[s] = {"volume_cc": volume["volume_cc"], "uncertainty_cc": volume["uncertainty_cc"],
-                    "model_volume_cc": volume["model_volume_cc"], "stopping_rule_met": sp.fit.stopping_rule_met,
+                    "unseen_outer_cc": volume["unseen_outer_cc"], "model_volume_cc": volume["model_volume_cc"],
+                    "stopping_rule_met": sp.fit.stopping_rule_met,
                     "changes": [st.key for st in plan.changes], "reused": list(sp.reused)}
         if s in plan.operated:
             sides[s]["operations"] = plan.operated[s].as_dict()
@@ -225,8 +226,10 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
     stdout.print(table)
     for s, sp in plan.sides.items():
         fit, volume = sp.fit, plan.volumes.sides[s]
-        stdout.print(f"{s} volume: {volume.volume_cc:.1f} ± {volume.uncertainty_cc:.1f} cc on her skin "
-                     f"(footprint {volume.area_cm2:.0f} cm²"
+        stdout.print(f"{s} volume: {volume.volume_cc:.1f} ± {volume.uncertainty_cc:.1f} cc on her skin"
+                     + (f", and perhaps {volume.unseen_outer_cc:.0f} cc more on her outer side, unseen"
+                        if volume.unseen_outer_cc >= 0.5 else "")
+                     + f" (footprint {volume.area_cm2:.0f} cm²"
                      + (f", {volume.unseen_pct:.0f} % estimated where unseen" if volume.unseen_pct >= 1 else "")
                      + ")")
         grade = m.ptosis["before"][s]

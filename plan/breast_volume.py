@@ -24,6 +24,8 @@ points alone (docs/volume.md):
 5. **Its uncertainty** (± cc): twice the wall's standard error (its residuals' robust σ times
    √(terms / cells fitted)) over the footprint's area, plus the volume of the cells estimated rather
    than seen, plus FLOOR_PCT of the volume for what moves with the landmarks between scans.
+6. **Her unseen outer side** (cc, one-sided: it can only add): where the camera stopped seeing her at the
+   footprint's outer edge, the most her skin beyond may hold (`unseen_outer_cc`).
 
 The points are put in a canonical order first, so the result depends on her surface alone.
 """
@@ -80,6 +82,9 @@ a side turned from the camera is seen more obliquely and reads a few percent low
 OUTLINE_SIGMA = 1.0
 """A footprint's outline is drawn through the mask blurred over this many cells (σ): smooth, enclosing the
 same area to a few percent."""
+GRAZING_DEG = 78.0
+"""A depth camera gets no depth from skin it sees at more than about this angle from its ray; beyond the last
+cell it saw on her outer side, her skin falls to the wall at least as steeply (`unseen_outer_cc`)."""
 FLOOR_PCT = 2.0
 """Share of the volume added to its ± for what moves between two scans of her (the landmarks, her
 outline): set so that nine re-scans in ten fall within it (benchmarks/bench_volume_repeat.py)."""
@@ -88,17 +93,20 @@ outline): set so that nine re-scans in ten fall within it (benchmarks/bench_volu
 @dataclass(frozen=True, eq=False)
 class BreastVolume:
     """One breast measured on her skin: volume and its ± (cc), its footprint (a closed curve on her
-    skin, input frame, mm), the footprint's area (cm², seen from the front) and the share of the volume
-    estimated where the camera did not see her (%)."""
+    skin, input frame, mm), the footprint's area (cm², seen from the front), the share of the volume
+    estimated where the camera did not see her (%), and the most her outer side beyond the footprint may
+    add where the camera stopped seeing her (cc; `unseen_outer_cc`)."""
 
     volume_cc: float
     uncertainty_cc: float
     footprint_input_mm: np.ndarray      # (K, 3), closed: the last point is the first
     area_cm2: float
     unseen_pct: float
+    unseen_outer_cc: float
 
     def as_dict(self) -> dict:
         return {"volume_cc": round(self.volume_cc, 1), "uncertainty_cc": round(self.uncertainty_cc, 1),
+                "unseen_outer_cc": round(self.unseen_outer_cc, 1),
                 "footprint_area_cm2": round(self.area_cm2, 1), "unseen_pct": round(self.unseen_pct, 1)}
 
     def model_differs_pct(self, model_cc: float) -> float | None:
@@ -210,7 +218,7 @@ def measure_breasts(body: Body, nipples: dict) -> BreastVolumes:
         sides[side] = BreastVolume(
             volume, float(2.0 * se_mm * area_cm2 / 10.0 + unseen + FLOOR_PCT / 100.0 * volume),
             transform_points(np.linalg.inv(T), grid.outline(mask, wall)), area_cm2,
-            100.0 * unseen / volume if volume > 0 else 0.0)
+            100.0 * unseen / volume if volume > 0 else 0.0, unseen_outer_cc(height, grid.seen, mask, side))
     return BreastVolumes(sides, landmarks, T, SkinCells(grid.X[:, 0], grid.Y[0], height, grid.seen, footprint, wall))
 
 
@@ -316,6 +324,19 @@ class _SkinGrid:
 def _volume_cc(height: np.ndarray, mask: np.ndarray) -> float:
     """cc of the heights (mm) above 0 over the cells of `mask`."""
     return float(np.clip(height[mask], 0.0, None).sum()) * CELL_MM ** 2 / 1000.0
+
+
+def unseen_outer_cc(height: np.ndarray, seen: np.ndarray, mask: np.ndarray, side: str) -> float:
+    """The most her skin may hold beyond a footprint's outer edge where the camera stopped seeing her (cc):
+    over each cell of `mask` whose neighbour away from her midline is neither in it nor seen, the wedge of
+    skin falling from the cell's height h above the wall to the wall no less steeply than GRAZING_DEG,
+    h² / (2 tan GRAZING_DEG) along CELL_MM of edge. `height`, `seen`, `mask`: (nx, ny) on a grid symmetric
+    about x = 0, her left at x > 0; heights in mm."""
+    outward = slice(1, None) if side == "left" else slice(None, -1)
+    inward = slice(None, -1) if side == "left" else slice(1, None)
+    edge = mask[inward] & ~(mask[outward] | seen[outward])
+    h = np.clip(height[inward][edge], 0.0, None)
+    return float((h ** 2).sum()) * CELL_MM / (2.0 * np.tan(np.radians(GRAZING_DEG))) / 1000.0
 
 
 def _filled(skin: np.ndarray, wall: np.ndarray) -> np.ndarray:

@@ -73,6 +73,18 @@ def measure_rows(plan: Plan) -> list[tuple[str, ...]]:
     return rows
 
 
+def outer_words(plan: Plan) -> list[str]:
+    """A line for the handout when the camera left some of her breasts' outer sides unseen (none else)."""
+    more = {s: v for s in ("right", "left") if s in plan.sides
+            and (v := plan.volumes.sides[s].unseen_outer_cc) >= 0.5}
+    if len(more) == 2:
+        right, left = more.values()
+        return ["The camera in front of her did not see all of each breast's outer side: perhaps "
+                f"{right:.0f} cc more of her right breast and {left:.0f} cc more of her left lie there."]
+    return [f"The camera in front of her did not see all of her {s} breast's outer side: perhaps {v:.0f} cc more "
+            "lies there." for s, v in more.items()]
+
+
 def draw_rows(pen: ImageDraw.ImageDraw, rows: list[tuple[str, ...]], at: tuple[int, int], face, step: int) -> None:
     """Draw `rows` of text as a table from `at` (px), `step` px apart: each column as wide as its widest cell
     and a gap; the first row (the head) grey."""
@@ -140,7 +152,8 @@ def _measures_page(plan: Plan) -> Image.Image:
     notes = (("Volumes are measured on the scan of her skin, down to the chest wall beneath each breast; the ± is "
               "how far a new scan may read."),
              "Lengths are straight lines between points of her skin, in millimetres.",
-             "Her right breast is on the left of a picture from the front, as someone facing her sees it.")
+             "Her right breast is on the left of a picture from the front, as someone facing her sees it.",
+             *outer_words(plan))
     for i, note in enumerate(notes):
         pen.text((MARGIN_PX, top + 48 * (len(rows) + 1) + 36 * i), note, fill="#333333", font=font(22))
     return page

@@ -39,7 +39,7 @@ from breastplan.fitting.ffd import STOP_RESIDUAL
 
 from .breast_volume import model_differs_much
 from .changes import short_of
-from .handout import DISCLAIMER, PLAIN, plain_value, state_words
+from .handout import DISCLAIMER, PLAIN, outer_words, plain_value, state_words
 from .measures import asymmetry, measure_label
 from .pictures import FOLD, FOOTPRINT, LANDMARK, LIGHT, VIEWS, camera, picture, skin_colour
 from .result import OPERATED, Plan
@@ -74,8 +74,11 @@ VOLUME_TEXT = ('<p id="volume-how">Her volume is the tissue between her skin and
                'same on both sides, is inferred from her chest around both breasts, and both breasts are measured '
                'inside one outline, mirrored, so that a difference between them is a difference of tissue. The ± '
                'holds nine re-scans in ten. Where the camera did not see her, the other side\'s mirror image stands '
-               'in, and the ± grows by what it adds. The fitted model, which plans the change, has a volume of its '
-               'own; it is shown as a cross-check.</p>')
+               'in, and the ± grows by what it adds. Where the camera stopped seeing her at the outer edge of her '
+               'footprint, her breast may go on beyond it: the column "perhaps more, unseen" estimates what her '
+               'outer side could hold there, had her skin fallen to the wall at the steepest slope the camera still '
+               'sees. It can only add, and a scanner that wraps round her would measure it. The fitted model, which '
+               'plans the change, has a volume of its own; it is shown as a cross-check.</p>')
 DIFFERS_TEXT = ('<p class="differs">The fitted model of her {side} breast holds {pct:+.0f} % of the volume measured '
                 'on her skin: the model describes her breast only roughly, and its planned change is best read as '
                 'a shape, not a volume.</p>')
@@ -232,11 +235,11 @@ def tables(plan: Plan) -> str:
     parts = [_operations_table(plan), for_her(plan), _measures_table(plan)]
     volumes = {s: plan.volumes.sides[s] for s in sides}
     differs = {s: v.model_differs_pct(plan.sides[s].fit.volume_cc) for s, v in volumes.items()}
-    rows = [[s, f"{v.volume_cc:.1f} ± {v.uncertainty_cc:.1f}", v.area_cm2, v.unseen_pct, plan.sides[s].fit.volume_cc,
-             differs[s]] for s, v in volumes.items()]
+    rows = [[s, f"{v.volume_cc:.1f} ± {v.uncertainty_cc:.1f}", f"+{v.unseen_outer_cc:.1f}", v.area_cm2,
+             v.unseen_pct, plan.sides[s].fit.volume_cc, differs[s]] for s, v in volumes.items()]
     parts.append("<h2>Volume, measured on her skin</h2>" + _table(
-        ["side", "volume cc", "footprint cm²", "estimated where unseen %", "the model's volume cc",
-         "the model differs by %"], rows, "volume") + VOLUME_TEXT
+        ["side", "volume cc", "perhaps more, unseen cc", "footprint cm²",
+         "estimated where unseen %", "the model's volume cc", "the model differs by %"], rows, "volume") + VOLUME_TEXT
         + "".join(DIFFERS_TEXT.format(side=s, pct=pct) for s, pct in differs.items() if model_differs_much(pct))
         + "".join(f'<p class="camera-distance">{html.escape(note)}</p>' for note in plan.camera_notes))
     parts.append(_symmetry_tables(plan))
@@ -293,7 +296,8 @@ def _operations_table(plan: Plan) -> str:
 
 def for_her(plan: Plan) -> str:
     """The main measures in plain words (`plan.handout.PLAIN`), before → as shown (the cells the page's script
-    updates as the state shown changes), the disclaimer and a link to her handout."""
+    updates as the state shown changes), what the camera did not see of her outer sides, the disclaimer and a
+    link to her handout."""
     m, sides = plan.measures, [s for s in ("right", "left") if s in plan.sides]
     head = "".join(f"<th>{html.escape(h)}</th>"
                    for h in ["measure", *(f"her {s} breast: before → as shown" for s in sides)])
@@ -306,7 +310,9 @@ def for_her(plan: Plan) -> str:
                       f"{plain_value(m.after[s].get(name))}</span> {unit}{extra}</td>")
         body += f"<tr><td>{html.escape(words)}</td>{cells}</tr>"
     return ('<section id="for-her"><h2>For her</h2><table class="for-her"><thead><tr>' + head + "</tr></thead><tbody>"
-            + body + f'</tbody></table><p id="disclaimer">{html.escape(DISCLAIMER)}</p><p>To take home: '
+            + body + "</tbody></table>"
+            + "".join(f'<p class="unseen-outer">{html.escape(w)}</p>' for w in outer_words(plan))
+            + f'<p id="disclaimer">{html.escape(DISCLAIMER)}</p><p>To take home: '
             '<a href="report.pdf">report.pdf</a>, two printed pages of these pictures and measures.</p></section>')
 
 

@@ -19,7 +19,7 @@ from breastplan.ingest.pipeline import ingest_frames
 from breastplan.scenes.realistic import BodyScene, CameraOptions, camera_pose
 from breastplan.ingest.recording import DepthFrames
 from breastplan.options import IngestOptions
-from breastplan.plan.breast_volume import measure_breasts
+from breastplan.plan.breast_volume import measure_breasts, unseen_outer_cc
 
 BODIES = {"symmetric": BodyOptions(cup=0.7, firmness=0.4, weight=0.6, pose="hands-on-hips"),
           "asymmetric": BodyOptions(cup=0.85, firmness=0.2, modifiers={"asymmetry": 0.5}, pose="arms-down")}
@@ -209,6 +209,35 @@ def test_a_breasts_volume_is_its_skins_heights_above_the_wall_over_its_footprint
     assert (height[12:18, 3:9] < 0).any() and (height[2:8, 3:9] < 0).any()
     for side, block in (("left", height[12:18, 3:9]), ("right", height[2:8, 3:9])):
         assert cells.volume_cc(side) == pytest.approx(np.clip(block, 0.0, None).sum() * 25.0 / 1000.0, rel=1e-12)
+
+
+def test_her_unseen_outer_side_is_the_skin_that_could_fall_beyond_the_last_cell_seen():
+    """Beyond a footprint cell whose neighbour away from her midline the camera did not see, her skin may go on,
+    falling to the wall no more steeply than a surface a depth camera still sees (78° from its ray): a ramp
+    from the cell's height h down to the wall, h / tan 78° long, along the cell's 5 mm of edge. The ramp's
+    volume is integrated here over a fine profile; an unseen neighbour towards her midline, or one the camera
+    saw, adds nothing."""
+    rng = np.random.default_rng(11)
+    height = rng.uniform(10.0, 50.0, (20, 6))
+    mask = np.zeros(height.shape, bool)
+    mask[12:16, 1:5] = True                          # her left (x > 0), outer edge at column 15
+    mask |= mask[::-1]                               # her right, outer edge at column 4
+    seen = np.ones(height.shape, bool)
+    seen[16, 1:3] = False                            # past her left's outer edge, two rows unseen
+    seen[3, 1:5] = False                             # past her right's, all four
+    seen[11, 1:5] = seen[8, 1:5] = False             # towards her midline: not her outer side
+
+    def ramp_cc(h):
+        run = h / np.tan(np.radians(78.0))
+        u = np.linspace(0.0, run, 20001)
+        return np.trapezoid(h * (1.0 - u / run), u) * 5.0 / 1000.0
+
+    left, right = mask & (np.arange(20) >= 10)[:, None], mask & (np.arange(20) < 10)[:, None]
+    assert unseen_outer_cc(height, seen, left, "left") == pytest.approx(
+        sum(ramp_cc(height[15, j]) for j in (1, 2)), rel=1e-6)
+    assert unseen_outer_cc(height, seen, right, "right") == pytest.approx(
+        sum(ramp_cc(height[4, j]) for j in range(1, 5)), rel=1e-6)
+    assert unseen_outer_cc(height, np.ones(height.shape, bool), left, "left") == 0.0
 
 
 def _skin_points(cells, skin, hidden=None) -> np.ndarray:

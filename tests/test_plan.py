@@ -186,7 +186,8 @@ def test_the_report_names_a_fitted_parameter_at_an_end_of_its_plausible_range(co
 
 def test_one_volume_leads_everywhere_and_the_models_is_named_as_the_models(cli, planned, monkeypatch, tmp_path):
     """Her volume measured on her skin is the same number in plan.json's side and measures, on the
-    terminal and from `fit` on the side's case; the model's volume is what fit.ply encloses (divergence
+    terminal and from `fit` on the side's case, and what her unseen outer sides may hold the same in plan.json,
+    on the terminal and in the report (its table, and the words for her); the model's volume is what fit.ply encloses (divergence
     theorem, here in numpy) and the gap below its base, named as the model's."""
     case, record, _ = planned
     for side in ("left", "right"):
@@ -202,11 +203,19 @@ def test_one_volume_leads_everywhere_and_the_models_is_named_as_the_models(cli, 
     res = run(cli, "plan", "--out", case, *[a for c in CHANGES for a in ("--deform", c)])
     assert res.returncode == 0, res.stderr[-3000:]
     for side in ("left", "right"):
-        line = re.search(rf"^{side} volume: ([\d.]+) ± ([\d.]+) cc on her skin", res.stdout, re.M)
-        assert tuple(map(float, line.groups())) == (record["sides"][side]["volume"]["volume_cc"],
-                                                    record["sides"][side]["volume"]["uncertainty_cc"])
+        line = re.search(rf"^{side} volume: ([\d.]+) ± ([\d.]+) cc on her skin, and perhaps (\d+) cc more on her "
+                         "outer side, unseen", res.stdout, re.M)
+        volume = record["sides"][side]["volume"]
+        assert tuple(map(float, line.groups()[:2])) == (volume["volume_cc"], volume["uncertainty_cc"])
+        assert abs(float(line.group(3)) - volume["unseen_outer_cc"]) <= 0.55          # whole cc, from 0.1 cc
+        assert 0 < volume["unseen_outer_cc"] < volume["volume_cc"]
+        assert f'<td>+{volume["unseen_outer_cc"]:.1f}</td>' in (case / "report.html").read_text()
         assert re.search(rf"^{side} fit: the model's volume {record['sides'][side]['fit']['model_volume_cc']:.1f} cc",
                          res.stdout, re.M)
+    said = re.search(r'<p class="unseen-outer">[^<]*perhaps (\d+) cc more of her right breast and (\d+) cc more of '
+                     r'her left lie there\.</p>', (case / "report.html").read_text())
+    assert said and all(abs(float(said.group(i)) - record["sides"][s]["volume"]["unseen_outer_cc"]) <= 0.55
+                        for i, s in ((1, "right"), (2, "left")))
     copy_of = tmp_path / "case"
     shutil.copytree(case, copy_of)
     out = json.loads(run(cli, "fit", copy_of / "left", "--json").stdout)
