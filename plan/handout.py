@@ -74,15 +74,16 @@ def measure_rows(plan: Plan) -> list[tuple[str, ...]]:
 
 
 def outer_words(plan: Plan) -> list[str]:
-    """A line for the handout when the camera left some of her breasts' outer sides unseen (none else)."""
+    """A line for the handout (and the report's words for her) when her scan, seen from in front of her, left some of
+    her breasts' outer sides unseen (none else); a number and its unit are not split across lines."""
     more = {s: v for s in ("right", "left") if s in plan.sides
             and (v := plan.volumes.sides[s].unseen_outer_cc) >= 0.5}
     if len(more) == 2:
         right, left = more.values()
-        return ["The camera in front of her did not see all of each breast's outer side: perhaps "
-                f"{right:.0f} cc more of her right breast and {left:.0f} cc more of her left lie there."]
-    return [f"The camera in front of her did not see all of her {s} breast's outer side: perhaps {v:.0f} cc more "
-            "lies there." for s, v in more.items()]
+        return ["Seen from in front of her, the scan does not show all of each breast's outer side: perhaps "
+                f"{right:.0f}\u00a0cc more of her right breast and {left:.0f}\u00a0cc more of her left lie there."]
+    return [f"Seen from in front of her, the scan does not show all of her {s} breast's outer side: perhaps "
+            f"{v:.0f}\u00a0cc more lies there." for s, v in more.items()]
 
 
 def draw_rows(pen: ImageDraw.ImageDraw, rows: list[tuple[str, ...]], at: tuple[int, int], face, step: int) -> None:
@@ -154,6 +155,7 @@ def _measures_page(plan: Plan) -> Image.Image:
              "Lengths are straight lines between points of her skin, in millimetres.",
              "Her right breast is on the left of a picture from the front, as someone facing her sees it.",
              *outer_words(plan))
-    for i, note in enumerate(notes):
-        pen.text((MARGIN_PX, top + 48 * (len(rows) + 1) + 36 * i), note, fill="#333333", font=font(22))
+    lines = [line for note in notes for line in textwrap.wrap(note, WRAP_CHARS)]
+    for i, line in enumerate(lines):
+        pen.text((MARGIN_PX, top + 48 * (len(rows) + 1) + 36 * i), line, fill="#333333", font=font(22))
     return page

@@ -13,12 +13,13 @@ def _plan(**unseen_cc):
 
 def test_the_handout_says_what_her_unseen_outer_sides_may_hold_right_breast_first():
     assert outer_words(_plan(left=24.4, right=31.6)) == [
-        "The camera in front of her did not see all of each breast's outer side: perhaps 32 cc more of her right "
-        "breast and 24 cc more of her left lie there."]
+        "Seen from in front of her, the scan does not show all of each breast's outer side: perhaps 32\u00a0cc more of "
+        "her right breast and 24\u00a0cc more of her left lie there."]
 
 
 def test_one_breast_unseen_or_planned_is_named_alone_and_breasts_seen_whole_say_nothing():
     for plan in (_plan(left=12.0), _plan(left=12.0, right=0.4)):
         assert outer_words(plan) == [
-            "The camera in front of her did not see all of her left breast's outer side: perhaps 12 cc more lies there."]
+            "Seen from in front of her, the scan does not show all of her left breast's outer side: perhaps 12\u00a0cc "
+            "more lies there."]
     assert outer_words(_plan(left=0.2, right=0.4)) == []

@@ -212,8 +212,8 @@ def test_one_volume_leads_everywhere_and_the_models_is_named_as_the_models(cli, 
         assert f'<td>+{volume["unseen_outer_cc"]:.1f}</td>' in (case / "report.html").read_text()
         assert re.search(rf"^{side} fit: the model's volume {record['sides'][side]['fit']['model_volume_cc']:.1f} cc",
                          res.stdout, re.M)
-    said = re.search(r'<p class="unseen-outer">[^<]*perhaps (\d+) cc more of her right breast and (\d+) cc more of '
-                     r'her left lie there\.</p>', (case / "report.html").read_text())
+    said = re.search('<p class="unseen-outer">[^<]*perhaps (\\d+)\u00a0cc more of her right breast and (\\d+)\u00a0cc more '
+                     'of her left lie there\\.</p>', (case / "report.html").read_text())
     assert said and all(abs(float(said.group(i)) - record["sides"][s]["volume"]["unseen_outer_cc"]) <= 0.55
                         for i, s in ((1, "right"), (2, "left")))
     copy_of = tmp_path / "case"
@@ -813,7 +813,8 @@ def test_a_left_plan_for_a_named_patient_gives_her_summary_and_handout_her_left_
     skin before (top row) and as planned (bottom row), framed alike; each picture as planned differs from the
     one above it visibly, and right of her midline: her left, on the picture's right from the front and either
     oblique (not the viewer's left). report.pdf: two A4 landscape pages, at most 2 MB; page 1 her skin before
-    and as planned from five views (ten pictures), page 2 text alone."""
+    and as planned from five views (ten pictures), page 2 text alone, none of it running off the page (nor on the
+    plan of both breasts, whose words are longer)."""
     from PIL import Image
 
     from breastplan.plan.pictures import SHOT_PX, VIEWS, camera
@@ -858,6 +859,10 @@ def test_a_left_plan_for_a_named_patient_gives_her_summary_and_handout_her_left_
     assert len(boxes) == 2 and all(abs(float(w) - 841.89) < 0.5 and abs(float(h) - 595.28) < 0.5 for w, h in boxes)
     first, second = (np.asarray(p).astype(int) for p in _pdf_pages(pdf))
     assert _skin_share(first) > 0.75 and _skin_share(second) < 0.01
+    both = np.asarray(_pdf_pages((planned[0] / "report.pdf").read_bytes())[1]).astype(int)   # both breasts' words
+    for page in (second, both):
+        inked = np.flatnonzero((page.sum(axis=2) < 3 * 200).any(axis=0))
+        assert inked.max() < page.shape[1] - 20                              # no text runs off the page
     r, g, b = first[..., 0], first[..., 1], first[..., 2]
     skin = (r > 90) & (r - g > 20) & (g - b > 10) & (r + g + b < 3 * 235)
     columns = np.flatnonzero(skin.any(axis=0))
