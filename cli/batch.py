@@ -19,8 +19,8 @@ FLAGS = {**PLAN_FLAGS, "jobs": "--jobs", "executor": "--executor", "scheduler": 
 @command()
 def batch(
     input: Path = typer.Argument(..., help="The folder of scans and recordings (searched recursively)."),
-    out: Path = typer.Option(..., "--out", help="The output folder: one case folder per input, and the manifest "
-                             "(manifest.csv, manifest.json)."),
+    out: Path = typer.Option(..., "--out", help="The output folder: one case folder per input, the manifest "
+                             "(manifest.csv, manifest.json) and each breast's measures (measures.csv)."),
     jobs: int = typer.Option(1, "--jobs", help="Cases planned at once (one BLAS thread each); with Dask and no "
                              "--scheduler, the local cluster's workers."),
     side: str = typer.Option("both", "--side", help="The breasts to plan: left, right or both."),
@@ -75,7 +75,8 @@ def batch(
             stderr.print(f"warning: {row.error}", markup=False, soft_wrap=True)
     summary = manifest.summary()
     if as_json:
-        report({"out": str(out), "manifest": str(out / "manifest.csv"), "summary": summary,
+        report({"out": str(out), "manifest": str(out / "manifest.csv"), "measures": str(out / "measures.csv"),
+                "summary": summary,
                 "failed": {r.input: r.error for r in manifest.rows if r.status == "failed"}}, True, "")
     else:
         _print_summary(out, manifest)
@@ -87,7 +88,8 @@ def batch(
 def _print_summary(out: Path, manifest) -> None:
     s = manifest.summary()
     stdout.print(f"batch: {s['inputs']} inputs — {s['done']} planned, {s['reused']} reused, {s['failed']} failed, "
-                 f"{s['skipped']} skipped; manifest → {out / 'manifest.csv'}", markup=False, soft_wrap=True)
+                 f"{s['skipped']} skipped; manifest → {out / 'manifest.csv'}, each breast's measures → "
+                 f"{out / 'measures.csv'}", markup=False, soft_wrap=True)
     for row in manifest.rows:
         if row.status == "failed":
             stdout.print(f"  failed: {row.error}", markup=False, soft_wrap=True)

@@ -130,8 +130,44 @@ def test_batch_plans_every_patient_and_reports_every_fault(batched, patients):
     assert "corrupt.mcap" in rows["corrupt.mcap"]["error"] and "gone.ply" in rows["gone.ply"]["error"]
     assert "No such file" in rows["gone.ply"]["error"]
     assert "outside.ply" in res.stderr and "warning" in res.stderr      # the skipped link, warned about
-    assert sorted(p.name for p in out.iterdir()) == [".batch.lock", "anna", "manifest.csv", "manifest.json", "ward"]
+    assert sorted(p.name for p in out.iterdir()) == [".batch.lock", "anna", "manifest.csv", "manifest.json",
+                                                     "measures.csv", "ward"]
     assert not _hidden(out)
+
+
+def _measures(out: Path) -> list[dict]:
+    with open(out / "measures.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_measures_csv_gives_each_planned_breast_its_plans_figures_and_nothing_of_the_rest(batched, patients):
+    """One row per breast of the two planned cases, in input order, none for a failed or skipped input; each the
+    figures of its case's plan.json: her volume, its ± and unseen outer side, her left − right (left less right,
+    the same on both rows), her ptosis grade and her nipple's distance from the notch; the recording's camera distance, none for the scan file; no
+    follow-up, no change since."""
+    out, res = batched
+    rows = _measures(out)
+    assert json.loads(res.stdout)["measures"] == str(out / "measures.csv")
+    assert [(r["input"], r["side"]) for r in rows] == [("anna.mcap", "left"), ("anna.mcap", "right"),
+                                                       ("ward/berta.ply", "left"), ("ward/berta.ply", "right")]
+    for name in ("anna.mcap", "ward/berta.ply"):
+        record = json.loads((out / _manifest(out)[name]["case"] / "plan.json").read_text())
+        mine = {r["side"]: r for r in rows if r["input"] == name}
+        for side, row in mine.items():
+            volume = record["sides"][side]["volume"]
+            assert [float(row[k]) for k in ("volume_cc", "uncertainty_cc", "unseen_outer_cc")] == \
+                [volume["volume_cc"], volume["uncertainty_cc"], volume["unseen_outer_cc"]]
+            assert row["ptosis_grade"] == record["measures"]["ptosis"]["before"][side]["grade"]
+            assert float(row["notch_to_nipple_mm"]) == pytest.approx(
+                record["measures"]["before"][side]["notch_to_nipple_mm"], abs=0.051)
+            assert row["change_since_earlier_cc"] == row["change_since_earlier_pct"] == ""
+            assert (row["camera_mm"] == "") == name.endswith(".ply")
+        left_minus_right = float(mine["left"]["volume_left_minus_right_cc"])
+        assert mine["right"]["volume_left_minus_right_cc"] == mine["left"]["volume_left_minus_right_cc"]
+        assert left_minus_right == pytest.approx(
+            record["measures"]["before"]["left"]["volume_cc"] - record["measures"]["before"]["right"]["volume_cc"],
+            abs=0.06)
+    assert 500 < float(rows[0]["camera_mm"]) < 800                         # the sample, recorded from about 0.65 m
 
 
 def test_a_batch_case_is_the_plan_of_its_input(batched, cli, tmp_path):
@@ -157,6 +193,8 @@ def test_a_batch_again_reuses_every_finished_case_and_retries_the_failed(batched
     assert rows["anna.mcap"]["status"] == rows["ward/berta.ply"]["status"] == "reused"
     assert rows["corrupt.mcap"]["status"] == "failed"
     assert {p: p.stat().st_mtime_ns for p in out.rglob("plan.json")} == stamps     # untouched
+    assert [(r["input"], r["side"]) for r in _measures(out)] == [(i, s) for i in ("anna.mcap", "ward/berta.ply")
+                                                                for s in ("left", "right")]     # reused: still there
 
 
 def test_a_case_missing_a_file_its_plan_names_is_planned_again(cli, tmp_path):
@@ -219,7 +257,9 @@ def test_a_batch_where_every_input_fails_exits_3(cli, tmp_path):
     assert res.returncode == 3, res.stderr
     assert "no input was planned" in res.stderr and str(folder) in res.stderr and "Traceback" not in res.stderr
     assert {r["status"] for r in _manifest(tmp_path / "cases").values()} == {"failed"}
-    assert sorted(p.name for p in (tmp_path / "cases").iterdir()) == [".batch.lock", "manifest.csv", "manifest.json"]
+    assert sorted(p.name for p in (tmp_path / "cases").iterdir()) == [".batch.lock", "manifest.csv", "manifest.json",
+                                                                       "measures.csv"]
+    assert _measures(tmp_path / "cases") == []                              # its header alone: no breast planned
 
 
 def test_an_empty_folder_exits_3_and_writes_nothing(cli, tmp_path):

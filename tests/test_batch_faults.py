@@ -157,5 +157,6 @@ def test_a_failed_batch_leaves_none_of_the_folders_it_made_for_its_cases(cli, tm
     assert res.returncode == 3 and "Traceback" not in res.stderr, res.stderr[-2000:]
     rows = _rows(out)
     assert set(rows) == set(names) and {r["status"] for r in rows.values()} == {"failed"}
-    assert sorted(p.name for p in out.iterdir()) == [".batch.lock", "kept", "manifest.csv", "manifest.json"]
+    assert sorted(p.name for p in out.iterdir()) == [".batch.lock", "kept", "manifest.csv", "manifest.json",
+                                                     "measures.csv"]
     assert not any((out / "kept").iterdir())

@@ -4,6 +4,7 @@ Truths the module does not compute: the true pose of each scene's camera relativ
 (`scene.camera_from_body`, which the registration must recover from the depth images alone), and
 the exact change of the half-body volume between two MakeHuman bodies differing only in cup.
 """
+import csv
 import json
 from dataclasses import replace
 
@@ -221,6 +222,12 @@ def test_batch_wall_from_plans_each_input_as_a_follow_up_of_its_earlier_case(cli
     since = json.loads((tmp_path / "out2" / "anna" / "plan.json").read_text())["sides"]["left"]["wall_from"]
     assert since["case"] == str((tmp_path / "out1" / "anna").resolve() / "left")
     assert abs(since["volume_change_cc"] - _true_change(cases, "left")) <= 0.10 * _true_change(cases, "left")
+    with open(tmp_path / "out2" / "measures.csv", newline="") as fh:
+        (row,) = csv.DictReader(fh)                             # her left breast alone; bea was not planned
+    assert (row["input"], row["side"], row["volume_left_minus_right_cc"]) == ("anna.mcap", "left", "")
+    assert float(row["change_since_earlier_cc"]) == since["skin_volume_change_cc"]
+    true = _true_change(cases, "left")
+    assert abs(float(row["change_since_earlier_cc"]) - true) <= 0.15 * true
     again = run(cli, "batch", tmp_path / "visit2", "--out", tmp_path / "out2", "--side", "left",
                 "--wall-from", tmp_path / "out1", "--json")
     assert json.loads(again.stdout)["summary"]["reused"] == 1
