@@ -25,7 +25,7 @@ points alone (docs/volume.md):
    √(terms / cells fitted)) over the footprint's area, plus the volume of the cells estimated rather
    than seen, plus FLOOR_PCT of the volume for what moves with the landmarks between scans.
 6. **Her unseen outer side** (cc, one-sided: it can only add): where the camera stopped seeing her at the
-   footprint's outer edge, the most her skin beyond may hold (`unseen_outer_cc`).
+   footprint's outer edge, an estimate of what her breast may hold beyond (`unseen_outer_cc`).
 
 The points are put in a canonical order first, so the result depends on her surface alone.
 """
@@ -94,8 +94,8 @@ outline): set so that nine re-scans in ten fall within it (benchmarks/bench_volu
 class BreastVolume:
     """One breast measured on her skin: volume and its ± (cc), its footprint (a closed curve on her
     skin, input frame, mm), the footprint's area (cm², seen from the front), the share of the volume
-    estimated where the camera did not see her (%), and the most her outer side beyond the footprint may
-    add where the camera stopped seeing her (cc; `unseen_outer_cc`)."""
+    estimated where the camera did not see her (%), and what her outer side beyond the footprint may add
+    where the camera stopped seeing her (cc, an estimate; `unseen_outer_cc`)."""
 
     volume_cc: float
     uncertainty_cc: float
@@ -327,7 +327,7 @@ def _volume_cc(height: np.ndarray, mask: np.ndarray) -> float:
 
 
 def unseen_outer_cc(height: np.ndarray, seen: np.ndarray, mask: np.ndarray, side: str) -> float:
-    """The most her skin may hold beyond a footprint's outer edge where the camera stopped seeing her (cc):
+    """What her breast may hold beyond a footprint's outer edge where the camera stopped seeing her (cc, an estimate):
     over each cell of `mask` whose neighbour away from her midline is neither in it nor seen, the wedge of
     skin falling from the cell's height h above the wall to the wall no less steeply than GRAZING_DEG,
     h² / (2 tan GRAZING_DEG) along CELL_MM of edge. `height`, `seen`, `mask`: (nx, ny) on a grid symmetric
