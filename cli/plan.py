@@ -226,12 +226,12 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
     stdout.print(table)
     for s, sp in plan.sides.items():
         fit, volume = sp.fit, plan.volumes.sides[s]
-        stdout.print(f"{s} volume: {volume.volume_cc:.1f} ± {volume.uncertainty_cc:.1f} cc on her skin"
-                     + (f", and perhaps {volume.unseen_outer_cc:.0f} cc more on her outer side, unseen"
-                        if volume.unseen_outer_cc >= 0.5 else "")
-                     + f" (footprint {volume.area_cm2:.0f} cm²"
-                     + (f", {volume.unseen_pct:.0f} % estimated where unseen" if volume.unseen_pct >= 1 else "")
-                     + ")")
+        stdout.print(f"{s} volume: {volume.volume_cc:.1f} ± {volume.uncertainty_cc:.1f} cc on her skin "
+                     f"(footprint {volume.area_cm2:.0f} cm²"
+                     + (f", {volume.unseen_pct:.0f} % filled in from her other side" if volume.unseen_pct >= 0.5
+                        else "") + ")"
+                     + (f"; perhaps {volume.unseen_outer_cc:.0f} cc more beyond its outer edge, unseen"
+                        if volume.unseen_outer_cc >= 0.5 else ""))
         grade = m.ptosis["before"][s]
         stdout.print(f"{s} ptosis: grade {grade['grade']} → {m.ptosis['after'][s]['grade']} as planned"
                      + (f" (nipple {abs(grade['nipple_to_fold_mm']):.0f} mm "

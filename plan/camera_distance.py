@@ -19,8 +19,8 @@ a change of distance than between re-scans from alike ones (docs/volume.md)."""
 
 
 def camera_distance_mm(nipples_from_camera: dict) -> float | None:
-    """The camera's distance from the midpoint of the nipples (side → (3,) from the camera, mm, or None), mm; None
-    where any side's scan holds no camera."""
+    """The camera's distance from the midpoint of the nipples (side → (3,) from the camera, mm, or None), mm (of a
+    plan of one side, from its nipple); None where any side's scan holds no camera."""
     if not nipples_from_camera or any(n is None for n in nipples_from_camera.values()):
         return None
     return float(np.linalg.norm(np.mean([np.asarray(n, float) for n in nipples_from_camera.values()], axis=0)))

@@ -20,6 +20,9 @@ WRAP_CHARS = 130
 """What is planned is written in lines of at most this many characters (22 px type fills a line at about 140)."""
 DISCLAIMER = ("A simulation of a planned change on her scanned body: a guide for discussion, not a promise of "
               "the result.")
+OUTER_SAID_CC = 5.0
+"""Her words say what her breast may hold beyond its outer edge, unseen, from this much (cc, a teaspoon); the
+surgeon's tables give every figure."""
 UNSEEN_WORDS = "Gaps in the pictures from the side are skin the camera in front of her could not see."
 """Said under her pictures: a camera in front of her does not see beneath a breast that hangs or her sides."""
 PLAIN = {"volume_cc": ("breast volume", "cc"),
@@ -74,16 +77,20 @@ def measure_rows(plan: Plan) -> list[tuple[str, ...]]:
 
 
 def outer_words(plan: Plan) -> list[str]:
-    """A line for the handout (and the report's words for her) when her scan, seen from in front of her, left some of
-    her breasts' outer sides unseen (none else); a number and its unit are not split across lines."""
+    """A line for the handout (and the report's words for her) when her scan, seen from in front of her, leaves at
+    least OUTER_SAID_CC of a breast's outer side unseen (none else); a number and its unit are not split across
+    lines."""
     more = {s: v for s in ("right", "left") if s in plan.sides
-            and (v := plan.volumes.sides[s].unseen_outer_cc) >= 0.5}
+            and (v := plan.volumes.sides[s].unseen_outer_cc) >= OUTER_SAID_CC}
+    if not more:
+        return []
+    said = ", and her left about ".join(f"{v:.0f}\u00a0cc more" for v in more.values())
     if len(more) == 2:
-        right, left = more.values()
-        return ["Seen from in front of her, the scan does not show all of each breast's outer side: perhaps "
-                f"{right:.0f}\u00a0cc more of her right breast and {left:.0f}\u00a0cc more of her left lie there."]
-    return [f"Seen from in front of her, the scan does not show all of her {s} breast's outer side: perhaps "
-            f"{v:.0f}\u00a0cc more lies there." for s, v in more.items()]
+        return ["The volumes above are measured on her skin as seen from the front, which does not reach all the way "
+                f"round each breast: as scanned, her right breast may hold about {said}."]
+    (side,) = more
+    return [f"The volume of her {side} breast above is measured on her skin as seen from the front, which does not "
+            f"reach all the way round it: as scanned, it may hold about {said}."]
 
 
 def draw_rows(pen: ImageDraw.ImageDraw, rows: list[tuple[str, ...]], at: tuple[int, int], face, step: int) -> None:

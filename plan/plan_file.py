@@ -49,37 +49,65 @@ def read_plan_file(folder: Path) -> PlanFile | None:
                     _files(record) if schema == PLAN_SCHEMA else None)
 
 
-MEASURE_COLUMNS = ("side", "volume_cc", "uncertainty_cc", "unseen_outer_cc", "footprint_area_cm2", "model_volume_cc",
-                   "volume_planned_cc", "volume_left_minus_right_cc", "ptosis_grade", "notch_to_nipple_mm",
-                   "nipple_to_midline_mm", "nipple_to_fold_mm", "change_since_earlier_cc", "change_since_earlier_pct",
-                   "camera_mm")
-"""`read_measures`' columns: her volume on her skin and what goes with it (cc, cm²), the fitted model's, her volume as
-planned, her left − right before, her ptosis grade and nipple distances before (mm), at a follow-up her change on the
-earlier wall (cc, %), and how far the camera stood from her nipples (mm; None for a scan file)."""
+MEASURE_COLUMNS = ("side", "planned", "volume_cc", "uncertainty_cc", "unseen_outer_cc", "footprint_area_cm2",
+                   "unseen_pct", "model_volume_cc", "model_differs_pct", "volume_planned_cc",
+                   "volume_left_minus_right_cc", "ptosis_grade", "notch_to_nipple_mm", "nipple_to_midline_mm",
+                   "nipple_to_fold_mm", "change_since_earlier_cc", "change_since_earlier_pct", "camera_mm")
+"""`read_measures`' columns: what was planned (operations as written, then changes by degree), her volume on her skin
+and what goes with it (cc, cm², %), the fitted model's and how far it lies from hers, her volume as planned, her
+left − right before, her ptosis grade and nipple distances before (mm), at a follow-up her change on the earlier wall
+(cc, %), and how far the camera stood from her nipples (mm; None for a scan file)."""
+_VOLUME_COLUMNS = ("volume_cc", "uncertainty_cc", "unseen_outer_cc", "footprint_area_cm2", "unseen_pct",
+                   "model_volume_cc", "model_differs_pct")
+_BEFORE_COLUMNS = ("notch_to_nipple_mm", "nipple_to_midline_mm", "nipple_to_fold_mm")
 
 
 def read_measures(folder: Path) -> list[dict]:
-    """One row per breast of the plan in `folder` (MEASURE_COLUMNS, to 0.1; None where the plan has no such figure);
-    [] when it holds no plan.json of this breastplan's schema, or one that is not whole."""
+    """One row per breast of the plan in `folder` (MEASURE_COLUMNS, as plan.json gives them; None where it has no
+    such figure, as a plan of an earlier version may not); [] when it holds no plan.json of this schema."""
     try:
         record = from_json((Path(folder) / Case.PLAN_JSON).read_text())
-        if record.get("schema") != PLAN_SCHEMA:
-            return []
-        m = record["measures"]
-        rows = []
-        for side, planned in record["sides"].items():
-            volume, before, since = planned["volume"], m["before"][side], planned.get("wall_from") or {}
-            rows.append({"side": side, **{k: volume.get(k) for k in MEASURE_COLUMNS[1:6]},
-                         "volume_planned_cc": m["after"][side].get("volume_cc"),
-                         "volume_left_minus_right_cc": (m.get("asymmetry") or {}).get("before", {}).get("volume_cc"),
-                         "ptosis_grade": m["ptosis"]["before"][side].get("grade"),
-                         **{k: before.get(k) for k in MEASURE_COLUMNS[9:12]},
-                         "change_since_earlier_cc": since.get("skin_volume_change_cc"),
-                         "change_since_earlier_pct": since.get("skin_volume_change_pct"),
-                         "camera_mm": record["input"].get("camera_mm")})
-        return [{k: round(v, 1) if isinstance(v, float) else v for k, v in row.items()} for row in rows]
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+    except (OSError, ValueError):
         return []
+    if not isinstance(record, dict) or record.get("schema") != PLAN_SCHEMA or not isinstance(record.get("sides"), dict):
+        return []
+    rows = []
+    for side, planned in record["sides"].items():
+        volume, since = _at(planned, "volume") or {}, _at(planned, "wall_from") or {}
+        before = _at(record, "measures", "before", side) or {}
+        rows.append({"side": side, "planned": _planned(record.get("options")),
+                     **{k: _at(volume, k) for k in _VOLUME_COLUMNS},
+                     "volume_planned_cc": _at(record, "measures", "after", side, "volume_cc"),
+                     "volume_left_minus_right_cc": _at(record, "measures", "asymmetry", "before", "volume_cc"),
+                     "ptosis_grade": _at(record, "measures", "ptosis", "before", side, "grade"),
+                     **{k: _at(before, k) for k in _BEFORE_COLUMNS},
+                     "change_since_earlier_cc": _at(since, "skin_volume_change_cc"),
+                     "change_since_earlier_pct": _at(since, "skin_volume_change_pct"),
+                     "camera_mm": _at(record, "input", "camera_mm")})
+    return [{k: v + 0.0 if isinstance(v, float) else v for k, v in row.items()} for row in rows]   # no −0.0
+
+
+def _at(record, *keys):
+    """record[k0][k1]…, or None where a key or a mapping is missing."""
+    for key in keys:
+        if not isinstance(record, dict):
+            return None
+        record = record.get(key)
+    return record
+
+
+def _planned(options) -> str | None:
+    """What a plan's options planned, in a line: each operation as written with its side, the breast symmetrised,
+    then the changes by degree (`kind:degree`)."""
+    if not isinstance(options, dict):
+        return None
+    try:
+        parts = [f"{side} {text}" for side, text in options.get("operations") or []]
+        parts += [f"symmetrise {options['symmetrise']}"] if options.get("symmetrise") else []
+        parts += [f"{kind}:{degree:g}" for kind, degree in options.get("changes") or []]
+    except (TypeError, ValueError):
+        return None
+    return "; ".join(parts)
 
 
 def _files(record: dict) -> tuple[str, ...] | None:

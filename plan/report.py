@@ -73,12 +73,13 @@ VOLUME_TEXT = ('<p id="volume-how">Her volume is the tissue between her skin and
                'the footprint drawn on her (the outline where her skin rises from her chest). One chest wall, the '
                'same on both sides, is inferred from her chest around both breasts, and both breasts are measured '
                'inside one outline, mirrored, so that a difference between them is a difference of tissue. The ± '
-               'holds nine re-scans in ten. Where the camera did not see her, the other side\'s mirror image stands '
-               'in, and the ± grows by what it adds. Where the camera stopped seeing her at the outer edge of her '
-               'footprint, her breast may go on beyond it: the column "perhaps more, unseen" estimates what her '
-               'outer side could hold there, had her skin fallen to the wall at the steepest slope the camera still '
-               'sees. It can only add, and a scanner that wraps round her would measure it. The fitted model, which '
-               'plans the change, has a volume of its own; it is shown as a cross-check.</p>')
+               'holds nine re-scans in ten. Where her skin was not seen, the other side\'s mirror image fills it in, '
+               'and the ± grows by what it adds. Her skin is measured as seen from in front of her (a camera\'s '
+               'view, or the front of a scan that wraps round her), which stops short of the outer side of a breast '
+               'that turns away: her breast may go on beyond the footprint\'s outer edge. The column "perhaps more '
+               'beyond its outer edge" estimates what it could hold there, had her skin fallen to the wall at the '
+               'steepest slope a depth camera still sees; it can only add. The fitted model, which plans the change, '
+               'has a volume of its own; it is shown as a cross-check.</p>')
 DIFFERS_TEXT = ('<p class="differs">The fitted model of her {side} breast holds {pct:+.0f} % of the volume measured '
                 'on her skin: the model describes her breast only roughly, and its planned change is best read as '
                 'a shape, not a volume.</p>')
@@ -235,11 +236,12 @@ def tables(plan: Plan) -> str:
     parts = [_operations_table(plan), for_her(plan), _measures_table(plan)]
     volumes = {s: plan.volumes.sides[s] for s in sides}
     differs = {s: v.model_differs_pct(plan.sides[s].fit.volume_cc) for s, v in volumes.items()}
-    rows = [[s, f"{v.volume_cc:.1f} ± {v.uncertainty_cc:.1f}", f"+{v.unseen_outer_cc:.1f}", v.area_cm2,
-             v.unseen_pct, plan.sides[s].fit.volume_cc, differs[s]] for s, v in volumes.items()]
+    rows = [[s, f"{v.volume_cc:.1f} ± {v.uncertainty_cc:.1f}", f"+{v.unseen_outer_cc:.0f}", v.area_cm2,
+             f"{v.unseen_pct:.1f}", plan.sides[s].fit.volume_cc, differs[s]] for s, v in volumes.items()]
     parts.append("<h2>Volume, measured on her skin</h2>" + _table(
-        ["side", "volume cc", "perhaps more, unseen cc", "footprint cm²",
-         "estimated where unseen %", "the model's volume cc", "the model differs by %"], rows, "volume") + VOLUME_TEXT
+        ["side", "volume cc", "perhaps more beyond its outer edge, unseen cc", "footprint cm²",
+         "filled in from her other side %", "the model's volume cc", "the model differs by %"], rows, "volume")
+        + VOLUME_TEXT
         + "".join(DIFFERS_TEXT.format(side=s, pct=pct) for s, pct in differs.items() if model_differs_much(pct))
         + "".join(f'<p class="camera-distance">{html.escape(note)}</p>' for note in plan.camera_notes))
     parts.append(_symmetry_tables(plan))

@@ -19,7 +19,7 @@ from breastplan.batch.inputs import find_inputs
 from breastplan.case import sha256
 from breastplan.scenes.makehuman import BodyOptions
 from breastplan.scenes.realistic import CameraOptions, make_body_scene, write_scan_file
-from breastplan.options import BatchOptions, OptionError
+from breastplan.options import DEFAULT_PLAN, BatchOptions, OptionError
 from breastplan.plan.job import sample_recording
 
 SAMPLE = sample_recording()
@@ -142,9 +142,9 @@ def _measures(out: Path) -> list[dict]:
 
 def test_measures_csv_gives_each_planned_breast_its_plans_figures_and_nothing_of_the_rest(batched, patients):
     """One row per breast of the two planned cases, in input order, none for a failed or skipped input; each the
-    figures of its case's plan.json: her volume, its ± and unseen outer side, her left − right (left less right,
-    the same on both rows), her ptosis grade and her nipple's distance from the notch; the recording's camera distance, none for the scan file; no
-    follow-up, no change since."""
+    figures of its case's plan.json: what was planned, her volume, its ± and unseen outer side, her left − right
+    (left less right, the same on both rows), her ptosis grade and her nipple's distance from the notch; the
+    recording's camera distance, none for the scan file; no follow-up, no change since."""
     out, res = batched
     rows = _measures(out)
     assert json.loads(res.stdout)["measures"] == str(out / "measures.csv")
@@ -158,6 +158,7 @@ def test_measures_csv_gives_each_planned_breast_its_plans_figures_and_nothing_of
             assert [float(row[k]) for k in ("volume_cc", "uncertainty_cc", "unseen_outer_cc")] == \
                 [volume["volume_cc"], volume["uncertainty_cc"], volume["unseen_outer_cc"]]
             assert row["ptosis_grade"] == record["measures"]["ptosis"]["before"][side]["grade"]
+            assert row["planned"] == "; ".join(f"{k}:{d:g}" for k, d in DEFAULT_PLAN)      # the batch's changes
             assert float(row["notch_to_nipple_mm"]) == pytest.approx(
                 record["measures"]["before"][side]["notch_to_nipple_mm"], abs=0.051)
             assert row["change_since_earlier_cc"] == row["change_since_earlier_pct"] == ""
@@ -182,6 +183,23 @@ def test_a_batch_case_is_the_plan_of_its_input(batched, cli, tmp_path):
         assert batch["sides"][side]["nipple_input_mm"] == alone["sides"][side]["nipple_input_mm"]
         assert batch["sides"][side]["volume"] == alone["sides"][side]["volume"]
         assert batch["sides"][side]["fit"]["model_volume_cc"] == alone["sides"][side]["fit"]["model_volume_cc"]
+
+
+def test_a_plan_lacking_a_figure_keeps_its_rows_with_that_cell_empty(batched, tmp_path):
+    """A case planned by an earlier version (no unseen outer side, no ptosis measures) keeps both breasts' rows, the
+    figures it lacks left empty, the rest as its plan.json gives them."""
+    from breastplan.plan.plan_file import read_measures
+
+    out, _ = batched
+    record = json.loads((out / "anna" / "plan.json").read_text())
+    for side in record["sides"].values():
+        del side["volume"]["unseen_outer_cc"]
+    del record["measures"]["ptosis"]
+    (tmp_path / "plan.json").write_text(json.dumps(record))
+    rows = read_measures(tmp_path)
+    assert [r["side"] for r in rows] == ["left", "right"]
+    assert all(r["unseen_outer_cc"] is None and r["ptosis_grade"] is None for r in rows)
+    assert [r["volume_cc"] for r in rows] == [record["sides"][s]["volume"]["volume_cc"] for s in ("left", "right")]
 
 
 def test_a_batch_again_reuses_every_finished_case_and_retries_the_failed(batched, cli, patients):

@@ -1,5 +1,5 @@
-"""The handout's line on her breasts' unseen outer sides: said for the breasts planned, right first as the
-handout's columns run, and not at all when the camera saw them."""
+"""Her words on her breasts' unseen outer sides: said for the breasts planned, right first as the handout's columns
+run, from a teaspoon (5 cc) on, and not at all below."""
 from types import SimpleNamespace
 
 from breastplan.plan.handout import outer_words
@@ -11,15 +11,16 @@ def _plan(**unseen_cc):
                                                           for s, v in unseen_cc.items()}))
 
 
-def test_the_handout_says_what_her_unseen_outer_sides_may_hold_right_breast_first():
+def test_her_words_say_what_her_unseen_outer_sides_may_hold_right_breast_first():
     assert outer_words(_plan(left=24.4, right=31.6)) == [
-        "Seen from in front of her, the scan does not show all of each breast's outer side: perhaps 32\u00a0cc more of "
-        "her right breast and 24\u00a0cc more of her left lie there."]
+        "The volumes above are measured on her skin as seen from the front, which does not reach all the way round "
+        "each breast: as scanned, her right breast may hold about 32\u00a0cc more, and her left about 24\u00a0cc "
+        "more."]
 
 
-def test_one_breast_unseen_or_planned_is_named_alone_and_breasts_seen_whole_say_nothing():
-    for plan in (_plan(left=12.0), _plan(left=12.0, right=0.4)):
+def test_one_breast_planned_or_past_a_teaspoon_is_named_alone_and_less_is_not_said():
+    for plan in (_plan(left=12.0), _plan(left=12.0, right=4.9)):
         assert outer_words(plan) == [
-            "Seen from in front of her, the scan does not show all of her left breast's outer side: perhaps 12\u00a0cc "
-            "more lies there."]
-    assert outer_words(_plan(left=0.2, right=0.4)) == []
+            "The volume of her left breast above is measured on her skin as seen from the front, which does not "
+            "reach all the way round it: as scanned, it may hold about 12\u00a0cc more."]
+    assert outer_words(_plan(left=4.9, right=2.0)) == []
