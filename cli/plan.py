@@ -179,8 +179,7 @@ def _json(plan, out: Path, seconds: float) -> dict:
     sides = {}
     for s, sp in plan.sides.items():
         volume = volume_record(plan, s)
-        sides[s] = {"volume_cc": volume["volume_cc"], "uncertainty_cc": volume["uncertainty_cc"],
-                    "unseen_outer_cc": volume["unseen_outer_cc"], "model_volume_cc": volume["model_volume_cc"],
+        sides[s] = {**{k: v for k, v in volume.items() if k != "footprint_input_mm"},
                     "stopping_rule_met": sp.fit.stopping_rule_met,
                     "changes": [st.key for st in plan.changes], "reused": list(sp.reused)}
         if s in plan.operated:

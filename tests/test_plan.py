@@ -210,6 +210,9 @@ def test_one_volume_leads_everywhere_and_the_models_is_named_as_the_models(cli, 
         assert abs(float(line.group(3)) - volume["unseen_outer_cc"]) <= 0.55          # whole cc, from 0.1 cc
         assert 0 < volume["unseen_outer_cc"] < volume["volume_cc"]
         assert f'<td>+{volume["unseen_outer_cc"]:.0f}</td>' in (case / "report.html").read_text()
+        printed = json.loads(planned[2].stdout)["sides"][side]                 # plan --json: the same figures
+        assert {k: printed[k] for k in volume if k != "footprint_input_mm"} == \
+            {k: v for k, v in volume.items() if k != "footprint_input_mm"}
         assert re.search(rf"^{side} fit: the model's volume {record['sides'][side]['fit']['model_volume_cc']:.1f} cc",
                          res.stdout, re.M)
     said = re.search('<p class="unseen-outer">[^<]*her right breast may hold about (\\d+)\u00a0cc more, and her left '
