@@ -138,7 +138,7 @@ def _her_plan(plan: PlanOptions, plan_file: Path | None) -> PlanOptions:
     written = read_written_plan(plan_file)
     try:
         operations = written_operations(written.left, written.right)
-        changes = [f"{k}:{d:g}" for k, d in plan.changes] if not (operations or written.symmetrise) else []
+        changes = list(plan.deform_items) if not (operations or written.symmetrise) else []
         return PlanOptions.parse(list(written.deform) or changes, "both" if plan.sides == SIDES else plan.sides[0],
                                  plan.method, plan.units, plan.up, plan.wall_from, operations, written.symmetrise,
                                  plan.operation_models)

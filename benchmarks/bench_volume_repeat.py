@@ -448,15 +448,15 @@ def asymmetry_rows(results: list[SceneResult]) -> list[dict]:
                          "body": r.shot.body, "view": r.shot.label, "true_lr_cc": true,
                          "new_lr_cc": new, "fitted_lr_cc": fit, "front_lr_cc": r.front_lr_cc,
                          "new_error_cc": None if new is None else new - true,
-                         "range_holds": None if new is None else range_holds(r, true),
+                         "range_holds": None if new is None else range_holds(r.new["left"], r.new["right"], true),
                          "fitted_error_cc": None if fit is None else fit - true})
     return rows
 
 
-def range_holds(r: SceneResult, true_lr: float) -> bool:
+def range_holds(left: dict, right: dict, true_lr: float) -> bool:
     """Whether a true left − right (cc) lies within the measured one's stated range: both breasts' ±, and beyond
-    them what each breast's unseen outer side may add (to its own side of the difference)."""
-    left, right = r.new["left"], r.new["right"]
+    them what each breast's unseen outer side may add (to its own side of the difference). `left`, `right`: each
+    breast's `volume_cc`, `uncertainty_cc` and `unseen_outer_cc`."""
     lr, u = left["volume_cc"] - right["volume_cc"], left["uncertainty_cc"] + right["uncertainty_cc"]
     return lr - u - right["unseen_outer_cc"] <= true_lr <= lr + u + left["unseen_outer_cc"]
 

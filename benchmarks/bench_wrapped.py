@@ -43,7 +43,7 @@ from breastplan.scenes.realistic import (BodyScene, CameraOptions, camera_pose, 
                                         turned, write_closed_scan, write_scan_file)
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_volume_repeat import BLEND_MM, HYBRIDS  # noqa: E402
+from bench_volume_repeat import BLEND_MM, HYBRIDS, range_holds  # noqa: E402
 from timing import median_times, repeats_argument  # noqa: E402
 
 BODIES = [  # (name, body, her turn about her vertical axis (°), up in the file, units, format)
@@ -113,10 +113,9 @@ def one_sided(folder: Path) -> list[dict]:
                             "mm", "+y")
             front = measured(folder / "one-sided-front.obj")
             lr = front["left"].volume_cc - front["right"].volume_cc
-            u = front["left"].uncertainty_cc + front["right"].uncertainty_cc
-            low, high = lr - u - front["right"].unseen_outer_cc, lr + u + front["left"].unseen_outer_cc
             rows.append({"name": f"{name}, {pose}", "true_cc": true, "wrapped_error_cc": wrapped,
-                         "frontal_error_cc": lr - true, "frontal_range_holds": bool(low <= true <= high)})
+                         "frontal_error_cc": lr - true,
+                         "frontal_range_holds": range_holds(vars(front["left"]), vars(front["right"]), true)})
             print(f"{rows[-1]['name']}: true left − right {true:.0f} cc; error, closed mesh "
                   + " / ".join(f"{e:+.0f}" for e in wrapped)
                   + f" cc, frontal export {rows[-1]['frontal_error_cc']:+.0f} cc (within its stated ranges: "

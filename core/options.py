@@ -162,6 +162,19 @@ class PlanOptions:
         object.__setattr__(self, "operations", operations)
         object.__setattr__(self, "operation_models", tuple(map(str, self.operation_models)))
 
+    @property
+    def deform_items(self) -> tuple[str, ...]:
+        """The changes by degree as the command line writes them (KIND:DEGREE): `parse`'s items."""
+        return tuple(f"{kind}:{degree:g}" for kind, degree in self.changes)
+
+    @property
+    def written(self) -> str:
+        """What is planned, in a line: each operation as written with its side, the breast symmetrised, then the
+        changes by degree (`ptosis:3; turn:3; top-shape:3`)."""
+        parts = [f"{side} {text}" for side, text in self.operations]
+        parts += [f"symmetrise {self.symmetrise}"] if self.symmetrise else []
+        return "; ".join([*parts, *self.deform_items])
+
     def operations_of(self, side: str) -> tuple[str, ...]:
         """The operations on one side, as written, in order."""
         return tuple(text for s, text in self.operations if s == side)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from breastplan.case import Case
 from breastplan.json_text import from_json
+from breastplan.options import PlanOptions
 
 PLAN_SCHEMA = "breastplan.plan/1"
 
@@ -97,17 +98,11 @@ def _at(record, *keys):
 
 
 def _planned(options) -> str | None:
-    """What a plan's options planned, in a line: each operation as written with its side, the breast symmetrised,
-    then the changes by degree (`kind:degree`)."""
-    if not isinstance(options, dict):
-        return None
+    """What a plan's recorded options planned, in a line (`PlanOptions.written`); None where they are not whole."""
     try:
-        parts = [f"{side} {text}" for side, text in options.get("operations") or []]
-        parts += [f"symmetrise {options['symmetrise']}"] if options.get("symmetrise") else []
-        parts += [f"{kind}:{degree:g}" for kind, degree in options.get("changes") or []]
-    except (TypeError, ValueError):
+        return PlanOptions.from_dict(options).written
+    except (KeyError, TypeError, ValueError, AttributeError):
         return None
-    return "; ".join(parts)
 
 
 def _files(record: dict) -> tuple[str, ...] | None:

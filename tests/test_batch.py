@@ -318,6 +318,16 @@ def test_batch_options_check_themselves():
         assert BatchOptions(executor="dask", scheduler=address).scheduler == address
 
 
+def test_what_a_plan_planned_reads_in_a_line_as_it_was_written():
+    """measures.csv's `planned`: each operation as written with its side, the breast symmetrised, then the changes
+    by degree as --deform takes them, which read back to the same changes."""
+    from breastplan.options import PlanOptions
+
+    operated = PlanOptions.parse(["turn:2.5"], operations=(("left", "augmentation:250:moderate"),), symmetrise="right")
+    assert operated.written == "left augmentation:250:moderate; symmetrise right; turn:2.5"
+    assert PlanOptions.parse(list(PlanOptions().deform_items)).changes == PlanOptions().changes
+
+
 def _alive(pid: int) -> bool:
     try:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
