@@ -199,6 +199,7 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
 
     from breastplan.plan.measures import measure_label
     from breastplan.plan.operated import said
+    from breastplan.plan.report import figure
     from breastplan.plan.result import OPERATED
 
     from .output import stdout
@@ -218,9 +219,9 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
     for name in m.before[sides[0]]:
         row = [measure_label(name)]
         for s in sides:
-            row += [_number(m.before[s][name]), _number(m.after[s][name])]
+            row += [figure(m.before[s][name]), figure(m.after[s][name])]
         if m.asymmetry:
-            row += [_number(m.asymmetry["before"][name]), _number(m.asymmetry["after"][name])]
+            row += [figure(m.asymmetry["before"][name]), figure(m.asymmetry["after"][name])]
         table.add_row(*row)
     stdout.print(table)
     for s, sp in plan.sides.items():
@@ -265,10 +266,6 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
 
 def _finite(v) -> bool:
     return v is not None and math.isfinite(v)
-
-
-def _number(v) -> str:
-    return "—" if v is None else f"{v:.1f}" if abs(v) >= 10 else f"{v:.2f}"
 
 
 def check_method(method: str):

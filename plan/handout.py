@@ -23,8 +23,9 @@ DISCLAIMER = ("A simulation of a planned change on her scanned body: a guide for
 OUTER_SAID_CC = 5.0
 """Her words say what her breast may hold beyond its outer edge, unseen, from this much (cc, a teaspoon); the
 surgeon's tables give every figure."""
-UNSEEN_WORDS = "Gaps in the pictures from the side are skin the camera in front of her could not see."
-"""Said under her pictures: a camera in front of her does not see beneath a breast that hangs or her sides."""
+UNSEEN_WORDS = ("From the side, her skin ends where the camera in front of her stopped seeing it, and beneath each "
+                "breast it is drawn straight back to her chest.")
+"""Said under her pictures: a camera in front of her does not see her sides or beneath a breast that hangs."""
 PLAIN = {"volume_cc": ("breast volume", "cc"),
          "notch_to_nipple_mm": ("nipple to the notch at the base of the neck", "mm"),
          "nipple_to_midline_mm": ("nipple to the middle of the chest", "mm"),

@@ -97,6 +97,10 @@ def _mesh(vertices: np.ndarray, faces: np.ndarray) -> dict:
     return {**_points(vertices), "faces": _b64(faces, "<i4"), "m": int(len(faces))}
 
 
+DIGITS = 6
+"""The page's measures are written with this many decimals: the page then rounds them as `figure` does, once."""
+
+
 def page_data(plan: Plan, views: Views) -> dict:
     """The JSON the page's script reads: geometry, every slider state and the state it opens on."""
     sides = list(plan.sides)
@@ -109,11 +113,14 @@ def page_data(plan: Plan, views: Views) -> dict:
             "side_labels": {s: v.round(1).tolist() for s, v in views.side_labels.items()},
             "folds": {s: {"xyz": v.round(1).tolist(), "from": plan.measures.ptosis["before"][s]["fold_from"]}
                       for s, v in views.folds.items()},
-            "before": {s: {k: round(float(v), 3) for k, v in plan.measures.before[s].items()} for s in sides},
-            "asymmetry_before": {k: round(float(v), 3) for k, v in plan.measures.asymmetry.get("before", {}).items()},
+            "before": {s: {k: round(float(v), DIGITS) for k, v in plan.measures.before[s].items()} for s in sides},
+            "asymmetry_before": {k: round(float(v), DIGITS) for k, v in
+                                 plan.measures.asymmetry.get("before", {}).items()},
             "bounds": _bounds(views), "footprints": {s: v.round(2).tolist() for s, v in views.footprints.items()},
             "grid": _grid(plan, views), **_skin_colour(views), "light": list(LIGHT),
-            "operated": None if views.operated is None else _operated_marks(views.operated),
+            "mark_layout": [list(m) for m in views.mark_layout],
+            "operated_labels": None if views.operated_labels is None else {
+                s: v.round(1).tolist() for s, v in views.operated_labels.items()},
             "scan": SCAN, "model": MODEL, "landmark": LANDMARK, "footprint": FOOTPRINT, "fold": FOLD}
 
 
@@ -122,9 +129,10 @@ def _grid(plan: Plan, views: Views) -> dict:
     each side's breast mesh as shared modes (`plan.modes`), and the state planned."""
     grid, sides = plan.grid, list(plan.sides)
     moved = np.concatenate([views.moved - views.patch.astype(np.float32)] + [
-        views.planned_meshes[s] - views.meshes[s][0].astype(np.float32) for s in sides], axis=1)
+        views.planned_meshes[s] - views.meshes[s][0].astype(np.float32) for s in sides]
+        + [views.marks_moved - _found_marks(views).astype(np.float32)], axis=1)
     stored = modes_of(moved)
-    rounded = lambda values: np.round(values, 3).tolist()  # noqa: E731
+    rounded = lambda values: np.round(values, DIGITS).tolist()  # noqa: E731
     asym = asymmetry(grid.measures)
     return {"kinds": list(grid.kinds), "degrees": [list(d) for d in grid.degrees], "requested": list(grid.requested),
             "keys": list(grid.keys), "words": [_state_said(plan, i) for i in range(len(grid))],
@@ -145,12 +153,11 @@ def _state_said(plan: Plan, i: int) -> str:
             + "".join(f"; {words}" for words in short))
 
 
-def _operated_marks(moved: dict) -> dict:
-    """`Views.operated` for the page: the marks it draws on every state but her skin as scanned."""
-    return {"footprints": {s: v.round(2).tolist() for s, v in moved["footprints"].items()},
-            "folds": {s: v.round(1).tolist() for s, v in moved["folds"].items()},
-            "nipples": moved["nipples"].round(2).tolist(),
-            "side_labels": {s: v.round(1).tolist() for s, v in moved["side_labels"].items()}}
+def _found_marks(views: Views) -> np.ndarray:
+    """(M, 3) the marks as found on her skin as scanned, in `Views.mark_layout`'s order (display frame)."""
+    found = views.marks(views.state("original"))
+    return np.concatenate([found["landmarks"][name] if side is None else found[name][side]
+                           for name, side, _, _ in views.mark_layout])
 
 
 def _skin_colour(views: Views) -> dict:
@@ -167,11 +174,10 @@ def _bounds(views: Views) -> list[list[float]]:
     scale."""
     marks = [*views.landmarks.values(), *views.footprints.values(), *views.folds.values(),
              *(p[None] for p in views.side_labels.values())]
-    if views.operated is not None:
-        moved = views.operated
-        marks += [moved["nipples"], *moved["footprints"].values(), *moved["folds"].values(),
-                  *(p[None] for p in moved["side_labels"].values())]
-    every = np.concatenate([views.torso, views.patch, views.moved.reshape(-1, 3), *marks])
+    if views.operated_labels is not None:
+        marks += [p[None] for p in views.operated_labels.values()]
+    every = np.concatenate([views.torso, views.patch, views.moved.reshape(-1, 3), views.marks_moved.reshape(-1, 3),
+                            *marks])
     lo, hi = every.min(axis=0), every.max(axis=0)
     pad = 0.03 * (hi - lo).max()
     return [[round(float(a - pad), 1), round(float(b + pad), 1)] for a, b in zip(lo, hi)]
@@ -193,11 +199,13 @@ def poster_png(views: Views, state: State) -> bytes:
 
 def _table(head: list[str], rows: list[list], cls: str = "") -> str:
     th = "".join(f"<th>{html.escape(str(h))}</th>" for h in head)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(c))}</td>" for c in row) + "</tr>" for row in rows)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(figure(c))}</td>" for c in row) + "</tr>" for row in rows)
     return f'<table class="{cls}"><thead><tr>{th}</tr></thead><tbody>{body}</tbody></table>'
 
 
-def _fmt(v) -> str:
+def figure(v) -> str:
+    """A figure as the surgeon's tables give it, here, on the page and on the terminal alike: one decimal from 10
+    on, else three significant digits; "—" for none."""
     if isinstance(v, float):
         return f"{v:.1f}" if abs(v) >= 10 else f"{v:.3g}"
     return "—" if v is None else str(v)
@@ -329,10 +337,10 @@ def _measures_table(plan: Plan) -> str:
     for name in m.before[sides[0]]:
         cells = f"<td>{html.escape(measure_label(name))}</td>"
         for s in sides:
-            cells += f'<td>{_fmt(m.before[s][name])}</td><td data-after="{s} {name}">{_fmt(m.after[s][name])}</td>'
+            cells += f'<td>{figure(m.before[s][name])}</td><td data-after="{s} {name}">{figure(m.after[s][name])}</td>'
         if m.asymmetry:
-            cells += (f'<td>{_fmt(m.asymmetry["before"][name])}</td>'
-                      f'<td data-asymmetry="{name}">{_fmt(m.asymmetry["after"][name])}</td>')
+            cells += (f'<td>{figure(m.asymmetry["before"][name])}</td>'
+                      f'<td data-asymmetry="{name}">{figure(m.asymmetry["after"][name])}</td>')
         rows += f"<tr>{cells}</tr>"
     th = "".join(f"<th>{html.escape(h)}</th>" for h in head)
     return (f'<h2>Measures (as shown: the state the view shows; as the page opens, the {_opening(plan)})</h2>'
@@ -417,7 +425,7 @@ td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4p
 <div><b>Colour</b><br><button id="colour-skin" class="on">Her skin</button><button id="colour-moved">Millimetres moved</button></div>
 <div><b>Compare</b><br><button id="beside">Before and as planned, side by side</button></div>
 <p id="state"></p>
-<p>Her skin as scanned, moved as the plan shown would move it (or coloured by how far each point moves). Seen from the side, her skin ends where the camera in front of her stopped seeing it: at her sides and beneath a breast that hangs, where nothing is drawn rather than guessed. Red: the sternal notch, the midline and the nipples the measures start from. Blue: each breast's footprint, the outline her volume is measured inside. Purple: the fold beneath each breast (dotted where the breast hides it and its place is estimated). The legend shows each breast's scanned points and its fitted model on demand.</p>
+<p>Her skin as scanned, moved as the plan shown would move it (or coloured by how far each point moves). Seen from the side, her skin ends where the camera in front of her stopped seeing it, at her sides; beneath a breast that hangs, which the camera did not see, her skin is drawn straight from the breast's lower edge back to her chest. Red: the sternal notch, the midline and the nipples the measures start from. Blue: each breast's footprint, the outline her volume is measured inside. Purple: the fold beneath each breast (dotted where the breast hides it and its place is estimated). The legend shows each breast's scanned points and its fitted model on demand.</p>
 </div></main>
 <div id="tables">%TABLES%</div>
 <script>%SCRIPT%</script>
@@ -520,9 +528,10 @@ function stateAt(i){   // slider state i as the plan computed it: its name, word
  const pick=m=>Object.fromEntries(Object.entries(m).map(([k,v])=>[k,v[i]]));
  return {index:i,key:G.keys[i],words:G.words[i],asymmetry:pick(G.asymmetry),
   measures:Object.fromEntries(P.sides.map(s=>[s,pick(G.measures[s])]))};}
+let shownD=null;   // the displacements of the state shown (null: her skin as scanned), for the marks on her too
 function arrays(state){   // the moving traces' coordinates in `state`; null: the original
  const upd={x:[],y:[],z:[]};
- const d=state?displacement(state.index):null;
+ const d=state?displacement(state.index):null;shownD=d;
  const pos=d?moved(patchBase,d,0,nP):split(patchBase,nP);
  for(let a=0;a<3;a++){const o=new Float32Array(nT+nP);o.set(still[a]);o.set(pos[a],nT);upd['xyz'[a]].push(o);}
  let at=3*nP;
@@ -584,13 +593,14 @@ function scenes(layout){   // the layout's scenes for one view or two side by si
  if(beside)out.scene2=Object.assign({},axes,left);else delete out.scene2;
  return out;}
 const drawn=()=>beside?traces:traces.filter((_,i)=>i!==idx.before);   // the traces drawn: the scene before only beside
-function placed(state){   // the marks on her: as found, or moved by her operations on every planned state
- if(!P.operated)return;const on=state?P.operated:null;
+const found={nipples:{null:L.nipples},footprints:P.footprints,folds:Object.fromEntries(Object.entries(P.folds).map(([s,f])=>[s,f.xyz]))};
+const markAt=3*(nP+P.sides.reduce((n,s)=>n+P.meshes[s].n,0));   // the marks' displacements follow the meshes'
+function placed(state){   // the marks on her: as found, or moved as the state shown moves her skin
  const at=(t,F)=>{traces[t]=Object.assign({},traces[t],{x:F.map(p=>p[0]),y:F.map(p=>p[1]),z:F.map(p=>p[2])});};
- at(idx.nipples,on?on.nipples:L.nipples);
- for(const s in idx.folds)at(idx.folds[s],on?on.folds[s]:P.folds[s].xyz);
- for(const s in idx.footprints)at(idx.footprints[s],on?on.footprints[s]:P.footprints[s]);
- at(idx.sides,sides.map(s=>(on?on.side_labels:P.side_labels)[s]));}
+ for(const [name,side,a,b] of P.mark_layout){const F=found[name][side];
+  const m=state&&shownD?F.map((p,r)=>p.map((v,c)=>v+shownD[markAt+3*(a+r)+c])):F;
+  at(side===null?idx.nipples:idx[name][side],m);}
+ at(idx.sides,sides.map(s=>(state&&P.operated_labels?P.operated_labels:P.side_labels)[s]));}
 function show(state){current=state;label(state);put(arrays(state));placed(state);const key=window.breastplanState;
  return Plotly.react(gd,drawn(),scenes(Object.assign({},gd.layout,{hovermode:colourBy==='moved'?'closest':false})))
   .then(()=>{window.breastplanDrawn=key;});}

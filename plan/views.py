@@ -28,7 +28,12 @@ TORSO_MM = 5.0
 """Her torso is drawn through the centroids of its points in cubes of this side (mm)."""
 GAP_MM = 20.0
 """A triangle of her drawn skin with an edge longer than this would span a gap the camera did not see
-across (an occluding edge, the side of her body): it is left out."""
+across (an occluding edge, the side of her body): it is left out, except beneath a breast (BENEATH_MM)."""
+BENEATH_MM, HIDDEN_MM = 60.0, 150.0
+"""Beneath a breast — across her footprint's span, from its middle height down to this far below its lowest
+point (her body frame) — a triangle spanning up to HIDDEN_MM is kept: it runs from the breast's lower edge back
+to her chest along the camera's line of sight, over skin the camera did not see, so that her body is not drawn
+torn in two under a breast that hangs."""
 VIEW_TO_DISPLAY = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])
 """Viewing frame (y down, z away) → display frame (y away, z up)."""
 MIDLINE_MM = (60.0, -350.0)
@@ -68,19 +73,27 @@ class Views:
     planned_meshes: dict[str, np.ndarray] | None = None   # side → (S, V, 3) float32 the planned breast in each state
     skin_rgb: np.ndarray | None = None  # (T + P, 3) uint8 her skin's recorded colour at the torso then the patch's
                                         # points (the mean over each TORSO_MM cube); None: none was recorded
-    operated: dict | None = None        # the footprints, folds, side labels and nipples moved by her operations
-                                        # (keys as `marks` gives them), drawn on every state but her skin as scanned
+    marks_moved: np.ndarray | None = None   # (S, M, 3) float32 the nipples, footprints and folds in each state
+                                            # of `Plan.grid` (her operations and changes applied), `mark_layout`
+    mark_layout: tuple = ()             # (name, side or None, start, stop) of each mark's rows in `marks_moved`
+    operated_labels: dict | None = None  # side → (3,) where her side is named on her operated skin; None: no
+                                         # operation
 
     def marks(self, state: State) -> dict:
         """What is drawn on her in `state`: "footprints", "folds", "side_labels" and "landmarks" (with the nipples),
-        as found on her skin as scanned, or moved by her operations in any planned state."""
+        as found on her skin as scanned, or moved as `state` moves her skin."""
         found = {"footprints": self.footprints, "folds": self.folds, "side_labels": self.side_labels,
                  "landmarks": self.landmarks}
-        if state.index is None or self.operated is None:
+        if state.index is None:
             return found
-        moved = self.operated
-        return {**found, "footprints": moved["footprints"], "folds": moved["folds"],
-                "side_labels": moved["side_labels"], "landmarks": {**self.landmarks, "nipples": moved["nipples"]}}
+        moved = {"footprints": {}, "folds": {}, "side_labels": self.operated_labels or self.side_labels}
+        for name, side, a, b in self.mark_layout:
+            points = self.marks_moved[state.index, a:b].astype(float)
+            if side is None:
+                moved["landmarks"] = {**self.landmarks, name: points}
+            else:
+                moved[name][side] = points
+        return moved
 
     def state(self, key: str) -> State:
         """The drawn state named `key` ("original": her skin as scanned)."""
@@ -107,9 +120,10 @@ def build_views(plan: Plan) -> Views:
     footprints = {s: v.footprint_input_mm + ahead for s, v in plan.volumes.sides.items()}
     folds = _folds(plan)
     one_view = all(sp.scan.source.kind != "file" for sp in plan.sides.values())
+    drawn_view = transform_points(plan.body.input_to_view, drawn)
     return Views(torso=show(still_in), patch=show(patch_in),
-                 skin=(skin_triangles if one_view else surface_triangles)(transform_points(plan.body.input_to_view,
-                                                                                           drawn)),
+                 skin=skin_triangles(drawn_view, _beneath_breasts(plan)) if one_view else
+                 surface_triangles(drawn_view),
                  scans={s: show(transform_points(sp.frames.breast_to_input, sp.scan.points))
                         for s, sp in plan.sides.items()},
                  meshes=meshes, keys=plan.grid.keys, moved=_moved(plan, patch_in, to_display),
@@ -121,19 +135,28 @@ def build_views(plan: Plan) -> Views:
                                                                            nipples).items()},
                  folds={s: show(f) for s, f in folds.items()},
                  skin_rgb=None if rgb is None else np.concatenate([rgb[~near], rgb[near]]),
-                 operated=_operated_marks(plan, show, footprints, folds, nipples) if plan.operated else None)
+                 **_marks_in_states(plan, to_display, nipples, footprints, folds),
+                 operated_labels=_operated_labels(plan, show, nipples) if plan.operated else None)
 
 
-def _operated_marks(plan: Plan, show, footprints: dict, folds: dict, nipples: np.ndarray) -> dict:
-    """`Views.operated`: the footprints, folds (side → (K, 3), input frame) and nipples ((sides, 3)) moved by her
-    operations, and her side labels placed on her operated skin, display frame."""
+def _marks_in_states(plan: Plan, to_display: np.ndarray, nipples: np.ndarray, footprints: dict, folds: dict) -> dict:
+    """`Views.marks_moved` and `mark_layout`: her nipples ((sides, 3)), footprints and folds (side → (K, 3)), input
+    frame, moved as her skin is in each state of `Plan.grid`."""
+    parts = [("nipples", None, nipples), *(("footprints", s, f) for s, f in footprints.items()),
+             *(("folds", s, f) for s, f in folds.items())]
+    ends = np.cumsum([len(p) for *_, p in parts])
+    layout = tuple((name, side, int(b - len(p)), int(b)) for (name, side, p), b in zip(parts, ends))
+    return {"marks_moved": _moved(plan, np.concatenate([p for *_, p in parts]), to_display), "mark_layout": layout}
+
+
+def _operated_labels(plan: Plan, show, nipples: np.ndarray) -> dict:
+    """`Views.operated_labels`: her side labels placed on her skin and nipples ((sides, 3), input frame) as her
+    operations move them, display frame."""
     def operated(points: np.ndarray) -> np.ndarray:
         return points + sum(op.displacement(points) for op in plan.operated.values())
 
-    return {"footprints": {s: show(operated(f)) for s, f in footprints.items()},
-            "folds": {s: show(operated(f)) for s, f in folds.items()}, "nipples": show(operated(nipples)),
-            "side_labels": {s: show(p[None])[0] for s, p in _side_labels(
-                plan, operated(np.asarray(plan.body.torso_input, float)), operated(nipples)).items()}}
+    return {s: show(p[None])[0] for s, p in _side_labels(
+        plan, operated(np.asarray(plan.body.torso_input, float)), operated(nipples)).items()}
 
 
 def _moved(plan: Plan, patch_in: np.ndarray, to_display: np.ndarray) -> np.ndarray:
@@ -166,17 +189,40 @@ def _trunk(plan: Plan) -> tuple[np.ndarray, np.ndarray | None]:
     return torso[keep], None if plan.body.torso_rgb is None else np.asarray(plan.body.torso_rgb)[keep]
 
 
-def skin_triangles(points_view: np.ndarray) -> np.ndarray:
+def skin_triangles(points_view: np.ndarray, beneath=None) -> np.ndarray:
     """(F, 3) vertex indices of a triangle surface over points one camera saw (its viewing frame: z away
     from it, mm): the Delaunay triangulation of their directions from the camera (x/z, y/z), each
     triangle wound so that its normal (right-handed) faces the camera, without those with an edge over
-    GAP_MM."""
+    GAP_MM, but for those with none over HIDDEN_MM whose centroid `beneath` ((n, 3) viewing frame → (n,) bool)
+    places beneath a breast."""
     uv = points_view[:, :2] / points_view[:, 2:]
     faces = Delaunay(uv).simplices
     a, b, c = (uv[faces[:, k]] for k in range(3))
     away = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]) > 0
     faces[away] = faces[away][:, ::-1]
-    return _without_gaps(points_view, faces)
+    longest = _longest_edges(points_view, faces)
+    keep = longest <= GAP_MM
+    if beneath is not None:
+        hidden = ~keep & (longest <= HIDDEN_MM)
+        keep[hidden] = beneath(points_view[faces[hidden]].mean(axis=1))
+    return faces[keep].astype(np.int64)
+
+
+def _beneath_breasts(plan: Plan):
+    """Whether points (viewing frame, mm; (n, 3) → (n,) bool) lie beneath one of her breasts (BENEATH_MM)."""
+    v = plan.volumes
+    to_body = v.body_from_input @ np.linalg.inv(plan.body.input_to_view)
+    spans = []
+    for side in v.sides.values():
+        f = transform_points(v.body_from_input, side.footprint_input_mm)
+        if len(f):
+            spans.append((f[:, 0].min(), f[:, 0].max(), f[:, 1].min() - BENEATH_MM, 0.5 * (f[:, 1].min() + f[:, 1].max())))
+
+    def beneath(points_view: np.ndarray) -> np.ndarray:
+        x, y = transform_points(to_body, points_view)[:, :2].T
+        return np.any([(x >= x0) & (x <= x1) & (y >= y0) & (y <= y1) for x0, x1, y0, y1 in spans], axis=0) \
+            if spans else np.zeros(len(points_view), bool)
+    return beneath
 
 
 BALL_RADII_MM = (1.6 * TORSO_MM, 2.4 * TORSO_MM)
@@ -213,14 +259,13 @@ def surface_triangles(points_view: np.ndarray) -> np.ndarray:
     tri = points_view[faces]
     away = np.einsum("ij,ij->i", np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), tri.mean(axis=1)) > 0
     faces[away] = faces[away][:, ::-1]
-    return _without_gaps(points_view, faces)
+    return faces[_longest_edges(points_view, faces) <= GAP_MM].astype(np.int64)
 
 
-def _without_gaps(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """`faces` without those with an edge over GAP_MM (int64)."""
+def _longest_edges(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) each face's longest edge, mm."""
     tri = points[faces]
-    longest = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
-    return faces[longest <= GAP_MM].astype(np.int64)
+    return np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
 
 
 FOLD_HALF_MM = 30.0

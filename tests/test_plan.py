@@ -610,6 +610,8 @@ def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(pl
         assert b.requests() == [] and b.console_errors() == []
         table = b.js("document.querySelector('table.measures').innerText")
         assert "volume" in table
+        b.driver.find_element("css selector", "#original").click()          # the landmarks as found on her
+        assert _drawn(b, "original")
         drawn = b.js("Object.fromEntries(document.getElementById('plot').data.filter(t => t.legendgroup === "
                      "'landmarks').map(t => [t.name, [Array.from(t.x), Array.from(t.y), Array.from(t.z)]]))")
         if os.environ.get("BREASTPLAN_SCREENSHOT"):                         # the README's screenshot
@@ -660,6 +662,8 @@ def test_each_slider_keeps_its_degree_and_the_page_draws_and_measures_the_plans_
             "ptosis: degree 8", "turn: degree 1", "top-shape: degree 4 (planned)"]
         drawn = b.js("Object.fromEntries(document.getElementById('plot').data.filter(t => t.type === 'mesh3d' && "
                      "!t.scene).map(t => [t.name, [Array.from(t.x), Array.from(t.y), Array.from(t.z)]]))")
+        lines = b.js("Object.fromEntries(document.getElementById('plot').data.filter(t => t.type === 'scatter3d' && "
+                     "!t.scene).map(t => [t.name, [Array.from(t.x), Array.from(t.y), Array.from(t.z)]]))")
         cells = {name: b.js(f"document.querySelector('table.measures [data-after=\"left {name}\"]').textContent")
                  for name in ("volume_cc", "notch_to_nipple_mm", "nipple_to_fold_mm")}
         b.driver.find_element("css selector", "#original").click()
@@ -679,6 +683,15 @@ def test_each_slider_keeps_its_degree_and_the_page_draws_and_measures_the_plans_
     for side in ("left", "right"):
         model = np.array(drawn[f"{side} breast (model)"]).T
         assert np.linalg.norm(model - state.mesh[side], axis=1).max() <= slack, side
+    on = views.marks(state)                                 # the marks move with her skin (they had stayed put)
+    nipples = np.array(lines["nipples (found)"]).T
+    assert np.linalg.norm(nipples - on["landmarks"]["nipples"], axis=1).max() <= slack
+    assert np.linalg.norm(nipples - views.landmarks["nipples"], axis=1).min() > 5.0
+    def off_skin(points, skin_points):                      # mm from the nearest point of her drawn skin
+        return np.linalg.norm(skin_points[None] - points[:, None], axis=2).min(axis=1)
+    assert (off_skin(nipples, skin[still:]) < off_skin(views.landmarks["nipples"], views.patch) + 1.0).all()
+    for side in ("left", "right"):
+        assert np.linalg.norm(np.array(lines[f"{side} footprint"]).T - on["footprints"][side], axis=1).max() <= slack
     measures = grid.measures_at(i)["left"]
     for name, text in cells.items():
         assert float(text) == pytest.approx(measures[name], abs=0.051), name

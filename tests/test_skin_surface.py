@@ -1,5 +1,7 @@
 """Her skin as the report draws it from a scan file's points (which need not be one camera's view): one surface
 without holes where her body was seen."""
+from dataclasses import replace
+
 import numpy as np
 from scipy import ndimage
 
@@ -7,11 +9,12 @@ from breastplan import transform_points
 from breastplan.options import PlanOptions
 from breastplan.plan import views as views_module
 from breastplan.plan.job import run_plan
-from breastplan.plan.pictures import before_after
+from breastplan.plan.pictures import SHOT_PX, VIEWS, before_after, camera, picture
 from breastplan.plan.views import build_views
 from breastplan.scenes.makehuman import BodyOptions, make_body
 from breastplan.scenes.realistic import (CameraOptions, file_from_body, make_body_scene, write_closed_scan,
                                         write_scan_file)
+from clitools import run
 from test_colour import _dark
 
 
@@ -61,3 +64,40 @@ def test_her_skin_from_a_closed_body_scan_shows_no_crack_under_her_breasts(tmp_p
     for name, (before, _) in before_after(views, views.state(views.keys[0])).items():
         share, pixels = holes(before)
         assert share < 0.0002, (name, share, pixels)
+
+
+def broken_columns(views, side: str) -> int:
+    """How many columns of her side view, between her sternal notch and her nipple on that side, show background
+    between two parts of her drawn skin within 100 mm below the nipple."""
+    state = views.state("original")
+    cam = camera(views, [state], VIEWS[f"her {side} side"], SHOT_PX)
+    her = np.asarray(picture(views, state, cam, marks=False).convert("RGB")).min(axis=2) <= 245
+    nipple = views.landmarks["nipples"][list(views.folds).index(side)]
+    (n, notch), _ = cam.project(np.vstack([nipple, views.landmarks["sternal notch"][0]]))
+    lo, hi = sorted([int(n[0]), int(notch[0])])
+    window = her[int(n[1]):int(n[1] + 100 / cam.mm_per_px), lo:hi + 1].astype(int)
+    return int(((np.diff(window, axis=0) == 1).sum(axis=0) + window[0] > 1).sum())
+
+
+def test_her_skin_from_a_camera_is_whole_beneath_a_breast_that_hangs(cli, tmp_path):
+    """A heavy patient whose breasts hang, recorded by a depth camera in front of her: seen from her sides, her drawn
+    skin below each breast is one piece, as her body is (it had been torn in two where the camera could not see
+    beneath the breast), while the air between her arm and her side stays open."""
+    res = run(cli, "scan-synth", "--body", "makehuman", "--cup", "0.9", "--firmness", "0.2", "--weight", "0.8",
+              "--pose", "arms-down", "--frames", "4", "--out", tmp_path / "her.mcap", "--truth", tmp_path / "t.npz")
+    assert res.returncode == 0, res.stderr
+    plan = run_plan(tmp_path / "her.mcap", tmp_path / "case", PlanOptions.parse(["ptosis:3"]))
+    views = build_views(plan)
+    torn = replace(views, skin=views_module.skin_triangles(          # as drawn before: nothing across the gaps
+        transform_points(np.linalg.inv(views_module.VIEW_TO_DISPLAY), np.concatenate([views.torso, views.patch]))))
+    assert all(broken_columns(views, side) <= 1 < 3 <= broken_columns(torn, side) for side in views.folds)
+    state = views.state(views.keys[0])
+    front, _ = before_after(views, state, names=("front",))["front"]
+    torn_front, _ = before_after(torn, state, names=("front",))["front"]
+    assert holes(front)[1] < holes(torn_front)[1]
+    her, was = (np.asarray(p.convert("RGB")).min(axis=2) <= 245 for p in (front, torn_front))
+    assert not (was & ~her).any()
+    cam = camera(views, [state], VIEWS["front"], SHOT_PX)
+    rows = np.nonzero((her & ~was).any(axis=1))[0]                   # added only beneath her breasts
+    nipple_row = cam.project(views.landmarks["nipples"])[0][:, 1].min()
+    assert nipple_row < rows.min() and rows.max() < nipple_row + 150 / cam.mm_per_px
