@@ -62,15 +62,19 @@ def _local_worker(parent: int) -> None:
 
 
 def run_local(tasks: list[Task], jobs: int) -> Results:
-    """Plan `tasks` in `jobs` worker processes (spawned: no state shared with the batch)."""
+    """Plan `tasks` in `jobs` worker processes (spawned: no state shared with the batch). When a worker dies
+    while several cases are being planned, each of them is planned again alone, so that only the one that kills
+    its worker is charged (ATTEMPTS)."""
     attempts: Counter = Counter()
-    pending = list(tasks)
-    while pending:
-        pool = ProcessPoolExecutor(min(jobs, len(pending)), mp_context=multiprocessing.get_context("spawn"),
+    pending, alone = list(tasks), []
+    while pending or alone:
+        solo = bool(alone)
+        todo = alone if solo else pending
+        pool = ProcessPoolExecutor(1 if solo else min(jobs, len(todo)), mp_context=multiprocessing.get_context("spawn"),
                                    initializer=_local_worker, initargs=(os.getpid(),))
         broken, running = [], set()
         try:
-            futures = {pool.submit(plan_case, t): t for t in pending}
+            futures = {pool.submit(plan_case, t): t for t in todo}
             waiting = set(futures)
             while waiting:
                 running = {futures[f].case for f in waiting if f.running()} or running
@@ -90,9 +94,14 @@ def run_local(tasks: list[Task], jobs: int) -> Results:
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
         suspects = {t.case for t in broken} & running or {t.case for t in broken}
-        for task in broken:                       # the cases being planned when a worker died are charged
+        if not solo and len(suspects) > 1:        # which of them killed its worker is not known: each tried alone
+            alone = [t for t in broken if t.case in suspects]
+            pending = [t for t in broken if t.case not in suspects]
+            continue
+        for task in broken:                       # the case being planned when a worker died is charged
             attempts[task.case] += task.case in suspects
-        pending = [t for t in broken if attempts[t.case] < ATTEMPTS]
+        retry = [t for t in broken if attempts[t.case] < ATTEMPTS]
+        alone, pending = (retry, pending) if solo else ([], retry)
         failed = [(t, _died(t)) for t in broken if attempts[t.case] >= ATTEMPTS]
         if failed:
             yield failed

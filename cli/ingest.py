@@ -11,7 +11,7 @@ from breastplan.errors import about
 from breastplan.options import IngestOptions, OptionError
 
 from .app import JSON, UNITS_HELP, UP_HELP, command, parse_numbers, scan_file_options
-from .output import report, usage_error, writable
+from .output import not_one_side_of_a_plan, report, usage_error, writable
 
 FLAGS = {"side": "--side", "voxel_mm": "--voxel", "frames": "--frames", "roi_camera_mm": "--roi",
          "nipple_camera_mm": "--nipple", "units": "--units", "up": "--up"}
@@ -43,6 +43,7 @@ def ingest(
     except OptionError as exc:
         raise usage_error(str(exc), FLAGS[exc.option]) from None
     scan_file_options(input, units, up)
+    not_one_side_of_a_plan(out, "ingested")
     writable(out, folder=True)
     from threadpoolctl import threadpool_limits
 

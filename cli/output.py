@@ -97,6 +97,17 @@ def holds_plan(folder: Path) -> bool:
     return (Path(folder) / "plan.json").is_file()
 
 
+def not_one_side_of_a_plan(out: Path, command: str) -> None:
+    """A usage error (exit 2) when `out` is one side's folder of a plan's case folder: `command` writing there
+    alone would leave the plan naming files it no longer has, or another scan's."""
+    from breastplan.options import SIDES
+
+    if real(out).name in SIDES and holds_plan(real(out).parent):
+        raise usage_error(f"{out} is one side of the plan in {out.parent}: {command} alone there would leave that "
+                          f"plan naming files it no longer has; plan {out.parent} (both sides), or give --out a new "
+                          "folder", "--out")
+
+
 def apart(out: Path, input: Path, option: str = "--out") -> Path:
     """`out` unless writing it would replace what the command reads: `input` itself (by whatever path or
     link), or one of the files of the case folder it is in; a usage error (exit 2) then."""

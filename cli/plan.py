@@ -9,10 +9,10 @@ import typer
 
 from breastplan.clock import Clock
 from breastplan.errors import require_file
-from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, SIDES, OptionError, PlanOptions
+from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, OptionError, PlanOptions
 
 from .app import JSON, UNITS_HELP, UP_HELP, command, scan_file_options
-from .output import holds_plan, inside, read_only, real, report, stderr, usage_error, writable
+from .output import inside, not_one_side_of_a_plan, read_only, real, report, stderr, usage_error, writable
 
 FLAGS = {"changes": "--deform", "sides": "--side", "method": "--method", "units": "--units", "up": "--up",
          "operations": "--left/--right", "symmetrise": "--symmetrise", "operation_models": "--operation-model"}
@@ -85,10 +85,7 @@ def plan(
         out = input if input is not None and input.is_dir() else Path(f"{(input or Path('sample')).stem}-plan")
     if wall_from is not None:
         read_only(wall_from, out)
-    if real(out).name in SIDES and holds_plan(real(out).parent):
-        raise usage_error(f"{out} is one side of the plan in {out.parent}: planned alone, the plan there would "
-                          f"name files it no longer has; plan {out.parent} (both sides), or give --out a new "
-                          "folder", "--out")
+    not_one_side_of_a_plan(out, "planned")
     if force and input is not None and inside(real(input), real(out)):
         raise usage_error(f"--force would replace {out}, which holds the input {input}; give --out a new folder",
                           "--out")

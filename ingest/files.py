@@ -15,6 +15,7 @@ open3d is imported when a reader needs it.
 from __future__ import annotations
 
 import json
+import os
 import re
 import struct
 import tempfile
@@ -33,6 +34,8 @@ from breastplan.ply import MAX_ELEMENTS as MAX_POINTS, FaceLayoutError, faces_pr
 from breastplan.units import FAR_EXTENT_MM as FAR_EXTENT
 from breastplan.units import SCAN_EXTENT_MM
 from breastplan.units import extent as extent_of
+
+from .crash_probe import crash_of
 
 SUPPORTED = (".ply", ".obj", ".stl", ".pcd", ".xyz", ".glb", ".gltf")
 POINTS_PER_MM2 = 1.0
@@ -346,8 +349,10 @@ def _embedded_rgb(mesh) -> np.ndarray | None:
 
 
 def _image_rgb(image: np.ndarray) -> np.ndarray:
-    """(H, W, 3) float 0..255 of an image's pixels: grey or RGB(A), 8 or 16 bits, or floats 0..1."""
-    rgb = np.repeat(image[..., None], 3, axis=2) if image.ndim == 2 else image[..., :3]
+    """(H, W, 3) float 0..255 of an image's pixels: grey (with alpha or not) or RGB(A), 8 or 16 bits, or floats
+    0..1."""
+    grey = image if image.ndim == 2 else image[..., 0] if image.shape[2] < 3 else None
+    rgb = np.repeat(grey[..., None], 3, axis=2) if grey is not None else image[..., :3]
     if rgb.dtype == np.uint16:
         return rgb / 257.0
     return rgb * 255.0 if rgb.dtype.kind == "f" else rgb.astype(float)
@@ -416,6 +421,9 @@ def _read_polygons(path: Path, materials: bool = False) -> ScanArrays | None:
 
     ms = pymeshlab.MeshSet()
     gltf = {"load_in_a_single_layer": True} if path.suffix.lower() in (".glb", ".gltf") else {}
+    crash = crash_of(lambda: pymeshlab.MeshSet().load_new_mesh(str(path), **gltf))
+    if crash:
+        raise _not_valid(path, f"(MeshLab's reader crashes on it, {crash})")
     try:
         ms.load_new_mesh(str(path), **gltf)                   # a glTF's nodes as one mesh, each placed
     except pymeshlab.PyMeshLabException:
@@ -538,8 +546,10 @@ def _check_gltf(path: Path) -> None:
             (magic, _, length), (chunk, kind) = struct.unpack_from("<4sII", head), struct.unpack_from("<I4s", head, 12)
             if magic != b"glTF" or kind != b"JSON":
                 raise _not_valid(path, "(it does not start as a binary glTF does)")
-            if length != size or 20 + chunk > size:
+            if length != size:
                 raise _not_valid(path, f"(it declares {length:,} bytes but holds {size:,})")
+            if 20 + chunk > size:
+                raise _not_valid(path, f"(its JSON chunk declares {chunk:,} bytes, past the file's end)")
             data = fh.read(chunk)
         elif size > GLTF_TEXT_BYTES:
             raise BadInputError(path, f"is a glTF text of {size:,} bytes, more than any body scan's "
@@ -552,7 +562,7 @@ def _check_gltf(path: Path) -> None:
                   for m in gltf.get("meshes", [])]
         placed = [n["mesh"] for n in gltf.get("nodes", []) if "mesh" in n]     # a mesh counts once per node
         vertices = sum(meshes[k] for k in placed) if placed else sum(meshes)
-    except (ValueError, KeyError, IndexError, TypeError):
+    except (ValueError, KeyError, IndexError, TypeError, AttributeError):   # AttributeError: JSON not an object
         raise _not_valid(path, "(its JSON is not a glTF's meshes and accessors)") from None
     if vertices > MAX_POINTS:
         raise BadInputError(path, f"holds {vertices:,} vertices, more than any body scan ({MAX_POINTS:,})")
@@ -582,7 +592,14 @@ def _check_pcd(path: Path) -> None:
     if points > MAX_POINTS:
         raise BadInputError(path, f"declares {points:,} points, more than any body scan holds ({MAX_POINTS:,})")
     need = {"ascii": 2 * points * sum(counts) - 1, "binary": points * row}.get(data, 0)
-    if path.stat().st_size - offset < need:
+    short = path.stat().st_size - offset < need
+    if data == "ascii" and not short:                       # a line a point: the last may lack its end of line
+        with path.open("rb") as fh:
+            fh.seek(offset)
+            ends = sum(chunk.count(b"\n") for chunk in iter(lambda: fh.read(1 << 20), b""))
+            fh.seek(-1, os.SEEK_END)
+            short = ends + (fh.read(1) != b"\n") < points
+    if short:
         raise _not_valid(path, f"(its header declares {points:,} points but the file ends before their data does)")
 
 
@@ -590,7 +607,7 @@ def _not_valid(path: Path, detail: str) -> BadInputError:
     """'is not a valid STL file …', naming the real type when its first bytes give it away."""
     fmt = path.suffix.lower().lstrip(".").upper()
     real = _real_type(path)
-    if real:
+    if real and real != f"a {fmt} file":
         return BadInputError(path, f"is not a valid {fmt} file: it is {real}")
     return BadInputError(path, f"is not a valid {fmt} file {detail}".strip())
 

@@ -4,10 +4,12 @@ inputs and options hash as before, else made and saved there.
 """
 from __future__ import annotations
 
+import contextlib
+import os
 import shutil
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Callable, Iterator
 
 import numpy as np
 
@@ -43,7 +45,7 @@ def fitted_sides(source: Path, folder: Path, options: PlanOptions, clock: Clock,
     else:
         cases = {side: Case(folder / side) for side in options.sides}
         scans, reused = _ingest(source, cases, options, clock, progress)
-    with clock("fit"):
+    with clock("fit"), _named_in(source, folder):
         progress("fit " + " and ".join(cases))
         todo = {side: _to_fit(case, scans[side], earlier.get(side)) for side, case in cases.items()}
         fits = _fitted({side: t for side, t in todo.items() if t.fit is None}, cases, parallel)
@@ -77,6 +79,7 @@ def _cases_of(source: Path, options: PlanOptions) -> dict[str, Case]:
     """The side cases a case folder holds for the requested sides. A one-side case from `ingest`
     plans its own side."""
     _check_schema(source)
+    _check_own_files(source)
     held = Case.of_sides(source)
     found = {s: case for s, case in held.items() if s in options.sides}
     missing = [] if found and Case.holds(source) else [s for s in options.sides if s not in held]
@@ -86,13 +89,39 @@ def _cases_of(source: Path, options: PlanOptions) -> dict[str, Case]:
     return found
 
 
+def _check_own_files(source: Path) -> None:
+    """BadInputError for a case folder holding a symbolic link: a plan writes and removes files in its case, and
+    would do so wherever the link leads."""
+    for root, dirs, files in os.walk(source):
+        link = next((Path(root) / n for n in (*dirs, *files) if (Path(root) / n).is_symlink()), None)
+        if link is not None:
+            raise BadInputError(link, "is a symbolic link inside a case folder, which holds its own files only (a "
+                                      "plan writes there): copy what it leads to in its place")
+
+
 def _copied(cases: dict[str, Case], source: Path, folder: Path) -> dict[str, Case]:
     """`cases` (of the case folder `source`) copied into `folder`, unless the plan is made in place."""
     if folder.resolve() == source.resolve():
         return cases
     for side, case in cases.items():
-        shutil.copytree(case.folder, folder / side, dirs_exist_ok=True)
+        try:
+            shutil.copytree(case.folder, folder / side, dirs_exist_ok=True)
+        except shutil.Error as exc:                        # the files it could not copy: (from, to, why) each
+            copied_from, _, why = exc.args[0][0]
+            raise BadInputError(copied_from, f"cannot be read ({why.split('] ')[-1].split(':')[0]})") from None
     return {side: Case(folder / side) for side in cases}
+
+
+@contextlib.contextmanager
+def _named_in(source: Path, folder: Path) -> Iterator[None]:
+    """A BadInputError about a file of the case copied from the case folder `source` into `folder` names the
+    file of `source` it was copied from (the copy is in a hidden folder, removed when the plan fails)."""
+    try:
+        yield
+    except BadInputError as exc:
+        if not source.is_dir() or exc.path is None or not exc.path.is_relative_to(folder) or folder == source:
+            raise
+        raise BadInputError(source / exc.path.relative_to(folder), exc.problem) from None
 
 
 def _held_scan(case: Case, side: str) -> Scan:

@@ -216,7 +216,8 @@ def _beneath_breasts(plan: Plan):
     for side in v.sides.values():
         f = transform_points(v.body_from_input, side.footprint_input_mm)
         if len(f):
-            spans.append((f[:, 0].min(), f[:, 0].max(), f[:, 1].min() - BENEATH_MM, 0.5 * (f[:, 1].min() + f[:, 1].max())))
+            low, high = f[:, 1].min(), f[:, 1].max()
+            spans.append((f[:, 0].min(), f[:, 0].max(), low - BENEATH_MM, 0.5 * (low + high)))
 
     def beneath(points_view: np.ndarray) -> np.ndarray:
         x, y = transform_points(to_body, points_view)[:, :2].T

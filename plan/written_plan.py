@@ -44,7 +44,7 @@ def read_written_plan(path: Path) -> WrittenPlan:
         data = yaml.safe_load(text)        # JSON is YAML; safe_load builds no Python objects
     except OSError as exc:
         raise ValueError(f"the plan file {path} cannot be read ({exc.strerror or type(exc).__name__})") from None
-    except (UnicodeDecodeError, yaml.YAMLError) as exc:
+    except (UnicodeDecodeError, yaml.YAMLError, RecursionError) as exc:   # Recursion: nested deeper than any plan
         raise ValueError(f"the plan file {path} cannot be read as YAML or JSON ({type(exc).__name__})") from None
     except ValueError as exc:
         raise ValueError(f"the plan file {path} {exc}") from None

@@ -6,7 +6,9 @@ Truths: the files on disk before and after each command (names and content), and
 scan.npz records.
 """
 import json
+import os
 import shutil
+import subprocess
 
 import numpy as np
 import pytest
@@ -86,7 +88,8 @@ def test_the_earlier_visit_is_only_read(cli, case, args):
     assert _tree(case) == before
 
 
-@pytest.mark.parametrize("args", [("plan", "{case}/left"), ("plan", "{rec}", "--out", "{case}/right")])
+@pytest.mark.parametrize("args", [("plan", "{case}/left"), ("plan", "{rec}", "--out", "{case}/right"),
+                                  ("ingest", "{rec}", "--side", "left", "--out", "{case}/left")])
 def test_one_side_of_a_plan_is_not_planned_alone_over_it(cli, case, args):
     before = _tree(case)
     res = run(cli, *[a.format(rec=sample_recording(), case=case) for a in args])
@@ -133,3 +136,39 @@ def test_a_failed_plan_leaves_no_folder_it_made(cli, tmp_path):
     res = run(cli, "plan", plate, "--out", tmp_path / "new" / "sub" / "case")
     assert_bad_input(res, plate, tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["plate.ply"]
+
+
+def test_a_case_whose_plan_folder_leads_elsewhere_is_refused_and_what_it_leads_to_kept(cli, case, tmp_path):
+    """A case's plan/ folder replaced by a link to another folder: planning the case in place wrote its plan there
+    and removed the files of that folder it took for an earlier plan's."""
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    for name in ("keep.ply", "keep.npz"):
+        (elsewhere / name).write_bytes(b"someone's")
+    shutil.rmtree(case / "left" / "plan")
+    (case / "left" / "plan").symlink_to(elsewhere, target_is_directory=True)
+    before = _tree(case)
+    res = run(cli, "plan", case, "--deform", "ptosis:2")
+    assert_bad_input(res, case / "left" / "plan", case.parent)
+    assert sorted(p.name for p in elsewhere.iterdir()) == ["keep.npz", "keep.ply"]
+    assert _tree(case) == before
+
+
+def test_a_fault_of_a_case_planned_elsewhere_names_the_cases_own_file(cli, case, tmp_path):
+    """A case planned into another folder is copied there first: its faults named the hidden copy (already
+    removed), or said "[Errno None] None", instead of the case's own file."""
+    fit = case / "left" / "fit.npz"
+    with np.load(fit, allow_pickle=False) as held:
+        arrays = {k: held[k] for k in held.files}
+    np.savez(fit, **{**arrays, "schema": np.str_("breastplan.fit/99")})
+    res = run(cli, "plan", case, "--out", tmp_path / "elsewhere")
+    assert_bad_input(res, fit, tmp_path)
+    assert "newer" in res.stderr
+    np.savez(fit, **arrays)
+    fit.chmod(0)
+    as_user = ["setpriv", "--inh-caps=-dac_override,-dac_read_search",        # root reads it whatever its mode
+               "--bounding-set=-dac_override,-dac_read_search"] if os.geteuid() == 0 else []
+    res = subprocess.run([*as_user, cli, "plan", str(case), "--out", str(tmp_path / "elsewhere")],
+                         capture_output=True, text=True, timeout=600)
+    assert_bad_input(res, fit, tmp_path)
+    assert "cannot be read (Permission denied)" in res.stderr

@@ -261,6 +261,10 @@ def _bad_files(tmp_path):
     write_pcd(d / "inf.pcd", np.array([[0, 0, 0], [100, 0, 0], [np.inf, 0, 0]]))
     write_pcd(d / "two.pcd", np.array([[0, 0, 0], [100, 0, 0]]))
     (d / "truncated.pcd").write_bytes(write_pcd(d / "whole.pcd", grid_points_mm()).read_bytes()[:-50])
+    assert o3d.io.write_point_cloud(str(d / "text.pcd"), o3d.geometry.PointCloud(o3d.utility.Vector3dVector(
+        grid_points_mm(20))), write_ascii=True)
+    text = (d / "text.pcd").read_bytes()
+    (d / "half.pcd").write_bytes(text[:len(text) // 2 + len(text) // 4])     # its header passes for whole
     (d / "nan.xyz").write_text("0 0 0\n100 0 0\nnan 0 0\n")
     (d / "garbage.xyz").write_text("0 0 0\nhello world 3\n")
     (d / "ragged.xyz").write_text("0 0 0\n100 0 0 0 0 1\n")
@@ -299,6 +303,7 @@ def _bad_files(tmp_path):
         "inf pcd": (d / "inf.pcd", "NaN or infinite"),
         "two-point pcd": (d / "two.pcd", "has only 2 points; a scan needs at least 3"),
         "truncated pcd": (d / "truncated.pcd", "is not a valid PCD file"),
+        "truncated text pcd": (d / "half.pcd", "ends before their data does"),
         "nan xyz": (d / "nan.xyz", "NaN or infinite"),
         "garbage xyz": (d / "garbage.xyz", "is not a valid XYZ file (could not convert string 'hello'"),
         "ragged xyz": (d / "ragged.xyz", "is not a valid XYZ file"),

@@ -31,7 +31,9 @@ def test_an_empty_file_plans_nothing_of_its_own(tmp_path):
     ("left: augmentation:300\nbreast: right\n", "only the keys"),
     ("left: {volume: 300}\n", "a word or a list of words"),
     ("symmetrise: [left, right]\n", "one side"),
-    ("left: true\n", "a word or a list of words")])
+    ("left: true\n", "a word or a list of words"),
+    ("left: " + "[" * 200_000 + "]" * 200_000 + "\n", "cannot be read as YAML or JSON"),   # deeper than its parser
+    ("left: " + "{a: " * 50_000 + "b" + "}" * 50_000 + "\n", "cannot be read as YAML or JSON")])
 def test_a_file_that_is_no_plan_is_refused_naming_it(tmp_path, text, words):
     (tmp_path / "p.yaml").write_text(text)
     with pytest.raises(ValueError, match=words) as caught:
