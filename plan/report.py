@@ -136,11 +136,23 @@ def _grid(plan: Plan, views: Views) -> dict:
     asym = asymmetry(grid.measures)
     return {"kinds": list(grid.kinds), "degrees": [list(d) for d in grid.degrees], "requested": list(grid.requested),
             "keys": list(grid.keys), "words": [_state_said(plan, i) for i in range(len(grid))],
-            "planned": grid.planned_index,
+            "planned": grid.planned_index, "reached": _short_degrees(plan),
             "measures": {s: {k: rounded(v) for k, v in grid.measures[s].items()} for s in sides},
             "asymmetry": {k: rounded(v["left_minus_right"]) for k, v in asym.items()},
             "coefficients": _b64(stored.coefficients, "<f4"), "modes": _b64(stored.modes, "<i2"),
             "scales": stored.scales.astype(float).tolist(), "worst_mm": stored.worst_mm}
+
+
+def _short_degrees(plan: Plan) -> list[list[str | None]]:
+    """Per slider state and kind: the degree its breasts reach where one does not reach the slider's ("5.29", or
+    "5.29 and 5.25" for her right and left), else None (`changes.short_of`)."""
+    grid, sides = plan.grid, [s for s in ("right", "left") if s in plan.sides]
+    out = []
+    for i in range(len(grid)):
+        details = [{d["kind"]: d for d in grid.changes[s][i].details} for s in sides]
+        out.append([" and ".join(f"{d[kind]['degree_reached']:.2f}" for d in details)
+                    if any(short_of(d[kind], plan.options.method) for d in details) else None for kind in grid.kinds])
+    return out
 
 
 def _state_said(plan: Plan, i: int) -> str:
@@ -551,7 +563,9 @@ function label(state){   // what is shown, in words; the sliders and the measure
  G.kinds.forEach((kind,k)=>{const inp=document.getElementById('slider-'+kind);
   if(at)inp.value=at[k];
   const d=G.degrees[k][+inp.value];
-  inp.previousSibling.textContent=kind+': degree '+d+(d===G.requested[k]?' (planned)':'')+(state?'':' (not shown)');
+  const short=state&&G.reached[state.index][k];   // the breasts stop short of the slider's degree
+  inp.previousSibling.textContent=kind+': degree '+d+(d===G.requested[k]?' (planned)':'')+(state?'':' (not shown)')
+   +(short?' (reaches '+short+(short.includes(' and ')?', her right and left)':')'):'');
   inp.previousSibling.classList.toggle('off',!state);});
  for(const c of document.querySelectorAll('[data-after]')){const [side,name]=c.dataset.after.split(' ');
   const v=state?state.measures[side][name]:P.before[side][name];c.textContent=fmt(v,c.dataset.forHer!==undefined);}

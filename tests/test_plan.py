@@ -666,6 +666,15 @@ def test_each_slider_keeps_its_degree_and_the_page_draws_and_measures_the_plans_
                      "!t.scene).map(t => [t.name, [Array.from(t.x), Array.from(t.y), Array.from(t.z)]]))")
         cells = {name: b.js(f"document.querySelector('table.measures [data-after=\"left {name}\"]').textContent")
                  for name in ("volume_cc", "notch_to_nipple_mm", "nipple_to_fold_mm")}
+        _slide(b, "top-shape", "max")                       # a degree her breasts stop short of, said beside it
+        top = grid.index((8.0, 1.0, 8.0))
+        assert _drawn(b, grid.keys[top])
+        reached = [d["degree_reached"] for s in ("right", "left") for d in grid.changes[s][top].details
+                   if d["kind"] == "top-shape"]
+        assert all(r < 7.5 for r in reached), reached
+        assert b.js(label.format("top-shape")) == ("top-shape: degree 8 (reaches "
+                                                   + " and ".join(f"{r:.2f}" for r in reached)
+                                                   + ", her right and left)")
         b.driver.find_element("css selector", "#original").click()
         assert _drawn(b, "original")
         assert b.js(label.format("ptosis")) == "ptosis: degree 8 (not shown)"
