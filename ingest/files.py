@@ -14,6 +14,8 @@ open3d is imported when a reader needs it.
 """
 from __future__ import annotations
 
+import base64
+import binascii
 import json
 import os
 import re
@@ -551,6 +553,7 @@ def _check_gltf(path: Path) -> None:
             if 20 + chunk > size:
                 raise _not_valid(path, f"(its JSON chunk declares {chunk:,} bytes, past the file's end)")
             data = fh.read(chunk)
+            binary = fh.read()[8:]                           # the BIN chunk after its length and type
         elif size > GLTF_TEXT_BYTES:
             raise BadInputError(path, f"is a glTF text of {size:,} bytes, more than any body scan's "
                                       f"({GLTF_TEXT_BYTES:,}): export it as GLB")
@@ -566,6 +569,34 @@ def _check_gltf(path: Path) -> None:
         raise _not_valid(path, "(its JSON is not a glTF's meshes and accessors)") from None
     if vertices > MAX_POINTS:
         raise BadInputError(path, f"holds {vertices:,} vertices, more than any body scan ({MAX_POINTS:,})")
+    try:
+        chunk = binary if path.suffix.lower() == ".glb" else b""
+        positions = [_positions(path, gltf, chunk, p["attributes"]["POSITION"])
+                     for mesh in gltf.get("meshes", []) for p in mesh["primitives"]]
+    except (ValueError, KeyError, IndexError, TypeError, binascii.Error):
+        raise _not_valid(path, "(its positions are not where its JSON says)") from None
+    for p in positions:
+        if p is not None:
+            _check_points(path, p)
+
+
+def _positions(path: Path, gltf: dict, chunk: bytes, accessor: int) -> np.ndarray | None:
+    """(N, 3) a glTF's float positions (`accessor`), from its GLB chunk `chunk` or a buffer it holds as a data
+    URI, as its reader would take them (MeshLab's drops the triangles of a NaN vertex, and reads on); None
+    from a buffer in another file (read by its reader alone)."""
+    acc = gltf["accessors"][accessor]
+    view = gltf["bufferViews"][acc["bufferView"]] if "bufferView" in acc else None
+    if view is None or acc.get("componentType") != 5126 or acc.get("type") != "VEC3":
+        raise _not_valid(path, "(its positions are not three floats a vertex)")
+    uri = gltf["buffers"][view.get("buffer", 0)].get("uri")
+    if uri is not None and not uri.startswith("data:"):
+        return None
+    binary = chunk if uri is None else base64.b64decode(uri.split(",", 1)[1], validate=True)
+    start, stride, count = view.get("byteOffset", 0) + acc.get("byteOffset", 0), view.get("byteStride", 12), \
+        acc["count"]
+    if count and (start < 0 or stride < 12 or start + (count - 1) * stride + 12 > len(binary)):
+        raise _not_valid(path, "(its positions lie past its binary data)")
+    return np.ndarray((count, 3), "<f4", binary, start, (stride, 4)) if count else np.zeros((0, 3))
 
 
 def _check_pcd(path: Path) -> None:

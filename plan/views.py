@@ -29,9 +29,11 @@ TORSO_MM = 5.0
 GAP_MM = 20.0
 """A triangle of her drawn skin with an edge longer than this would span a gap the camera did not see
 across (an occluding edge, the side of her body): it is left out, except beneath a breast (BENEATH_MM)."""
-BENEATH_MM, HIDDEN_MM = 60.0, 150.0
-"""Beneath a breast — across her footprint's span, from its middle height down to this far below its lowest
-point (her body frame) — a triangle spanning up to HIDDEN_MM is kept: it runs from the breast's lower edge back
+BENEATH_MM, HIDDEN_MM, ACROSS = 60.0, 150.0, 0.15
+"""Beneath a breast — across her footprint's span less the ACROSS share of its outline's points at each side (a
+triangle there, from the breast's outer edge to her flank, showed as a fin once the breast moved), from its
+middle height down to this far below its lowest point (her body frame) — a triangle spanning up to HIDDEN_MM is
+kept: it runs from the breast's lower edge back
 to her chest along the camera's line of sight, over skin the camera did not see, so that her body is not drawn
 torn in two under a breast that hangs."""
 VIEW_TO_DISPLAY = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])
@@ -217,7 +219,8 @@ def _beneath_breasts(plan: Plan):
         f = transform_points(v.body_from_input, side.footprint_input_mm)
         if len(f):
             low, high = f[:, 1].min(), f[:, 1].max()
-            spans.append((f[:, 0].min(), f[:, 0].max(), low - BENEATH_MM, 0.5 * (low + high)))
+            inner, outer = np.quantile(f[:, 0], [ACROSS, 1.0 - ACROSS])
+            spans.append((inner, outer, low - BENEATH_MM, 0.5 * (low + high)))
 
     def beneath(points_view: np.ndarray) -> np.ndarray:
         x, y = transform_points(to_body, points_view)[:, :2].T

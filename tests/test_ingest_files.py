@@ -275,6 +275,7 @@ def _bad_files(tmp_path):
     (d / "binary.xyz").write_bytes(bytes(range(128, 256)))
     write_ply(d / "nan.ply", np.array([[0, 0, 0], [100, 0, 0], [np.nan, 0, 0]]))
     write_glb(d / "whole.glb", grid_points_mm(), [[0, 1, 2], [1, 2, 3]])
+    write_glb(d / "nan.glb", np.vstack([grid_points_mm(), [[np.nan, 0, 0]]]), [[0, 1, 2], [1, 2, 512]])
     (d / "truncated.glb").write_bytes((d / "whole.glb").read_bytes()[:-40])
     (d / "zip.glb").write_bytes(b"PK\x03\x04" + bytes(64))
     (d / "text.gltf").write_text('{"asset": {"version": "2.0"}, "meshes": [{"primitives": [{}]}]}')
@@ -304,6 +305,7 @@ def _bad_files(tmp_path):
         "two-point pcd": (d / "two.pcd", "has only 2 points; a scan needs at least 3"),
         "truncated pcd": (d / "truncated.pcd", "is not a valid PCD file"),
         "truncated text pcd": (d / "half.pcd", "ends before their data does"),
+        "nan glb": (d / "nan.glb", "has 1 point with NaN or infinite coordinates"),    # its reader drops them
         "nan xyz": (d / "nan.xyz", "NaN or infinite"),
         "garbage xyz": (d / "garbage.xyz", "is not a valid XYZ file (could not convert string 'hello'"),
         "ragged xyz": (d / "ragged.xyz", "is not a valid XYZ file"),
