@@ -52,8 +52,15 @@ def one_thread_environment() -> None:
         os.environ[name] = "1"
 
 
-def _local_worker(parent: int) -> None:
-    """A local worker's start: one thread, and death with the batch."""
+_STARTED = None
+"""A local worker's queue of the cases it starts (`_local_worker`), by which the batch knows which were being
+planned when a worker died."""
+
+
+def _local_worker(parent: int, started=None) -> None:
+    """A local worker's start: one thread, death with the batch, and where it says which case it starts."""
+    global _STARTED
+    _STARTED = started
     one_thread_environment()
     if sys.platform.startswith("linux"):
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
@@ -67,17 +74,18 @@ def run_local(tasks: list[Task], jobs: int) -> Results:
     its worker is charged (ATTEMPTS)."""
     attempts: Counter = Counter()
     pending, alone = list(tasks), []
+    context = multiprocessing.get_context("spawn")
     while pending or alone:
         solo = bool(alone)
-        todo = alone if solo else pending
-        pool = ProcessPoolExecutor(1 if solo else min(jobs, len(todo)), mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_local_worker, initargs=(os.getpid(),))
-        broken, running = [], set()
+        todo = alone[:1] if solo else pending            # alone: one case in a pool of its own
+        started = context.SimpleQueue()
+        pool = ProcessPoolExecutor(1 if solo else min(jobs, len(todo)), mp_context=context,
+                                   initializer=_local_worker, initargs=(os.getpid(), started))
+        broken = []
         try:
-            futures = {pool.submit(plan_case, t): t for t in todo}
+            futures = {pool.submit(_started_and_planned, t): t for t in todo}
             waiting = set(futures)
             while waiting:
-                running = {futures[f].case for f in waiting if f.running()} or running
                 done, waiting = wait(waiting, return_when=FIRST_COMPLETED)
                 settled = []
                 for future in done:
@@ -93,6 +101,9 @@ def run_local(tasks: list[Task], jobs: int) -> Results:
             raise
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
+        running = set()                          # begun and not settled: the cases a worker was planning
+        while broken and not started.empty():
+            running.add(started.get())
         suspects = {t.case for t in broken} & running or {t.case for t in broken}
         if not solo and len(suspects) > 1:        # which of them killed its worker is not known: each tried alone
             alone = [t for t in broken if t.case in suspects]
@@ -101,10 +112,17 @@ def run_local(tasks: list[Task], jobs: int) -> Results:
         for task in broken:                       # the case being planned when a worker died is charged
             attempts[task.case] += task.case in suspects
         retry = [t for t in broken if attempts[t.case] < ATTEMPTS]
-        alone, pending = (retry, pending) if solo else ([], retry)
+        alone, pending = (retry + alone[1:], pending) if solo else ([], retry)
         failed = [(t, _died(t)) for t in broken if attempts[t.case] >= ATTEMPTS]
         if failed:
             yield failed
+
+
+def _started_and_planned(task: Task) -> dict:
+    """`plan_case` in a local worker, once it has said it starts `task` (`_STARTED`)."""
+    if _STARTED is not None:
+        _STARTED.put(task.case)
+    return plan_case(task)
 
 
 def run_dask(tasks: list[Task], jobs: int, scheduler: str | None) -> Results:

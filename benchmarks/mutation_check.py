@@ -415,6 +415,21 @@ MUTANTS = [
         "plan/learnt_operation.py", "SHARE_SIGMA_MM = CELL_MM", "SHARE_SIGMA_MM = 0.0", ("tests/test_learnt_operation.py",)),
     one("operation-model-unused", "a plan making an operation by the built-in model where a clinic's was given",
         "plan/operated.py", "if spec.kind in models", "if False", ("tests/test_learnt_operation_cli.py",)),
+    one("skin-torn-beneath-breast", "her skin left torn in two beneath a breast that hangs",
+        "plan/views.py", "keep[hidden] = beneath(points_view[faces[hidden]].mean(axis=1))", "pass",
+        ("tests/test_skin_surface.py",)),
+    one("marks-stay-where-found", "the nipples, footprints and folds left where found while a slider moves her skin",
+        "plan/report.py", "const m=state&&shownD?", "const m=false?", ("tests/test_plan.py",)),
+    one("reader-crash-not-probed", "a file that crashes MeshLab's reader read in this process",
+        "ingest/files.py", "crash = crash_of(lambda: pymeshlab.MeshSet().load_new_mesh(str(path), **gltf))",
+        "crash = None", ("tests/test_reader_crashes.py",)),
+    one("case-link-followed", "a case folder's symbolic link followed where a plan writes",
+        "plan/stages.py", "    _check_own_files(source)\n", "", ("tests/test_case_is_one_patients.py",)),
+    one("copied-case-fault-names-copy", "a fault of a copied case naming the hidden copy",
+        "plan/stages.py", "with clock(\"fit\"), _named_in(source, folder):", "with clock(\"fit\"):",
+        ("tests/test_case_is_one_patients.py",)),
+    one("worker-death-charges-all", "a batch charging every case planned beside the one whose worker died",
+        "batch/executors.py", "if not solo and len(suspects) > 1:", "if False:", ("tests/test_batch_worker_death.py",)),
 ]
 
 

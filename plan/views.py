@@ -33,9 +33,8 @@ BENEATH_MM, HIDDEN_MM, ACROSS = 60.0, 150.0, 0.15
 """Beneath a breast — across her footprint's span less the ACROSS share of its outline's points at each side (a
 triangle there, from the breast's outer edge to her flank, showed as a fin once the breast moved), from its
 middle height down to this far below its lowest point (her body frame) — a triangle spanning up to HIDDEN_MM is
-kept: it runs from the breast's lower edge back
-to her chest along the camera's line of sight, over skin the camera did not see, so that her body is not drawn
-torn in two under a breast that hangs."""
+kept: it runs from the breast's lower edge back to her chest along the camera's line of sight, over skin the
+camera did not see, so that her body is not drawn torn in two under a breast that hangs."""
 VIEW_TO_DISPLAY = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])
 """Viewing frame (y down, z away) → display frame (y away, z up)."""
 MIDLINE_MM = (60.0, -350.0)
