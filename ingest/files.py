@@ -540,7 +540,7 @@ def _check_stl(path: Path) -> None:
 def _check_gltf(path: Path) -> None:
     """Refuse a glTF whose JSON (a .gltf's text, a GLB's first chunk) cannot be read, a GLB whose header does not
     match its size, a .gltf text larger than GLTF_TEXT_BYTES, and one whose meshes, as its nodes place them, hold
-    more vertices than any body scan. A GLB's binary chunk is not read here."""
+    more vertices than any body scan, and one whose positions (`_positions`) are not finite floats within its data."""
     size = path.stat().st_size
     with path.open("rb") as fh:
         if path.suffix.lower() == ".glb":
