@@ -88,6 +88,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_repeatability.py
 	$(BIN)/python benchmarks/bench_volume_repeat.py
 	$(BIN)/python benchmarks/bench_follow_up.py
+	$(BIN)/python benchmarks/bench_patient_agreement.py
 	$(BIN)/python benchmarks/bench_folds.py
 	$(BIN)/python benchmarks/bench_symmetry.py
 	$(BIN)/python benchmarks/bench_distance.py

@@ -428,6 +428,9 @@ MUTANTS = [
     one("copied-case-fault-names-copy", "a fault of a copied case naming the hidden copy",
         "plan/stages.py", "with clock(\"fit\"), _named_in(source, folder):", "with clock(\"fit\"):",
         ("tests/test_case_is_one_patients.py",)),
+    one("follow-up-of-another-patient-id", "a follow-up measured on another patient ID's earlier plan",
+        "plan/stages.py", "if then is not None and then.patient_id and then.patient_id != patient_id:",
+        "if False:", ("tests/test_follow_up.py",)),
     one("worker-death-charges-all", "a batch charging every case planned beside the one whose worker died",
         "batch/executors.py", "if not solo and len(suspects) > 1:", "if False:", ("tests/test_batch_worker_death.py",)),
 ]

@@ -22,7 +22,7 @@ from breastplan.options import PlanOptions
 
 from .changes import Method
 from .result import Patient, Plan
-from .stages import Progress, check_own_case, earlier_volumes, fitted_sides
+from .stages import Progress, check_own_case, check_same_patient, earlier_volumes, fitted_sides
 
 
 def sample_recording() -> Path:
@@ -48,6 +48,8 @@ def run_plan(input: Path | None, out: Path, options: PlanOptions, progress: Prog
     method = method or _resolved(options.method)
     if not force:
         check_own_case(source, out)
+    if options.wall_from is not None and patient is not None:
+        check_same_patient(Path(options.wall_from), patient.patient_id)
     clock = Clock()
     with threadpool_limits(1, "blas"), building(out, "plan", force) as folder:   # small dense solves: threads only add overhead
         fitted = fitted_sides(source, folder, options, clock, progress, parallel)

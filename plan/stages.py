@@ -70,6 +70,21 @@ def check_own_case(source: Path, out: Path) -> None:
                                  "is one recording's; plan into a new folder, or give --force to replace it")
 
 
+def check_same_patient(earlier: Path, patient_id: str | None) -> None:
+    """BadInputError when the earlier visit's case folder `earlier` was planned for another patient ID than
+    `patient_id` (None: none given, nothing to compare): a follow-up is measured on her own earlier scan, and the
+    registration of two chests cannot tell every two women apart (docs/cli.md)."""
+    if not patient_id:
+        return
+    try:
+        then = read_plan_file(earlier)
+    except (OSError, ValueError):
+        return                                        # a damaged earlier plan is refused where it is read
+    if then is not None and then.patient_id and then.patient_id != patient_id:
+        raise BadInputError(earlier, f"is the plan of patient ID {then.patient_id}, not {patient_id}: a follow-up is "
+                                     "measured on her own earlier scan")
+
+
 def _side_cases(folder: Path) -> list[Case]:
     """The cases in `folder`: itself (one side's, from `ingest`) or its sides'."""
     return [c for c in (Case(folder), *(Case(folder / s) for s in SIDES)) if Case.holds(c.folder)]

@@ -130,7 +130,8 @@ def _true_change(cases, side: str) -> float:
 
 @pytest.fixture(scope="module")
 def earlier_plan(cli, cases):
-    res = run(cli, "plan", cases / f"cup{CUPS[0]}.mcap", "--out", cases / "plan-before", "--json")
+    res = run(cli, "plan", cases / f"cup{CUPS[0]}.mcap", "--out", cases / "plan-before", "--json",
+              "--patient-id", "H-1042")
     assert res.returncode == 0, res.stderr
     return cases / "plan-before"
 
@@ -139,9 +140,19 @@ def earlier_plan(cli, cases):
 def follow_up_plan(cli, cases, earlier_plan):
     """The larger breasts planned against the earlier plan: (case folder, --json result)."""
     out = cases / "plan-after"
-    res = run(cli, "plan", cases / f"cup{CUPS[1]}.mcap", "--wall-from", earlier_plan, "--out", out, "--json")
+    res = run(cli, "plan", cases / f"cup{CUPS[1]}.mcap", "--wall-from", earlier_plan, "--out", out, "--json",
+              "--patient-id", "H-1042")
     assert res.returncode == 0, res.stderr
     return out, json.loads(res.stdout)
+
+
+def test_an_earlier_plan_of_another_patient_id_is_refused(cli, cases, earlier_plan, tmp_path):
+    """Two women's chests can register as well as one woman's two visits (another MakeHuman body agreed up to 95 %
+    where the same woman agreed 84–88 %): the patient IDs, when both plans have one, must be the same."""
+    res = run(cli, "plan", cases / f"cup{CUPS[1]}.mcap", "--wall-from", earlier_plan, "--out", tmp_path / "out",
+              "--patient-id", "H-2077")
+    assert_bad_input(res, earlier_plan, tmp_path)
+    assert "patient ID H-1042, not H-2077" in res.stderr
 
 
 def test_plan_wall_from_reports_each_sides_change_since_the_earlier_plan(cli, cases, earlier_plan, follow_up_plan):
