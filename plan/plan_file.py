@@ -47,10 +47,10 @@ def read_plan_file(folder: Path) -> PlanFile | None:
     schema, given = str(record.get("schema", "")), record.get("input")
     sha = given.get("sha256") if isinstance(given, dict) else None
     options = record.get("options") if isinstance(record.get("options"), dict) else {}
-    who = record.get("patient") if isinstance(record.get("patient"), dict) else {}
+    patient_id = _at(record, "patient", "patient_id")
     return PlanFile(schema, sha if isinstance(sha, str) else None, options,
                     _files(record) if schema == PLAN_SCHEMA else None,
-                    who.get("patient_id") if isinstance(who.get("patient_id"), str) else None)
+                    patient_id if isinstance(patient_id, str) else None)
 
 
 MEASURE_COLUMNS = ("side", "planned", "volume_cc", "uncertainty_cc", "unseen_outer_cc", "footprint_area_cm2",
