@@ -23,15 +23,15 @@ from .learnt_operation import operation_models
 from .measures import asymmetry, breast_measures, breast_measures_each
 from .operated import Operated, operate
 from .operation_spec import OperationSpec
-from .result import COMBINED, OPERATED, Measures, Plan, PlanState, SidePlan, SkinChange, StateGrid, planned_states
+from .result import COMBINED, OFF, OPERATED, Measures, Plan, PlanState, SidePlan, SkinChange, StateGrid, planned_states
 from .surface import PlannedChange
 from .symmetrising import symmetrising
 from .symmetry import bcct_measures, ptosis_from_cells
 
 
 def slider_degrees(requested: float) -> list[float]:
-    """The degrees a kind's slider offers: 1..8 and the requested one."""
-    return sorted({*map(float, range(1, 9)), float(requested)})
+    """The positions a kind's slider offers: off (`OFF`), then the degrees 1..8 and the requested one."""
+    return sorted({OFF, *map(float, range(1, 9)), float(requested)})
 
 
 def compute_plan(source: Path, fitted: dict[str, SidePlan], options: PlanOptions, method: Method,
@@ -108,10 +108,10 @@ def operations(sides: dict[str, SidePlan], volumes: BreastVolumes, options: Plan
 
 def _states(sides: dict[str, SidePlan], options: PlanOptions, method: Method, operated: dict[str, Operated]):
     """Each requested kind alone at each of its slider's degrees (the requested degree being the change solved for
-    the plan), then the combination as planned: the changes `state_grid` combines; with no kind, her operations
-    alone (OPERATED). Each after her operations, if any."""
+    the plan; off is no change), then the combination as planned: the changes `state_grid` combines; with no kind,
+    her operations alone (OPERATED). Each after her operations, if any."""
     for kind, requested in options.changes:
-        for degree in slider_degrees(requested):
+        for degree in slider_degrees(requested)[1:]:             # off is no change
             name = change_name(kind, degree)
             changes = {s: next((c for c in sp.changes if c.name == name), None)
                        or solve_change(sp.local_surface, kind, degree, sp.primitive, method)
@@ -125,8 +125,8 @@ def _states(sides: dict[str, SidePlan], options: PlanOptions, method: Method, op
 def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], options: PlanOptions,
                volumes: BreastVolumes, fitted: dict[str, dict[str, float]],
                operated: dict[str, Operated] | None = None) -> StateGrid:
-    """Every combination of the kinds' slider degrees (`states` holds each kind's change at each; with no kind, the
-    one state of her operations), after her `operated` breasts' operations, each side's fitted model so planned,
+    """Every combination of the kinds' slider positions (`states` holds each kind's change at each degree; a kind
+    off is left out, every kind off is her operations alone; with no kind, the one state of her operations), after her `operated` breasts' operations, each side's fitted model so planned,
     and her measures on it (`breast_measures_each`). Her volume on her skin is changed by the operations' exact
     change, then by as much as the fitted model's volume changes from the operations' state (`fitted`: its measures
     as scanned, `_model_measures`)."""
@@ -138,7 +138,7 @@ def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], option
     by_key = {st.key: st for st in states}
     changes, planned, models, measures = {}, {}, {}, {}
     for s, sp in sides.items():
-        singles = [[by_key[change_name(k, d)].changes[s] for k, d in zip(kinds, combo)] for combo in combos]
+        singles = [[by_key[change_name(k, d)].changes[s] for k, d in zip(kinds, combo) if d != OFF] for combo in combos]
         changes[s] = tuple(one[0] if len(one) == 1 else combine(one) if one else UNCHANGED for one in singles)
         planned[s] = tuple(PlannedChange.of(sp, c, operated.get(s)) for c in changes[s])
         moved = PlannedChange.models(planned[s], np.vstack([sp.surface_input, sp.scan.nipple_camera_mm]))
@@ -151,8 +151,8 @@ def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], option
             volume = op.volume_cc
         measures[s]["volume_cc"] += volume - base
         measures[s] = poles_of_her_volume(measures[s])
-    keys = tuple(OPERATED if not kinds else COMBINED if len(kinds) > 1 and combo == requested else
-                 "+".join(change_name(k, d) for k, d in zip(kinds, combo)) for combo in combos)
+    keys = tuple(COMBINED if len(kinds) > 1 and combo == requested else
+                 "+".join(change_name(k, d) for k, d in zip(kinds, combo) if d != OFF) or OPERATED for combo in combos)
     return StateGrid(kinds, degrees, requested, keys, changes, planned, models, measures)
 
 

@@ -10,7 +10,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from .pictures import SHOT_PX, VIEWS, font
-from .result import Plan, StateGrid
+from .result import OFF, Plan, StateGrid
 
 PAGE_PX = (1754, 1240)
 """An A4 page, landscape, at DPI."""
@@ -35,16 +35,18 @@ PLAIN = {"volume_cc": ("breast volume", "cc"),
 
 
 def state_words(grid: StateGrid, i: int) -> str:
-    """What state i of the plan's slider states shows, in words: each kind's degree, or their combination as
-    planned."""
+    """What state i of the plan's slider states shows, in words: each kind's degree (or off), or their combination
+    as planned."""
     degrees = grid.combination(i)
     if not grid.kinds:
         return "the operations planned"
+    if all(d == OFF for d in degrees):
+        return "every change off"
     if len(grid.kinds) == 1:
         return f"{grid.kinds[0]}, degree {degrees[0]:g}"
     if degrees == grid.requested:
         return "all planned changes combined"
-    return ", ".join(f"{k} degree {d:g}" + (" (planned)" if d == r else "")
+    return ", ".join(f"{k} off" if d == OFF else f"{k} degree {d:g}" + (" (planned)" if d == r else "")
                      for k, d, r in zip(grid.kinds, degrees, grid.requested))
 
 

@@ -7,7 +7,7 @@ on demand each breast's scanned points and
 fitted model as planned (from the legend), for a follow-up the breast as fitted at the earlier visit (a
 translucent blue mesh), the landmarks the measures start from (the sternal notch, the midline and the
 nipples found, red), each breast's footprint (blue), the fold beneath each breast (purple) and her sides
-named on her. A degree slider per planned kind, each keeping its degree while another moves (every combination
+named on her. A degree slider per planned kind, off at its left end, each keeping its degree while another moves (every combination
 they reach, `Plan.grid`, computed by the plan: the page looks a state up, it computes none), the combination as
 planned, her skin before beside the state shown (one camera for both), the five standard views (her right side,
 her right oblique, front, her left oblique, her left side) and a top view.
@@ -94,7 +94,13 @@ def _points(p: np.ndarray) -> dict:
 
 
 def _mesh(vertices: np.ndarray, faces: np.ndarray) -> dict:
-    return {**_points(vertices), "faces": _b64(faces, "<i4"), "m": int(len(faces))}
+    return {**_points(vertices), **_faces(faces, len(vertices))}
+
+
+def _faces(faces: np.ndarray, n: int) -> dict:
+    """(M, 3) faces of n vertices for the page: 16-bit indices where they fit (`wide` says when not)."""
+    wide = n > 1 << 16
+    return {"faces": _b64(faces, "<i4" if wide else "<u2"), "m": int(len(faces)), "wide": wide}
 
 
 DIGITS = 6
@@ -105,7 +111,7 @@ def page_data(plan: Plan, views: Views) -> dict:
     """The JSON the page's script reads: geometry, every slider state and the state it opens on."""
     sides = list(plan.sides)
     return {"sides": sides, "torso": _points(views.torso), "patch": _points(views.patch),
-            "skin_faces": {"faces": _b64(views.skin, "<i4"), "m": int(len(views.skin))},
+            "skin_faces": _faces(views.skin, len(views.torso) + len(views.patch)),
             "scans": {s: _points(views.scans[s]) for s in sides},
             "meshes": {s: _mesh(*views.meshes[s]) for s in sides},
             "earlier": {s: _mesh(*views.earlier[s]) for s in views.earlier},
@@ -151,7 +157,8 @@ def _short_degrees(plan: Plan) -> list[list[str | None]]:
     for i in range(len(grid)):
         details = [{d["kind"]: d for d in grid.changes[s][i].details} for s in sides]
         out.append([" and ".join(f"{d[kind]['degree_reached']:.2f}" for d in details)
-                    if any(short_of(d[kind], plan.options.method) for d in details) else None for kind in grid.kinds])
+                    if any(kind in d and short_of(d[kind], plan.options.method) for d in details) else None
+                    for kind in grid.kinds])
     return out
 
 
@@ -451,6 +458,7 @@ _SCRIPT = r"""
 function b64(s, T){const b=atob(s);const u=new Uint8Array(b.length);for(let i=0;i<b.length;i++)u[i]=b.charCodeAt(i);return new T(u.buffer);}
 function split(f,n,T){T=T||Float32Array;const x=new T(n),y=new T(n),z=new T(n);for(let i=0;i<n;i++){x[i]=f[3*i];y[i]=f[3*i+1];z[i]=f[3*i+2];}return [x,y,z];}
 function pts(p){return split(b64(p.xyz,Float32Array),p.n);}
+function tri(f){return split(b64(f.faces,f.wide?Int32Array:Uint16Array),f.m,Int32Array);}   // a mesh's faces
 function moved(base,d,at,n){const f=new Float32Array(3*n);for(let i=0;i<3*n;i++)f[i]=base[i]+d[at+i];return split(f,n);}
 const painted=()=>new Promise(r=>requestAnimationFrame(()=>setTimeout(r,0)));   // after the next frame is painted
 const shown=document.querySelector('#poster img').decode().catch(()=>{}).then(painted)
@@ -465,7 +473,7 @@ function draw(P){
 const traces=[], idx={};
 const still=pts(P.torso), nT=P.torso.n, nP=P.patch.n;
 const patchBase=b64(P.patch.xyz,Float32Array);
-const sf=split(b64(P.skin_faces.faces,Int32Array),P.skin_faces.m,Int32Array);
+const sf=tri(P.skin_faces);
 idx.skin=traces.length;
 traces.push({type:'mesh3d',name:'her skin',i:sf[0],j:sf[1],k:sf[2],showlegend:true,
  lighting:{ambient:1,diffuse:0,specular:0,fresnel:0},hoverinfo:'skip'});   // lit here (shade), the same in every renderer
@@ -488,13 +496,13 @@ for(const s of P.sides){
  traces.push({type:'scatter3d',mode:'markers',name:s+' breast (scan)',x:sc[0],y:sc[1],z:sc[2],visible:'legendonly',
   marker:{size:1.6,color:P.scan},hoverinfo:'skip'});
  const m=P.meshes[s]; meshBase[s]=b64(m.xyz,Float32Array);
- const f=split(b64(m.faces,Int32Array),m.m,Int32Array);
+ const f=tri(m);
  idx[s]=traces.length;
  traces.push({type:'mesh3d',name:s+' breast (model)',i:f[0],j:f[1],k:f[2],color:P.model,opacity:0.6,showlegend:true,
   visible:'legendonly',flatshading:false,lighting:{ambient:0.55,diffuse:0.7,specular:0.15},hoverinfo:'skip'});
 }
 for(const s of Object.keys(P.earlier)){   // a follow-up: the breast as fitted at the earlier visit
- const m=P.earlier[s];const v=pts(m);const f=split(b64(m.faces,Int32Array),m.m,Int32Array);
+ const m=P.earlier[s];const v=pts(m);const f=tri(m);
  traces.push({type:'mesh3d',name:s+' breast (earlier visit)',x:v[0],y:v[1],z:v[2],i:f[0],j:f[1],k:f[2],
   color:'#6a7fb5',opacity:0.35,showlegend:true,hoverinfo:'skip'});
 }
@@ -564,7 +572,7 @@ function label(state){   // what is shown, in words; the sliders and the measure
   if(at)inp.value=at[k];
   const d=G.degrees[k][+inp.value];
   const short=state&&G.reached[state.index][k];   // the breasts stop short of the slider's degree
-  inp.previousSibling.textContent=kind+': degree '+d+(d===G.requested[k]?' (planned)':'')+(state?'':' (not shown)')
+  inp.previousSibling.textContent=kind+(d===0?': off':': degree '+d)+(d===G.requested[k]?' (planned)':'')+(state?'':' (not shown)')
    +(short?' (reaches '+short+(short.includes(' and ')?', her right and left)':')'):'');
   inp.previousSibling.classList.toggle('off',!state);});
  for(const c of document.querySelectorAll('[data-after]')){const [side,name]=c.dataset.after.split(' ');

@@ -37,7 +37,10 @@ if TYPE_CHECKING:
 COMBINED = "combined"
 """The key of the state that applies every requested change together."""
 OPERATED = "operated"
-"""The key of the one state of a plan of operations alone (no change by degree)."""
+"""The key of the one state of a plan of operations alone (no change by degree), and of the slider state with
+every kind off."""
+OFF = 0.0
+"""A slider's first position: its kind switched off (that change left out of the state)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,12 +151,12 @@ class PlanState:
 
 @dataclass(frozen=True, eq=False)
 class StateGrid:
-    """Every state the report's sliders reach: each requested kind at each of its slider's degrees, in every
-    combination (the kinds' changes as each was solved alone, applied together). State i takes the kinds'
+    """Every state the report's sliders reach: each requested kind off (`OFF`) or at each of its slider's degrees, in
+    every combination (the kinds' changes as each was solved alone, applied together). State i takes the kinds'
     degrees at the digits of i in mixed radix, the last kind's digit the fastest (`combination`)."""
 
     kinds: tuple[str, ...]
-    degrees: tuple[tuple[float, ...], ...]        # per kind: its slider's degrees, ascending
+    degrees: tuple[tuple[float, ...], ...]        # per kind: its slider's positions, ascending: OFF, then degrees
     requested: tuple[float, ...]                  # per kind: the degree planned
     keys: tuple[str, ...]                         # per state: its name (COMBINED: every kind as planned)
     changes: dict[str, tuple[Change, ...]]        # side → per state: the change as combined

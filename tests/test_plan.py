@@ -656,7 +656,7 @@ def test_each_slider_keeps_its_degree_and_the_page_draws_and_measures_the_plans_
         b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
         _slide(b, "ptosis", "max")
         assert _drawn(b, "ptosis-8+turn-2.5+top-shape-4")
-        _slide(b, "turn", 0)
+        _slide(b, "turn", 1)                                 # its first degree: 0 is off
         assert _drawn(b, key)
         assert [b.js(label.format(k)) for k in ("ptosis", "turn", "top-shape")] == [
             "ptosis: degree 8", "turn: degree 1", "top-shape: degree 4 (planned)"]
@@ -675,6 +675,16 @@ def test_each_slider_keeps_its_degree_and_the_page_draws_and_measures_the_plans_
         assert b.js(label.format("top-shape")) == ("top-shape: degree 8 (reaches "
                                                    + " and ".join(f"{r:.2f}" for r in reached)
                                                    + ", her right and left)")
+        for kind in ("ptosis", "turn", "top-shape"):        # every change switched off: her breasts as scanned
+            _slide(b, kind, 0)
+        assert _drawn(b, "operated")
+        assert [b.js(label.format(k)) for k in ("ptosis", "turn", "top-shape")] == [
+            "ptosis: off", "turn: off", "top-shape: off"]
+        assert b.js("document.getElementById('state').textContent") == "Showing: every change off"
+        off = np.array(b.js("(t => [Array.from(t.x), Array.from(t.y), Array.from(t.z)])(document.getElementById("
+                            "'plot').data.find(t => t.name === 'her skin'))")).T
+        off_volume = b.js("document.querySelector('table.measures [data-after=\"left volume_cc\"]').textContent")
+        _slide(b, "ptosis", "max")
         b.driver.find_element("css selector", "#original").click()
         assert _drawn(b, "original")
         assert b.js(label.format("ptosis")) == "ptosis: degree 8 (not shown)"
@@ -704,6 +714,8 @@ def test_each_slider_keeps_its_degree_and_the_page_draws_and_measures_the_plans_
     measures = grid.measures_at(i)["left"]
     for name, text in cells.items():
         assert float(text) == pytest.approx(measures[name], abs=0.051), name
+    assert np.linalg.norm(off[still:] - views.patch, axis=1).max() <= slack        # every change off: as scanned
+    assert float(off_volume) == pytest.approx(computed.measures.before["left"]["volume_cc"], abs=0.051)
 
 
 def test_everything_drawn_on_her_lies_inside_the_reports_box_and_her_sides_are_named_in_front_of_her(computed):

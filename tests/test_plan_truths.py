@@ -220,14 +220,15 @@ def test_the_reports_drawing_of_every_state_is_the_reference_deformation(sample)
 
 
 def test_the_sliders_reach_every_combination_of_the_kinds_degrees_each_as_solved_alone(sample):
-    """`Plan.grid`: every combination of each kind's slider degrees (1..8 and the requested one), state i at the
-    mixed-radix digits of i; each state's change is every kind at its degree with the parameters it was solved
-    with alone, its planned breast the reference deformation; its measures are the reference breast's (her volume
-    on her skin changed by as much as the reference model's, computed here by the divergence theorem; the nipple's
-    chord to the notch); and the state planned is named "combined" and measures as the plan does."""
+    """`Plan.grid`: every combination of each kind's slider positions (off, 1..8 and the requested degree), state i
+    at the mixed-radix digits of i; each state's change is every kind not off at its degree with the parameters it
+    was solved with alone, its planned breast the reference deformation (every kind off: her fitted breast as it
+    is); its measures are the reference breast's (her volume on her skin changed by as much as the reference
+    model's, computed here by the divergence theorem; the nipple's chord to the notch); and the state planned is
+    named "combined" and measures as the plan does."""
     plan, _, _ = sample
     grid = plan.grid
-    degrees = [sorted({*map(float, range(1, 9)), REQUESTED[k]}) for k in KINDS]
+    degrees = [sorted({0.0, *map(float, range(1, 9)), REQUESTED[k]}) for k in KINDS]
     assert grid.kinds == KINDS and [list(d) for d in grid.degrees] == degrees
     assert len(grid) == len(set(grid.keys)) == np.prod([len(d) for d in degrees])
     assert grid.keys[grid.planned_index] == "combined"
@@ -235,17 +236,20 @@ def test_the_sliders_reach_every_combination_of_the_kinds_degrees_each_as_solved
     singles = {(st.kind, st.degree): st for st in plan.states if st.kind is not None}
     breasts = {s: Breast(sp) for s, sp in plan.sides.items()}
     notch = plan.volumes.landmarks.sternal_notch
-    for i in _some_states(grid):
+    assert grid.combination(0) == (0.0,) * len(KINDS) and grid.keys[0] == "operated"     # every slider off
+    half_off = grid.index((0.0, *(REQUESTED[k] for k in KINDS[1:])))
+    for i in _some_states(grid) + [half_off]:
         combo = grid.combination(i)
+        on = [(k, d) for k, d in zip(KINDS, combo) if d != 0.0]
         assert grid.index(combo) == i
         assert grid.keys[i] == ("combined" if combo == tuple(REQUESTED[k] for k in KINDS)
-                                else "+".join(f"{k}-{d:g}" for k, d in zip(KINDS, combo)))
+                                else "+".join(f"{k}-{d:g}" for k, d in on) or "operated")
         measures = grid.measures_at(i)
         for side, b in breasts.items():
             change = grid.changes[side][i]
-            assert [(d["kind"], d["degree"]) for d in change.details] == list(zip(KINDS, combo))
+            assert [(d["kind"], d["degree"]) for d in change.details] == on
             assert [d["params"] for d in change.details] == [singles[k, d].changes[side].details[0]["params"]
-                                                             for k, d in zip(KINDS, combo)]
+                                                             for k, d in on]
             vector = vector_of(change)
             moved = b.model(b.fitted_input, vector)
             assert np.abs(grid.models[side][i] - moved).max() < 1e-3, (grid.keys[i], side)
