@@ -42,7 +42,7 @@ from .changes import short_of
 from .handout import DISCLAIMER, PLAIN, outer_words, plain_value, state_words
 from .measures import asymmetry, measure_label
 from .pictures import FOLD, FOOTPRINT, LANDMARK, LIGHT, VIEWS, camera, picture, skin_colour
-from .result import OPERATED, Plan
+from .result import OFF, OPERATED, Plan
 from .modes import modes_of
 from .operated import said
 from .views import State, Views
@@ -164,12 +164,30 @@ def _short_degrees(plan: Plan) -> list[list[str | None]]:
 
 def _state_said(plan: Plan, i: int) -> str:
     """What slider state i shows, in words, with each change a breast does not reach as far as its slider asks
-    (`changes.short_of`)."""
+    (`changes.short_of`) and the volume its changes by degree add to a breast or take from it."""
     grid = plan.grid
     short = [f"on her {s} breast, {d['kind']} reaches {why}" for s in plan.sides for d in grid.changes[s][i].details
              if (why := short_of(d, plan.options.method))]
     return (state_words(grid, i) + (" (after the operations)" if plan.operated and grid.kinds else "")
-            + "".join(f"; {words}" for words in short))
+            + "".join(f"; {words}" for words in short + _volume_said(plan, i)))
+
+
+SAID_CC = 5.0
+"""A state says how much its changes by degree change a breast's volume from this much on (cc)."""
+
+
+def _volume_said(plan: Plan, i: int) -> list[str]:
+    """How much slider state i's changes by degree change each breast's volume, against every slider off (after the
+    operations, if any): a change of shape that makes a breast larger asks for volume (an implant, a graft) that
+    the shape alone does not give. Nothing where no breast changes by SAID_CC."""
+    grid = plan.grid
+    off = grid.index((OFF,) * len(grid.kinds))
+    by = {s: float(grid.measures[s]["volume_cc"][i] - grid.measures[s]["volume_cc"][off])
+          for s in ("right", "left") if s in plan.sides}
+    if all(abs(v) < SAID_CC for v in by.values()):
+        return []
+    return ["these changes make " + " and ".join(f"her {s} breast {abs(v):.0f} cc {'larger' if v > 0 else 'smaller'}"
+                                                for s, v in by.items())]
 
 
 def _found_marks(views: Views) -> np.ndarray:

@@ -261,6 +261,29 @@ def test_the_sliders_reach_every_combination_of_the_kinds_degrees_each_as_solved
         assert grid.measures_at(grid.planned_index)[side] == pytest.approx(plan.measures.after[side], abs=1e-9)
 
 
+def test_each_state_says_the_volume_its_changes_add_and_shears_add_none(sample):
+    """The words of a slider state (the page's "Showing: …") say how much its changes make each breast larger or
+    smaller, against every slider off: ptosis and turn are shears (their Jacobian's determinant is 1), so a state
+    with top-shape off says nothing of volume; with top-shape on, the figures said are the reference model's
+    change of each breast's volume (divergence theorem), where one reaches 5 cc."""
+    from breastplan.plan.report import _state_said
+
+    plan, _, _ = sample
+    grid = plan.grid
+    breasts = {s: Breast(sp) for s, sp in plan.sides.items()}
+    at = KINDS.index("top-shape")
+    for i in _some_states(grid):
+        words = _state_said(plan, i)
+        grown = {s: divergence_volume_cc(b.model(b.fitted_input, vector_of(grid.changes[s][i])), b.faces)
+                 - divergence_volume_cc(b.fitted_input, b.faces) for s, b in breasts.items()}
+        if grid.combination(i)[at] == 0.0:
+            assert all(abs(v) < 0.5 for v in grown.values()) and "cc larger" not in words and "cc smaller" not in words
+        elif max(map(abs, grown.values())) >= 5.5:
+            said = " and ".join(f"her {s} breast {abs(grown[s]):.0f} cc {'larger' if grown[s] > 0 else 'smaller'}"
+                                for s in ("right", "left"))
+            assert words.endswith("; these changes make " + said), (grid.keys[i], words)
+
+
 # --- what is written ---------------------------------------------------------------------------
 def test_the_written_planned_breasts_and_scan_displacements_are_the_reference_deformation(sample):
     """Each side's plan/<change>.ply is the reference deformation of fit.ply (breast frame); plan/<change>
