@@ -54,7 +54,8 @@ def fit(
     try:
         options = FitOptions(lattice, kinds, max_iterations)
     except OptionError as exc:
-        raise usage_error(str(exc), {"lattice": "--lattice", "max_iterations": "--max-iterations"}[exc.option]) from None
+        raise usage_error(str(exc), {"lattice": "--lattice", "max_iterations": "--max-iterations",
+                                       "deformations": "--deformations"}[exc.option]) from None
 
     points, scan, source, folder = _breast_points(input)     # bad input is refused before the stage loads
     if wall_from is not None and scan is None:

@@ -86,6 +86,9 @@ class FitOptions:
         if self.max_iterations < 1:
             raise OptionError("max_iterations", f"the FFD needs at least 1 iteration, got {self.max_iterations}")
         object.__setattr__(self, "deformations", tuple(self.deformations))
+        twice = sorted({k for k in self.deformations if self.deformations.count(k) > 1})
+        if twice:
+            raise OptionError("deformations", f"{', '.join(twice)} named more than once: each deformation is fitted once")
 
     def as_dict(self) -> dict:
         return {**asdict(self), "deformations": list(self.deformations)}

@@ -301,7 +301,7 @@ def test_fit_command_fits_top_shape_ptosis_and_turn_by_default_and_none_fits_the
         assert params[name] == pytest.approx(value, abs=0.1 if name[0] == "s" else 0.03), name
     plain = json.loads(run(cli, "fit", tmp_path / "breast.ply", "--deformations", "none", "--json").stdout)["params"]
     assert not {"s0", "s1", "b0", "b1", "c0", "c1"} & set(plain)
-    for empty in ("", ",", "ptosis,", "none,ptosis"):                 # no list: not a silent 'none'
+    for empty in ("", ",", "ptosis,", "none,ptosis", "ptosis,turn,ptosis"):   # no list: not a silent 'none'
         res = run(cli, "fit", tmp_path / "breast.ply", "--deformations", empty)
         assert res.returncode == 2 and "--deformations" in res.stderr, (empty, res.stderr)
 
