@@ -154,6 +154,20 @@ def test_a_case_whose_plan_folder_leads_elsewhere_is_refused_and_what_it_leads_t
     assert _tree(case) == before
 
 
+@pytest.mark.parametrize("where", ["elsewhere", "in place"])
+def test_a_folder_where_a_case_file_belongs_is_named_and_nothing_written(cli, case, tmp_path, where):
+    """A case whose fit.npz is a folder: planned into another folder, the refusal named that other folder's copy;
+    it names the case's own fit.npz, and neither folder changes."""
+    fit = case / "left" / "fit.npz"
+    fit.unlink()
+    fit.mkdir()
+    before = _tree(case)
+    res = run(cli, "plan", case, *(["--out", tmp_path / "elsewhere"] if where == "elsewhere" else []))
+    assert_bad_input(res, fit, tmp_path)
+    assert "is a folder" in res.stderr
+    assert _tree(case) == before and not (tmp_path / "elsewhere").exists()
+
+
 def test_a_fault_of_a_case_planned_elsewhere_names_the_cases_own_file(cli, case, tmp_path):
     """A case planned into another folder is copied there first: its faults named the hidden copy (already
     removed), or said "[Errno None] None", instead of the case's own file."""
