@@ -240,18 +240,32 @@ def _principal_axes(points: np.ndarray) -> np.ndarray:
 
 
 def _facing(points: np.ndarray, axis: np.ndarray, up: str) -> tuple[np.ndarray, BodyInView] | None:
-    """The viewing frame looking along ±`axis` from which the nearest body's trunk bulges most towards the viewer
-    (a frontal scan's inside is hollow), or, when both senses see a body that wraps round (more than
+    """The viewing frame looking along ±`axis` from which the nearest body's trunk, not flat (`_flat`), bulges most
+    towards the viewer (a frontal scan's inside is hollow), or, when both senses see a body that wraps round (more than
     WRAPPED_HIDDEN of its points hidden: her front and her back are both convex), from which her chest stands out
     most (`_chest_relief`: breasts, not shoulder blades); and that body. None when neither sense shows a trunk."""
     frames = [_frame(sense * axis, up) for sense in (1.0, -1.0)]
     found = [_body_or_none(transform_points(T, points)) for T in frames]
+    found = [None if body is None or _flat(body) else body for body in found]      # a wall seen from behind her
     seen = [None if body is None else seen_from(body.points, _viewer(body.points)) for body in found]
     wraps = all(s is not None and 1.0 - s.mean() > WRAPPED_HIDDEN for s in seen)
     score = ([_chest_relief(body, s) for body, s in zip(found, seen)] if wraps else
              [_trunk_bulge(body) for body in found])
     k = int(np.argmax(score))
     return None if score[k] == -np.inf else (frames[k], found[k])
+
+
+FLAT_MM = 15.0
+"""A trunk whose points lie within this of one plane (95th percentile) is a wall, not her: her chest curves across
+by several centimetres. From behind a frontal scan with a wall, the nearest surface as wide as a chest is the wall."""
+
+
+def _flat(body: BodyInView) -> bool:
+    """Whether the trunk found is flat (FLAT_MM): a wall or a floor."""
+    trunk = body.points[body.trunk.mask]
+    centred = trunk - trunk.mean(0)
+    normal = np.linalg.svd(centred[::max(1, len(centred) // 20000)], full_matrices=False)[2][2]
+    return bool(np.percentile(np.abs(centred @ normal), 95) < FLAT_MM)
 
 
 def _viewer(points: np.ndarray) -> np.ndarray:
