@@ -60,6 +60,10 @@ anterior axis (which a mirror-symmetric wall cannot follow: it set one breast's 
 other's), and leave the wall otherwise the same on both sides."""
 MIN_WALL_CELLS = 100
 """The wall is fitted to at least this many cells of her chest (a quarter of a 10 × 10 cm patch)."""
+AROUND_NIPPLE_MM, AROUND_SEEN = 20.0, 0.75
+"""At least this share of the cells within AROUND_NIPPLE_MM of each nipple must be seen: the skin round her nipple
+faces a camera in front of her, and a scan missing it has a hole where her breast is (cut out, or a scanner's
+gap), which no volume can be measured across."""
 DISC = 0.75
 """The first round leaves out a disc of this many times that distance round each breast."""
 ROUNDS = 3
@@ -202,6 +206,7 @@ def measure_breasts(body: Body, nipples: dict) -> BreastVolumes:
     T = body_frame(landmarks)
     grid = _SkinGrid(transform_points(T, P), {s: transform_points(T, np.asarray(n, float)[None])[0]
                                              for s, n in nipples.items()})
+    grid.check_around_nipples()
     (wall, se_mm), footprint = grid.wall_and_footprint(grid.seen & grid.near & ~grid.disc)
     height = grid.filled_height(wall)
     sides = {}
@@ -249,6 +254,15 @@ class _SkinGrid:
 
     def half(self, side: str) -> np.ndarray:
         return self.X > 0 if side == "left" else self.X < 0
+
+    def check_around_nipples(self) -> None:
+        """BadInputError where the skin round a nipple was not seen (AROUND_SEEN)."""
+        for side, n in self.nipples.items():
+            seen = self.seen[np.hypot(self.X - n[0], self.Y - n[1]) <= AROUND_NIPPLE_MM].mean()
+            if seen < AROUND_SEEN:
+                raise BadInputError(None, f"shows only {seen:.0%} of her skin within {AROUND_NIPPLE_MM:g} mm of her "
+                                          f"{side} nipple: the scan has a hole where her breast is (cut out, or a "
+                                          "gap the scanner left), and her breast cannot be measured across it")
 
     def fit_wall(self, support: np.ndarray) -> tuple[np.ndarray, float]:
         """The wall's anterior coordinate on every cell, fitted robustly to the skin of `support`, and

@@ -175,6 +175,31 @@ def test_skin_that_stands_two_metres_in_front_of_her_chest_is_no_breast_and_is_r
         measure_breasts(Body(moved, view_from, plumb), {s: n + towards for s, n in nipples.items()})
 
 
+@pytest.mark.parametrize("radius", [30.0, 45.0])
+def test_a_scan_with_a_hole_where_her_breasts_are_is_refused_naming_the_file(cli, tmp_path, radius):
+    """A MakeHuman woman's scan file with her skin cut away within `radius` mm of each true nipple (a scan whose
+    breasts were cut out): `plan` found a "nipple" on each hole's rim and measured her at exit 0, its fitted model
+    twice her skin's volume. It is refused (exit 3, one sentence naming the file, nothing written); the same scan
+    whole plans."""
+    from clitools import assert_bad_input, run
+
+    from breastplan import read_ply, write_ply
+    from breastplan.scenes.realistic import file_from_body, make_body_scene, write_scan_file
+
+    scene = make_body_scene(BODIES[SYMMETRIC], CameraOptions(resolution="640x400"))
+    whole = tmp_path / "whole.ply"
+    write_scan_file(whole, scene)
+    points = read_ply(whole).points
+    nipples = transform_points(file_from_body("+y", "mm"), np.array(list(scene.body.nipples.values())))
+    cut = tmp_path / "cut.ply"
+    write_ply(cut, points[np.linalg.norm(points[:, None] - nipples[None], axis=2).min(axis=1) > radius])
+    res = run(cli, "plan", cut, "--deform", "ptosis:3", "--out", tmp_path / "case")
+    assert_bad_input(res, cut, tmp_path)
+    assert "hole where her breast is" in res.stderr and not (tmp_path / "case").exists()
+    res = run(cli, "plan", whole, "--deform", "ptosis:3", "--out", tmp_path / "case")
+    assert res.returncode == 0, res.stderr
+
+
 @pytest.mark.parametrize("cc, problem", [(float("nan"), "not a number"), (-1.0, "a negative volume"),
                                          (12_001.0, "more than any breast holds (12,000 cc)"), (0.0, None),
                                          (4_500.0, None), (12_000.0, None)])
