@@ -429,7 +429,7 @@ def _symmetry_tables(plan: Plan) -> str:
 
 
 _TEMPLATE = """<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8">
+<html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
 <meta http-equiv="Content-Security-Policy" content="default-src 'none'; script-src 'unsafe-inline' 'unsafe-eval'; style-src 'unsafe-inline'; img-src data: blob:; worker-src blob:; font-src data:">
 <title>%TITLE%</title>
 <style>
@@ -438,7 +438,8 @@ header{padding:10px 16px;background:#3b3b52;color:#fff}header h1{margin:0;font-s
 details{margin:10px 0}summary{cursor:pointer;font-weight:600}
 main{display:flex;flex-wrap:wrap;gap:12px;padding:12px}
 #plot{position:relative;width:min(760px,calc(100vw - 360px));height:640px;background:#fff;border:1px solid #ddd}
-@media (max-width:900px){#plot{width:calc(100vw - 26px)}}
+@media (max-width:900px){#plot{width:calc(100vw - 26px);height:min(640px,125vw)}#controls{max-width:none}
+ table{display:block;overflow-x:auto;max-width:calc(100vw - 32px)}}
 #poster{position:absolute;inset:0;z-index:10;margin:0;background:#fff}#poster[hidden]{display:none}
 #poster img{display:block;max-width:100%;height:auto}
 @media print{header{background:none;color:#000}#controls,#for-surgeon,#plot>div{display:none!important}
@@ -554,7 +555,8 @@ for(const s of Object.keys(P.footprints)){   // the outline each breast's volume
 const around=a=>({eye:{x:1.45*Math.sin(a*Math.PI/180),y:-1.45*Math.cos(a*Math.PI/180),z:0.12},up:{x:0,y:0,z:1}});   // a: degrees towards her left
 const views={'right-side':around(-90),'right-oblique':around(-45),front:around(0),'left-oblique':around(45),
  'left-side':around(90),top:{eye:{x:0,y:-0.15,z:1.45},up:{x:0,y:1,z:0}}};
-const layout={margin:{l:0,r:0,t:0,b:0},showlegend:true,legend:{x:0,y:1},hovermode:false,   // the legend beside the body, not over it
+const NARROW_PX=600, LEGEND={x:0,y:1};
+const layout={margin:{l:0,r:0,t:0,b:0},showlegend:true,legend:LEGEND,hovermode:false,   // the legend beside the body, not over it
  scene:{domain:{x:[0.26,1],y:[0,1]},aspectmode:'data',xaxis:{visible:false},yaxis:{visible:false},zaxis:{visible:false},camera:views.front}};
 const gd=document.getElementById('plot');
 const G=P.grid, K=G.scales.length, coef=b64(G.coefficients,Float32Array), modes=b64(G.modes,Int16Array);
@@ -623,11 +625,13 @@ traces.push({type:'mesh3d',name:'before',scene:'scene2',x:still0.x[0],y:still0.y
 function scenes(layout){   // the layout's scenes for one view or two side by side, the camera kept
  const cam=(gd.layout&&gd.layout.scene&&gd.layout.scene.camera)||views.front;
  const end=colourBy==='moved'?SCALE_AT:1;   // the colour scale beside her, not over her
- const one={domain:{x:[0.26,end],y:[0,1]}},two={domain:{x:[0.5,end],y:[0,1]}},left={domain:{x:[0,0.5],y:[0,1]}};
+ const narrow=gd.clientWidth<NARROW_PX;   // a phone: the legend in rows below her, not over her
+ const one={domain:narrow?{x:[0,end],y:[0.36,1]}:{x:[0.26,end],y:[0,1]}},two={domain:{x:[0.5,end],y:[0,1]}},left={domain:{x:[0,0.5],y:[0,1]}};
  const B=P.bounds,size=B.map(r=>r[1]-r[0]),most=Math.max(...size);   // one box and scale for every scene
  const axes={aspectmode:'manual',aspectratio:{x:size[0]/most,y:size[1]/most,z:size[2]/most},camera:cam,
   xaxis:{visible:false,range:B[0]},yaxis:{visible:false,range:B[1]},zaxis:{visible:false,range:B[2]}};
  const out=Object.assign({},layout,{scene:Object.assign({},axes,beside?two:one),showlegend:!beside,   // beside: no legend
+  legend:narrow?{orientation:'h',x:0,y:0,yanchor:'bottom',font:{size:11}}:LEGEND,
   annotations:beside?[{text:'before',x:0.25,y:0.01,xref:'paper',yref:'paper',showarrow:false,yanchor:'bottom'},
    {text:'as shown',x:0.75,y:0.01,xref:'paper',yref:'paper',showarrow:false,yanchor:'bottom'}]:[]});
  if(beside)out.scene2=Object.assign({},axes,left);else delete out.scene2;

@@ -776,6 +776,25 @@ def test_the_report_is_usable_by_touch(planned):
         assert b.console_errors() == []
 
 
+@requires_chromium
+def test_the_report_fits_a_phones_screen(planned):
+    """On a phone (390 × 844 CSS px, Chromium's mobile emulation): the page is laid out at the phone's width (it has a
+    viewport; without one a phone draws it 980 px wide, shrunk), nothing runs off its right edge, her picture spans
+    the screen with the legend in rows below her, not over her, and the controls follow below."""
+    case, _, _ = planned
+    with chromium(390, 844) as b:
+        b.driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride",
+                                 {"width": 390, "height": 844, "deviceScaleFactor": 2, "mobile": True})
+        b.open(case / "report.html", wait_for_js="window.breastplanReady === true")
+        assert b.js("window.innerWidth") == 390
+        assert b.js("document.documentElement.scrollWidth") <= 390
+        plot, scene, legend = b.rect("#plot"), b.rect("#plot #scene"), b.rect("#plot g.legend")
+        assert plot[2] - plot[0] > 340 and scene[2] - scene[0] > 300
+        assert legend[1] >= scene[3] - 1 and legend[3] <= plot[3] + 1                 # below her, inside the plot
+        assert b.rect("#controls")[1] >= plot[3]                                      # the controls below the plot
+        assert b.console_errors() == []
+
+
 def test_a_side_case_of_an_older_schema_is_named_as_such(planned, cli, tmp_path):
     case = tmp_path / "case"
     shutil.copytree(planned[0], case)
