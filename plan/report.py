@@ -529,6 +529,7 @@ const L=P.landmarks, col=k=>[0,1,2].map(a=>L[k].map(p=>p[a]));   // what the mea
 const mark={color:P.landmark};
 traces.push({type:'scatter3d',mode:'lines',name:'midline',legendgroup:'landmarks',x:col('midline')[0],
  y:col('midline')[1],z:col('midline')[2],line:{...mark,width:3,dash:'dash'},hoverinfo:'skip'});
+idx.notch=traces.length;
 traces.push({type:'scatter3d',mode:'markers+text',name:'sternal notch',legendgroup:'landmarks',x:col('sternal notch')[0],
  y:col('sternal notch')[1],z:col('sternal notch')[2],text:['\u2002sternal notch'],textposition:'middle right',
  textfont:{...mark,size:11},marker:{...mark,size:4},hoverinfo:'skip'});
@@ -673,6 +674,8 @@ if(G.kinds.length!==1){comb.onclick=()=>show(stateAt(G.planned));}else{comb.styl
 const named=v=>sides.map(s=>v.endsWith('-side')&&!v.startsWith(s)?'':'her '+s);   // a side view names its own side only
 for(const b of document.querySelectorAll('button[data-view]'))b.onclick=()=>{const v=b.dataset.view;
  traces[idx.sides]=Object.assign({},traces[idx.sides],{text:named(v)});
+ traces[idx.notch]=Object.assign({},traces[idx.notch],   // the notch's name reaches in front of her, not into her neck
+  {textposition:v.startsWith('left')?'middle left':'middle right',text:[v.startsWith('left')?'sternal notch\u2002':'\u2002sternal notch']});
  const layout=scenes(gd.layout);layout.scene.camera=views[v];if(beside)layout.scene2.camera=views[v];
  return Plotly.react(gd,drawn(),layout);};
 const first=stateAt(G.planned);
