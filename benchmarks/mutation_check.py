@@ -433,6 +433,18 @@ MUTANTS = [
         "if False:", ("tests/test_follow_up.py",)),
     one("worker-death-charges-all", "a batch charging every case planned beside the one whose worker died",
         "batch/executors.py", "if not solo and len(suspects) > 1:", "if False:", ("tests/test_batch_worker_death.py",)),
+    one("slider-off-applies-its-kind", "a slider at off still applying its kind's change at its first degree",
+        "plan/compute.py", "for k, d in zip(kinds, combo) if d != OFF] for combo in combos]",
+        "for k, d in zip(kinds, [c or 1.0 for c in combo])] for combo in combos]", ("tests/test_plan_truths.py",)),
+    one("volume-said-against-before", "a state's volume words counted from her breasts as scanned, not from every "
+        "slider off after the operations", "plan/report.py", "off = grid.index((OFF,) * len(grid.kinds))",
+        "off = grid.index((OFF,) * len(grid.kinds)) + 1", ("tests/test_plan_truths.py",)),
+    one("hole-round-nipple-accepted", "a scan with a hole where her breast is measured round the hole",
+        "plan/breast_volume.py", "            if seen < AROUND_SEEN:", "            if seen < 0.0:",
+        ("tests/test_breast_volume.py",)),
+    one("wall-taken-for-her", "a flat wall half, seen from behind her, taken for her trunk",
+        "ingest/pipeline.py", "    found = [None if body is None or _flat(body) else body for body in found]", "",
+        ("tests/test_background.py",)),
 ]
 
 
