@@ -47,8 +47,6 @@ LOWER_MARGIN, LOW_SHARE = 0.7, 0.1
 """A top-shape fit starts from the points top-shape barely moves: those below y = −0.7·a4 (cloud
 centre, breast frame), in the lower half whatever ptosis moved down, and those below 10 % of the
 height, which z·(β − 1) moves by under 0.02·a5 for |s0| ≤ 2.5 (docs/model.md §3–4)."""
-STUCK = 1.0
-"""A fit with deformations whose cost ends above this share of the plain primitive's is stuck."""
 CHEST_PRIOR_WEIGHT = 30.0
 """Weight of the prior residuals (tilt of the base, rad; height of the base, mu) per √point."""
 
@@ -271,20 +269,16 @@ def _solve_plausibly(fitted: np.ndarray, kinds: tuple[str, ...], x0: np.ndarray,
 
 
 def _fit_with_top_shape(p: np.ndarray, fitted: np.ndarray, kinds: tuple[str, ...], solve: "_Solver"):
-    """The solver's end from `_top_shape_start`; or, if that ends no better than the plain primitive
-    (STUCK × its cost) — a local minimum, since zero deformations give the primitive — the better of
-    it and the end from the plain primitive with every deformation at zero, solved within the
-    PLAUSIBLE ranges from the start (a free solve could leave them, and the bounded one from where it
-    left end above the primitive)."""
+    """The better (lower cost, on the same points) of the solver's ends from two starts: `_top_shape_start`, and
+    the plain primitive with every deformation at zero, solved within the PLAUSIBLE ranges from the start (a free
+    solve could leave them, and the bounded one from where it left end above the primitive). Either start can
+    end in a local minimum the other avoids (docs/model.md §6)."""
     primitive = solve(fitted, (), initial_guess(fitted))
     first = _solve_plausibly(fitted, kinds, *_top_shape_start(p, kinds, solve), solve)
-    first.nfev += primitive.nfev
-    if first.cost <= STUCK * primitive.cost:
-        return first
     x0 = np.concatenate([primitive.x, np.zeros(sum(len(KIND_PARAMS[k]) for k in kinds))])
     second = solve(fitted, kinds, x0, plausible=True)    # bounded from a plausible start: ends at or below it
     best = second if second.cost < first.cost else first
-    best.nfev = first.nfev + second.nfev          # the evaluations of both solves
+    best.nfev = primitive.nfev + first.nfev + second.nfev          # the evaluations of every solve
     return best
 
 

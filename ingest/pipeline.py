@@ -193,7 +193,8 @@ def upright_frame(points: np.ndarray) -> tuple[np.ndarray, BodyInView, str, str]
             return *viewing_frame(points, up), up, "her head"
         taken = taken or up
     if taken is None:
-        raise BadInputError(None, "shows no trunk along any of its axes: nothing in view is as wide as a chest")
+        raise BadInputError(None, "shows no trunk along any of its axes: nothing in view is as wide as a chest and curved "
+                                  "as one (a wall or a board is flat)")
     return *viewing_frame(points, taken), taken, "taken"
 
 
@@ -214,7 +215,8 @@ def viewing_frame(points: np.ndarray, up: str) -> tuple[np.ndarray, BodyInView]:
             continue
         if facing is not None:
             return _refined(points, *facing, up)
-    raise along_up or BadInputError(None, "shows no trunk: nothing in view is as wide as a chest")
+    raise along_up or BadInputError(None, "shows no trunk: nothing in view is as wide as a chest and curved as one (a "
+                                          "wall or a board is flat)")
 
 
 def _refined(points: np.ndarray, frame: np.ndarray, found: BodyInView, up: str) -> tuple[np.ndarray, BodyInView]:
