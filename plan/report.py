@@ -142,34 +142,37 @@ def _grid(plan: Plan, views: Views) -> dict:
     asym = asymmetry(grid.measures)
     return {"kinds": list(grid.kinds), "degrees": [list(d) for d in grid.degrees], "requested": list(grid.requested),
             "keys": list(grid.keys), "words": [_state_said(plan, i) for i in range(len(grid))],
-            "planned": grid.planned_index, "reached": _short_degrees(plan),
+            "planned": grid.planned_index, **_short(plan),
             "measures": {s: {k: rounded(v) for k, v in grid.measures[s].items()} for s in sides},
             "asymmetry": {k: rounded(v["left_minus_right"]) for k, v in asym.items()},
             "coefficients": _b64(stored.coefficients, "<f4"), "modes": _b64(stored.modes, "<i2"),
             "scales": stored.scales.astype(float).tolist(), "worst_mm": stored.worst_mm}
 
 
-def _short_degrees(plan: Plan) -> list[list[str | None]]:
-    """Per slider state and kind: the degree its breasts reach where one does not reach the slider's ("5.29", or
-    "5.29 and 5.25" for her right and left), else None (`changes.short_of`)."""
-    grid, sides = plan.grid, [s for s in ("right", "left") if s in plan.sides]
-    out = []
-    for i in range(len(grid)):
-        details = [{d["kind"]: d for d in grid.changes[s][i].details} for s in sides]
-        out.append([" and ".join(f"{d[kind]['degree_reached']:.2f}" for d in details)
-                    if any(kind in d and short_of(d[kind], plan.options.method) for d in details) else None
-                    for kind in grid.kinds])
-    return out
+def _short(plan: Plan) -> dict:
+    """Per kind and slider position (`StateGrid.degrees`), where her breasts stop short of the slider's degree
+    (`changes.short_of`; a kind's change is solved alone, so it stops short alike in every state): `reached`, the
+    degrees they reach ("5.29 and 5.25", her right and left; None where both reach it), and `notes`, a sentence
+    for each breast that stops short, which the page adds to the words of every state at that position."""
+    sides = [s for s in ("right", "left") if s in plan.sides]
+    alone = {(st.kind, st.degree): st for st in plan.states if st.kind is not None}
+    reached, notes = [], []
+    for kind, degrees in zip(plan.grid.kinds, plan.grid.degrees):
+        details = [None if d == OFF else [alone[kind, d].changes[s].details[0] for s in sides] for d in degrees]
+        said = [[] if each is None else [f"on her {s} breast, {kind} reaches {why}" for s, d in zip(sides, each)
+                                         if (why := short_of(d, plan.options.method))] for each in details]
+        notes.append(said)
+        reached.append([" and ".join(f"{d['degree_reached']:.2f}" for d in each) if words else None
+                        for each, words in zip(details, said)])
+    return {"reached": reached, "notes": notes}
 
 
 def _state_said(plan: Plan, i: int) -> str:
-    """What slider state i shows, in words, with each change a breast does not reach as far as its slider asks
-    (`changes.short_of`) and the volume its changes by degree add to a breast or take from it."""
+    """What slider state i shows, in words, with the volume its changes by degree add to a breast or take from it
+    (the page adds where a breast stops short of a slider's degree, `_short`)."""
     grid = plan.grid
-    short = [f"on her {s} breast, {d['kind']} reaches {why}" for s in plan.sides for d in grid.changes[s][i].details
-             if (why := short_of(d, plan.options.method))]
     return (state_words(grid, i) + (" (after the operations)" if plan.operated and grid.kinds else "")
-            + "".join(f"; {words}" for words in short + _volume_said(plan, i)))
+            + "".join(f"; {words}" for words in _volume_said(plan, i)))
 
 
 SAID_CC = 5.0
@@ -567,7 +570,8 @@ function displacement(i){const d=new Float64Array(M);
  return d;}
 function stateAt(i){   // slider state i as the plan computed it: its name, words and measures
  const pick=m=>Object.fromEntries(Object.entries(m).map(([k,v])=>[k,v[i]]));
- return {index:i,key:G.keys[i],words:G.words[i],asymmetry:pick(G.asymmetry),
+ const short=digits(i).flatMap((d,k)=>G.notes[k][d]).map(n=>'; '+n).join('');   // where a breast stops short
+ return {index:i,key:G.keys[i],words:G.words[i]+short,asymmetry:pick(G.asymmetry),
   measures:Object.fromEntries(P.sides.map(s=>[s,pick(G.measures[s])]))};}
 let shownD=null;   // the displacements of the state shown (null: her skin as scanned), for the marks on her too
 function arrays(state){   // the moving traces' coordinates in `state`; null: the original
@@ -592,7 +596,7 @@ function label(state){   // what is shown, in words; the sliders and the measure
  G.kinds.forEach((kind,k)=>{const inp=document.getElementById('slider-'+kind);
   if(at)inp.value=at[k];
   const d=G.degrees[k][+inp.value];
-  const short=state&&G.reached[state.index][k];   // the breasts stop short of the slider's degree
+  const short=state&&G.reached[k][+inp.value];   // the breasts stop short of the slider's degree
   inp.previousSibling.textContent=kind+(d===0?': off':': degree '+d)+(d===G.requested[k]?' (planned)':'')+(state?'':' (not shown)')
    +(short?' (reaches '+short+(short.includes(' and ')?', her right and left)':')'):'');
   inp.previousSibling.classList.toggle('off',!state);});
