@@ -88,7 +88,8 @@ class FitOptions:
         object.__setattr__(self, "deformations", tuple(self.deformations))
         twice = sorted({k for k in self.deformations if self.deformations.count(k) > 1})
         if twice:
-            raise OptionError("deformations", f"{', '.join(twice)} named more than once: each deformation is fitted once")
+            raise OptionError("deformations",
+                              f"{', '.join(twice)} named more than once: each deformation is fitted once")
 
     def as_dict(self) -> dict:
         return {**asdict(self), "deformations": list(self.deformations)}

@@ -193,8 +193,8 @@ def upright_frame(points: np.ndarray) -> tuple[np.ndarray, BodyInView, str, str]
             return *viewing_frame(points, up), up, "her head"
         taken = taken or up
     if taken is None:
-        raise BadInputError(None, "shows no trunk along any of its axes: nothing in view is as wide as a chest and curved "
-                                  "as one (a wall or a board is flat)")
+        raise BadInputError(None, "shows no trunk along any of its axes: nothing in view is as wide as a chest and "
+                                  "curved as one (a wall or a board is flat)")
     return *viewing_frame(points, taken), taken, "taken"
 
 

@@ -126,8 +126,9 @@ def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], option
                volumes: BreastVolumes, fitted: dict[str, dict[str, float]],
                operated: dict[str, Operated] | None = None) -> StateGrid:
     """Every combination of the kinds' slider positions (`states` holds each kind's change at each degree; a kind
-    off is left out, every kind off is her operations alone; with no kind, the one state of her operations), after her `operated` breasts' operations, each side's fitted model so planned,
-    and her measures on it (`breast_measures_each`). Her volume on her skin is changed by the operations' exact
+    off is left out, every kind off is her operations alone; with no kind, the one state of her operations), after
+    her `operated` breasts' operations, each side's fitted model so planned, and her measures on it
+    (`breast_measures_each`). Her volume on her skin is changed by the operations' exact
     change, then by as much as the fitted model's volume changes from the operations' state (`fitted`: its measures
     as scanned, `_model_measures`)."""
     operated = operated or {}

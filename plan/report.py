@@ -7,10 +7,11 @@ on demand each breast's scanned points and
 fitted model as planned (from the legend), for a follow-up the breast as fitted at the earlier visit (a
 translucent blue mesh), the landmarks the measures start from (the sternal notch, the midline and the
 nipples found, red), each breast's footprint (blue), the fold beneath each breast (purple) and her sides
-named on her. A degree slider per planned kind, off at its left end, each keeping its degree while another moves (every combination
-they reach, `Plan.grid`, computed by the plan: the page looks a state up, it computes none), the combination as
-planned, her skin before beside the state shown (one camera for both), the five standard views (her right side,
-her right oblique, front, her left oblique, her left side) and a top view.
+named on her. A degree slider per planned kind, off at its left end, each keeping its degree while another moves
+(every combination they reach, `Plan.grid`, computed by the plan: the page looks a state up, it computes none), the
+combination as planned, her skin before beside the state shown (one camera for both), the five standard views (her
+right side, her right oblique, front, her left oblique, her left side) and a top view; on a phone, the legend below
+her.
 Below: the main measures in plain words for her, with the disclaimer and a link to her handout; the measures
 before and after with the asymmetry between sides, her volume, symmetry and a follow-up's change; and,
 folded away for the surgeon, the fits' quality, the changes' parameters, the inputs, options and versions.
