@@ -24,9 +24,12 @@ def test_a_child_that_fails_leaves_its_work_to_the_process():
 
 
 def _sleeper(pid_file):
-    """Work that never ends, once it has said which process it is."""
+    """Work that never ends, once it has said which process it is (the file appears whole: written aside, then
+    renamed, so that a reader never finds it empty)."""
     def work():
-        pid_file.write_text(str(os.getpid()))
+        aside = pid_file.with_suffix(".part")
+        aside.write_text(str(os.getpid()))
+        aside.rename(pid_file)
         time.sleep(3600)
     return work
 
