@@ -6,7 +6,7 @@ modes shared by every state and K coefficients per state: state i ≈ Σₖ coef
 modes[k], the modes quantised to int16. K is the fewest leading modes whose reconstruction, quantised as stored,
 puts no point of any state farther than TOLERANCE_MM from where the plan computed it (checked on every state, not
 estimated): sought among the modes whose singular value exceeds TOLERANCE_MM, on a sample of the states first,
-and grown one mode at a time while the check on every state fails.
+then, if every state is not held so, on every state from there.
 """
 from __future__ import annotations
 
@@ -57,8 +57,9 @@ def modes_of(displacements: np.ndarray) -> Modes:
     while True:
         out = _quantised(X, vectors[:, :top], shape)
         k = _fewest(out, X[sample], sample)
-        while (worst := _worst(out, X, k)) > TOLERANCE_MM and k < top:         # checked on every state
-            k += 1
+        if (worst := _worst(out, X, k)) > TOLERANCE_MM:                        # checked on every state
+            k = _fewest(out, X, np.arange(S), k + 1)
+            worst = _worst(out, X, k)
         if worst <= TOLERANCE_MM or top >= S:
             return Modes(out.coefficients[:, :k].copy(), out.modes[:k].copy(), out.scales[:k].copy(), worst)
         top += 1
@@ -89,10 +90,10 @@ def _worst(modes: Modes, X: np.ndarray, k: int, rows: np.ndarray | None = None) 
     return worst
 
 
-def _fewest(modes: Modes, X: np.ndarray, rows: np.ndarray) -> int:
-    """The fewest leading `modes` that hold the states X (those of `rows`) within TOLERANCE_MM (bisection: the error
-    falls as modes are added), or all of them."""
-    lo, hi = 0, len(modes.scales)
+def _fewest(modes: Modes, X: np.ndarray, rows: np.ndarray, lo: int = 0) -> int:
+    """The fewest leading `modes`, from `lo` on, that hold the states X (those of `rows`) within TOLERANCE_MM
+    (bisection: the error falls as modes are added), or all of them."""
+    hi = len(modes.scales)
     while lo < hi:
         mid = (lo + hi) // 2
         lo, hi = (lo, mid) if _worst(modes, X, mid, rows) <= TOLERANCE_MM else (mid + 1, hi)
