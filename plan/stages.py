@@ -104,10 +104,6 @@ def _cases_of(source: Path, options: PlanOptions) -> dict[str, Case]:
     return found
 
 
-CASE_FILES = (Case.SCAN_PLY, Case.SCAN_NPZ, Case.CAMERA_PLY, Case.FIT_PLY, Case.FIT_NPZ, Case.PLAN_JSON, Case.REPORT)
-"""The files a case folder (or a side's) holds by name."""
-
-
 def _check_own_files(source: Path) -> None:
     """BadInputError for a case folder holding a symbolic link (a plan writes and removes files in its case, and
     would do so wherever the link leads), or a folder where one of its files goes."""
@@ -116,7 +112,7 @@ def _check_own_files(source: Path) -> None:
         if link is not None:
             raise BadInputError(link, "is a symbolic link inside a case folder, which holds its own files only (a "
                                       "plan writes there): copy what it leads to in its place")
-        folder = next((Path(root) / n for n in sorted(dirs) if n in CASE_FILES), None)
+        folder = next((Path(root) / n for n in sorted(dirs) if n in Case.FILES), None)
         if folder is not None:
             raise BadInputError(folder, "is a folder where the case's file of that name belongs: remove it, or plan "
                                         "her again from her recording")
