@@ -115,16 +115,18 @@ def build_views(plan: Plan) -> Views:
     still_in, patch_in = torso_in[~near], torso_in[near]
     show = lambda p: transform_points(to_display, p)  # noqa: E731
     meshes = {s: (show(sp.surface_input), sp.fit.faces) for s, sp in plan.sides.items()}
-    drawn = np.concatenate([still_in, patch_in])
+    at = np.empty(len(torso_in), np.int64)                 # each torso point's index among the drawn
+    at[np.concatenate([np.flatnonzero(~near), np.flatnonzero(near)])] = np.arange(len(torso_in))
     nipples = np.array([sp.scan.nipple_camera_mm for sp in plan.sides.values()])
     ahead = FOOTPRINT_LIFT_MM * plan.volumes.landmarks.anterior_axis
     footprints = {s: v.footprint_input_mm + ahead for s, v in plan.volumes.sides.items()}
     folds = _folds(plan)
     one_view = all(sp.scan.source.kind != "file" for sp in plan.sides.values())
-    drawn_view = transform_points(plan.body.input_to_view, drawn)
-    return Views(torso=show(still_in), patch=show(patch_in),
-                 skin=skin_triangles(drawn_view, _beneath_breasts(plan)) if one_view else
-                 surface_triangles(drawn_view),
+    torso_view = transform_points(plan.body.input_to_view, torso_in)
+    # her skin's surface is made over her points in one order, whatever the plan's changes split off as the patch:
+    # ball pivoting's result depends on the order of its points
+    skin = skin_triangles(torso_view, _beneath_breasts(plan)) if one_view else surface_triangles(torso_view)
+    return Views(torso=show(still_in), patch=show(patch_in), skin=at[skin],
                  scans={s: show(transform_points(sp.frames.breast_to_input, sp.scan.points))
                         for s, sp in plan.sides.items()},
                  meshes=meshes, keys=plan.grid.keys, moved=_moved(plan, patch_in, to_display),
