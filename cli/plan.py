@@ -103,7 +103,8 @@ def plan(
         _print_plan(planned, out / "report.html", clock.seconds)
     for note in planned.camera_notes:
         stderr.print(f"note: {note[0].lower()}{note[1:]} The report says so.", markup=False, soft_wrap=True)
-    for s, sp in planned.sides.items():
+    for s in planned.shown_sides:
+        sp = planned.sides[s]
         differs = planned.volumes.sides[s].model_differs_pct(sp.fit.volume_cc)
         if model_differs_much(differs):
             stderr.print(f"note: the {s} breast's fitted model holds {differs:+.0f} % of the volume measured on her "
@@ -111,7 +112,7 @@ def plan(
         if not sp.fit.stopping_rule_met:
             stderr.print(f"note: the {s} breast's fit ends above the stopping rule (normalised residual "
                          f"{sp.fit.normalised_residual:.4f}); the report says so.", markup=False, soft_wrap=True)
-    for s, sp in planned.sides.items():
+    for s in planned.shown_sides:
         for d in (d for st in planned.changes if st.kind is not None for d in st.changes[s].details):
             short = short_of(d, options.method)
             if short:
@@ -201,8 +202,8 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
 
     from .output import stdout
 
-    m, sides = plan.measures, list(plan.sides)
-    planned = [f"{s} {spec.text}" for s, op in plan.operated.items() for spec in op.written]
+    m, sides = plan.measures, plan.shown_sides
+    planned = [f"{s} {spec.text}" for s, op in plan.operated_shown for spec in op.written]
     planned += [st.key for st in plan.changes if st.key != OPERATED]
     table = Table(title=f"plan: {', '.join(planned) or 'nothing to operate'} — after: {plan.shown.key}",
                   title_justify="left")
@@ -221,7 +222,8 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
             row += [figure(m.asymmetry["before"][name]), figure(m.asymmetry["after"][name])]
         table.add_row(*row)
     stdout.print(table)
-    for s, sp in plan.sides.items():
+    for s in sides:
+        sp = plan.sides[s]
         fit, volume = sp.fit, plan.volumes.sides[s]
         stdout.print(f"{s} volume: {volume.volume_cc:.1f} ± {volume.uncertainty_cc:.1f} cc on her skin "
                      f"(footprint {volume.area_cm2:.0f} cm²"
@@ -244,7 +246,7 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
                          f"({pct:+.1f} %; then {f.earlier_volume_cc:.1f} cc, measured "
                          f"down to its chest wall, registered at rms {f.registration.rms_mm:.2f} mm)"
                          + (f"; on her skin, on the earlier wall: {skin.on_wall_cc:+.1f} cc" if skin else ""))
-    for s, op in plan.operated.items():
+    for s, op in plan.operated_shown:
         stdout.print(f"{s} operated: {', '.join(op.texts) or 'nothing proposed'}; her volume "
                      f"{op.volume_before_cc:.1f} → {op.volume_cc:.1f} cc on her skin, her nipple moved "
                      f"{op.nipple_moved_mm:.0f} mm", markup=False, soft_wrap=True)

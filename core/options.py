@@ -10,6 +10,9 @@ import re
 from dataclasses import asdict, dataclass
 
 SIDES = ("left", "right")
+SHOWN_SIDES = ("right", "left")
+"""The order her sides are shown in, in every table and sentence: her right first, as she stands facing
+whoever reads them (and as her picture shows her)."""
 UNITS = ("auto", "mm", "m")
 UP_AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
 UP_CHOICES = ("auto", *UP_AXES)

@@ -55,14 +55,14 @@ def shown_words(plan: Plan) -> str:
     words = state_words(plan.grid, plan.grid.planned_index)
     if len(plan.grid.kinds) > 1:
         words += " (" + ", ".join(f"{k} {d:g}" for k, d in plan.options.changes) + ")"
-    operations = "; ".join(f"her {s} breast, {op.words or 'nothing'}" for s, op in plan.operated.items())
+    operations = "; ".join(f"her {s} breast, {op.words or 'nothing'}" for s, op in plan.operated_shown)
     return words if not operations else operations if not plan.grid.kinds else f"{operations}; then {words}"
 
 
 def measure_rows(plan: Plan) -> list[tuple[str, ...]]:
     """Rows of text: a head, then each measure of PLAIN and (a follow-up) the change since the earlier visit;
     columns: the measure, then her right and her left breast (those planned), before → as planned."""
-    m, sides = plan.measures, [s for s in ("right", "left") if s in plan.sides]
+    m, sides = plan.measures, plan.shown_sides
     rows = [("measure", *(f"her {s} breast: before → as planned" for s in sides))]
     for name, (words, unit) in PLAIN.items():
         cells = []
@@ -83,8 +83,8 @@ def outer_words(plan: Plan) -> list[str]:
     """A line for the handout (and the report's words for her) when her scan, seen from in front of her, leaves at
     least OUTER_SAID_CC of a breast's outer side unseen (none else); a number and its unit are not split across
     lines."""
-    more = {s: v for s in ("right", "left") if s in plan.sides
-            and (v := plan.volumes.sides[s].unseen_outer_cc) >= OUTER_SAID_CC}
+    more = {s: v for s in plan.shown_sides
+            if (v := plan.volumes.sides[s].unseen_outer_cc) >= OUTER_SAID_CC}
     if not more:
         return []
     said = ", and her left about ".join(f"{v:.0f}\u00a0cc more" for v in more.values())

@@ -155,7 +155,7 @@ def _short(plan: Plan) -> dict:
     (`changes.short_of`; a kind's change is solved alone, so it stops short alike in every state): `reached`, the
     degrees they reach ("5.29 and 5.25", her right and left; None where both reach it), and `notes`, a sentence
     for each breast that stops short, which the page adds to the words of every state at that position."""
-    sides = [s for s in ("right", "left") if s in plan.sides]
+    sides = plan.shown_sides
     alone = {(st.kind, st.degree): st for st in plan.states if st.kind is not None}
     reached, notes = [], []
     for kind, degrees in zip(plan.grid.kinds, plan.grid.degrees):
@@ -187,7 +187,7 @@ def _volume_said(plan: Plan, i: int) -> list[str]:
     grid = plan.grid
     off = grid.index((OFF,) * len(grid.kinds))
     by = {s: float(grid.measures[s]["volume_cc"][i] - grid.measures[s]["volume_cc"][off])
-          for s in ("right", "left") if s in plan.sides}
+          for s in plan.shown_sides}
     if all(abs(v) < SAID_CC for v in by.values()):
         return []
     return ["these changes make " + " and ".join(f"her {s} breast {abs(v):.0f} cc {'larger' if v > 0 else 'smaller'}"
@@ -281,7 +281,7 @@ def tables(plan: Plan) -> str:
     """The report's text: for her (the main measures in plain words, the disclaimer, her handout), then the
     measures, volume, symmetry and follow-up tables, and for the surgeon, collapsed, the fit quality,
     the changes' parameters, the inputs, options and versions."""
-    sides = list(plan.sides)
+    sides = plan.shown_sides
     parts = [_operations_table(plan), for_her(plan), _measures_table(plan)]
     volumes = {s: plan.volumes.sides[s] for s in sides}
     differs = {s: v.model_differs_pct(plan.sides[s].fit.volume_cc) for s, v in volumes.items()}
@@ -294,15 +294,15 @@ def tables(plan: Plan) -> str:
         + "".join(DIFFERS_TEXT.format(side=s, pct=pct) for s, pct in differs.items() if model_differs_much(pct))
         + "".join(f'<p class="camera-distance">{html.escape(note)}</p>' for note in plan.camera_notes))
     parts.append(_symmetry_tables(plan))
-    surgeon = []
+    surgeon, shown = [], {s: plan.sides[s] for s in sides}
     rows = [[s, sp.fit.volume_cc, sp.fit.volume_cc_below_base, sp.fit.residuals_mm["rms"], sp.fit.normalised_residual,
              "met" if sp.fit.stopping_rule_met else "not met", sp.fit.points, NIPPLE_FOUND[sp.scan.nipple_found],
-             ", ".join(sp.at_bounds) or "none"] for s, sp in plan.sides.items()]
+             ", ".join(sp.at_bounds) or "none"] for s, sp in shown.items()]
     surgeon.append("<h2>Fit quality</h2>" + _table(
         ["side", "model volume cc down to the chest wall", "of it below the base cc", "rms mm", "normalised residual",
          f"stopping rule {STOP_RESIDUAL}", "points", "nipple found", "at an end of its plausible range"],
         rows, "fit") + AT_BOUNDS_TEXT * any(sp.at_bounds for sp in plan.sides.values()))
-    since = {s: sp for s, sp in plan.sides.items() if sp.follow_up is not None}
+    since = {s: sp for s, sp in shown.items() if sp.follow_up is not None}
     if since:
         rows = []
         for s, sp in since.items():
@@ -337,7 +337,7 @@ def _operations_table(plan: Plan) -> str:
         return ""
     rows = [[f"her {s}", op.words or "none proposed",
              f"{op.volume_before_cc:.0f} → {op.volume_cc:.0f}", round(op.nipple_moved_mm, 1),
-             " ".join(said(op, plan.measures)) or "—"] for s, op in plan.operated.items()]
+             " ".join(said(op, plan.measures)) or "—"] for s, op in plan.operated_shown]
     after = ("Every state shown is after them: the changes by degree start from her breasts as operated."
              if plan.grid.kinds else "")
     return ('<section id="operations"><h2>Operations planned</h2>' + _table(
@@ -349,7 +349,7 @@ def for_her(plan: Plan) -> str:
     """The main measures in plain words (`plan.handout.PLAIN`), before → as shown (the cells the page's script
     updates as the state shown changes), what the camera did not see of her outer sides, the disclaimer and a
     link to her handout."""
-    m, sides = plan.measures, [s for s in ("right", "left") if s in plan.sides]
+    m, sides = plan.measures, plan.shown_sides
     head = "".join(f"<th>{html.escape(h)}</th>"
                    for h in ["measure", *(f"her {s} breast: before → as shown" for s in sides)])
     body = ""
@@ -370,7 +370,7 @@ def for_her(plan: Plan) -> str:
 def _measures_table(plan: Plan) -> str:
     """Each side's measures before and as shown, and their asymmetry, with where up came from; the page's
     script updates the "as shown" cells as the state shown changes."""
-    sides, m = list(plan.sides), plan.measures
+    sides, m = plan.shown_sides, plan.measures
     head = ["measure"] + [f"{s} {w}" for s in sides for w in ("before", "as shown")]
     if m.asymmetry:
         head += ["asymmetry before", "asymmetry as shown"]
@@ -423,8 +423,8 @@ def _symmetry_tables(plan: Plan) -> str:
         if plan.measures.contour_hidden:
             html += CONTOUR_HIDDEN_TEXT
     rows = []
-    for s, sp in plan.sides.items():
-        before, after = ptosis["before"][s], ptosis["after"][s]
+    for s in plan.shown_sides:
+        before, after, sp = ptosis["before"][s], ptosis["after"][s], plan.sides[s]
         rows.append([s, before["grade"], after["grade"], before["nipple_to_fold_mm"], before["nipple_to_lowest_mm"],
                      before["fold_from"], [round(v, 4) for v in sp.ptosis_params]])
     return html + "<h2>Ptosis (Regnault)</h2>" + _table(

@@ -24,7 +24,7 @@ from breastplan import Primitive, transform_points
 from breastplan.body import Body
 from breastplan.case import Case, Fit, Scan
 from breastplan.deform.names import DEFORMATION_PARAMS, at_bounds
-from breastplan.options import PlanOptions
+from breastplan.options import SHOWN_SIDES, PlanOptions
 
 if TYPE_CHECKING:
     from breastplan.ingest.follow_up import Registration
@@ -284,6 +284,16 @@ class Plan:
         if self.input.is_dir():
             return "case folder"
         return "recording" if self.input.suffix.lower() == ".mcap" else "scan file"
+
+    @property
+    def shown_sides(self) -> list[str]:
+        """The sides planned, in the order tables and sentences show them (`SHOWN_SIDES`)."""
+        return [s for s in SHOWN_SIDES if s in self.sides]
+
+    @property
+    def operated_shown(self) -> list[tuple[str, Operated]]:
+        """(side, its operations) of each operated side, in `shown_sides` order."""
+        return [(s, self.operated[s]) for s in self.shown_sides if s in self.operated]
 
     @property
     def first(self) -> SidePlan:

@@ -6,7 +6,7 @@ from breastplan.plan.handout import outer_words
 
 
 def _plan(**unseen_cc):
-    return SimpleNamespace(sides=dict.fromkeys(unseen_cc),
+    return SimpleNamespace(sides=dict.fromkeys(unseen_cc), shown_sides=[s for s in ("right", "left") if s in unseen_cc],
                            volumes=SimpleNamespace(sides={s: SimpleNamespace(unseen_outer_cc=v)
                                                           for s, v in unseen_cc.items()}))
 

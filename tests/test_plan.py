@@ -225,6 +225,36 @@ def test_one_volume_leads_everywhere_and_the_models_is_named_as_the_models(cli, 
     assert (out["volume_cc"], out["volume_from"]) == (record["sides"]["left"]["volume"]["volume_cc"], "skin")
 
 
+def _right_before_left(text: str) -> bool:
+    """Whether `text` names her right side before her left (the asymmetry's name, "left − right", aside)."""
+    text = text.replace("left − right", "")
+    found = {s: m.start() for s in ("right", "left") if (m := re.search(rf"\b{s}\b", text))}
+    return len(found) < 2 or found["right"] < found["left"]
+
+
+def test_every_table_and_sentence_shows_her_right_before_her_left(planned, computed, cli, monkeypatch):
+    """Truth: one order of her sides everywhere, her right first, as her picture shows her facing whoever reads. A
+    surgeon reading across the report's tables, the terminal and her handout never finds the two sides swapped
+    (the report's tables for her listed her right first and those for the surgeon her left)."""
+    from breastplan.plan.handout import measure_rows
+    from breastplan.plan.report import tables
+
+    page = tables(computed)
+    found = [t for t in re.findall(r"<table.*?</table>", page, re.S) if 'class="about"' not in t]   # options as given
+    assert len(found) >= 5
+    for table in found:
+        assert _right_before_left(re.sub("<[^>]+>", " ", table)), table[:300]
+    assert [row[1:] for row in measure_rows(computed)[:1]] == [("her right breast: before → as planned",
+                                                                "her left breast: before → as planned")]
+    monkeypatch.setenv("COLUMNS", "220")                                   # the table's head on one line
+    res = run(cli, "plan", "--out", planned[0], *[a for c in CHANGES for a in ("--deform", c)])
+    assert res.returncode == 0, res.stderr[-3000:]
+    head = next(line for line in res.stdout.splitlines() if "before" in line)
+    assert head.index("right before") < head.index("left before")
+    assert res.stdout.index("\nright volume:") < res.stdout.index("\nleft volume:")
+    assert res.stdout.index("\nright fit:") < res.stdout.index("\nleft fit:")
+
+
 @pytest.mark.parametrize("name", NAMES[:3])
 @pytest.mark.parametrize("side", ["left", "right"])
 def test_each_planned_breast_reaches_its_degree_by_the_reference_model(planned, side, name):

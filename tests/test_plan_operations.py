@@ -154,8 +154,8 @@ NIPPLES = ("(() => { const t = document.getElementById('plot').data.find(t => t.
 
 @requires_chromium
 def test_the_report_names_the_operations_and_returns_to_them_from_the_original(cli, patient):
-    """The page opens on her operated skin with no slider, names each operation, and its marks move with her skin:
-    each nipple drawn as operated lies as far from where it was found as plan.json says her nipple moves."""
+    """The page opens on her operated skin with no slider, names each operation (her right first), and its marks move
+    with her skin: each nipple drawn as operated lies as far from where it was found as plan.json says it moves."""
     plan = _plan(cli, patient, "shown", "--left", "augmentation:250:moderate", "--right", "lift:fold=40")
     moved = [plan["sides"][s]["operations"]["nipple_moved_mm"] for s in plan["sides"]]   # the page's order
     with chromium() as b:
@@ -163,7 +163,7 @@ def test_the_report_names_the_operations_and_returns_to_them_from_the_original(c
         d = b.driver
         rows = d.execute_script("return [...document.querySelectorAll('table.operations tbody tr')]"
                                 ".map(r => r.innerText)")
-        assert len(rows) == 2 and "an implant of 250 cc" in rows[0] and "a lift" in rows[1]
+        assert len(rows) == 2 and rows[0].startswith("her right\ta lift") and "an implant of 250 cc" in rows[1]
         assert d.execute_script("return window.breastplanState") == "operated"
         assert d.execute_script("return document.querySelectorAll('#sliders input').length") == 0
         operated = np.array(d.execute_script("return " + NIPPLES))
