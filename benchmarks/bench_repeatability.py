@@ -11,10 +11,13 @@ the unshifted one. The unshifted breast is also fitted with its points in other 
 two seeded shuffles): the same points, so any spread would be the fit's own doing; the fit works on
 its points in canonical order (`breastplan.point_order`: its seeded subsets are drawn in
 that order, not by the caller's indices), so the spread is 0 (it was 2–3 % at the median, up to 9.5 % worst,
-when the subsets were drawn by index). Cases: 4 MakeHuman bodies of bench_realistic's pairs (cup 0.3 and 0.2, firmness 0
+when the subsets were drawn by index). And with its coordinates moved in their last bits (another machine's
+rounding upstream of the fit, docs/realistic.md): a last bit can reorder two points of nearly equal x, and so
+draw another subset, and the solver's path itself turns on rounding. Cases: 4 MakeHuman bodies of
+bench_realistic's pairs (cup 0.3 and 0.2, firmness 0
 of cup 0.7 and 0.9) in one view each, both sides; baseline: 2 Chen torsos in the same run.
 
-Nothing is asserted and there is no target; the last two lines are the JSON summaries.
+Nothing is asserted and there is no target; the last three lines are the JSON summaries.
 
 Run:  .venv/bin/python benchmarks/bench_repeatability.py     (about 4 minutes)
 """
@@ -43,6 +46,7 @@ SHIFTS_MM = ((0, 0, 0), (3, 0, 0), (0, 3, 0), (0, 0, 3), (5, 5, 0), (-4, 2, 6))
 CASES = ((0, 0, 1), (1, 0, 3), (2, 0, 4), (3, 0, 7))
 """(pair index in bench_realistic.PAIRS, member, view)."""
 CHEN_SEEDS = (0, 1)
+NUDGE, NUDGE_SEEDS = 1e-12, (1, 2, 3, 4)
 GRID_MM = np.mgrid[-60:61:30, -60:61:30].reshape(2, -1).T
 
 
@@ -92,18 +96,31 @@ def reordered_volumes(ingested: Ingested) -> list[float]:
     return volumes
 
 
+def nudged_volumes(ingested: Ingested) -> list[float]:
+    """Fitted volumes (cc) of the same breast with each coordinate moved in its last bits (a relative
+    NUDGE, seeded): what another machine's rounding upstream of the fit does to its points."""
+    volumes = []
+    for seed in NUDGE_SEEDS:
+        moved = ingested.points * (1.0 + NUDGE * np.random.default_rng(seed).standard_normal(ingested.points.shape))
+        with threadpool_limits(1, "blas"):
+            volumes.append(fit_scan(dataclasses.replace(ingested, points=moved)).volume_cc)
+    return volumes
+
+
 def shifted_fits(points: np.ndarray, side: str) -> dict:
     """Volume (cc) and chest-wall offset (mm, mean over GRID_MM around the unshifted nipple) per shift,
     and the unshifted breast's volumes with its points in other orders."""
-    volumes, walls, nipple, orders = [], [], None, []
+    volumes, walls, nipple, orders, nudged = [], [], None, [], []
     for shift, ingested, fit in fits_under_shifts(points, side, SHIFTS_MM):
         volumes.append(fit.volume_cc)
         if nipple is None:
             nipple, orders = ingested.nipple_camera[:2], [fit.volume_cc, *reordered_volumes(ingested)]
+            nudged = [fit.volume_cc, *nudged_volumes(ingested)]
         walls.append(float(np.mean(ingested.chest_wall.z(nipple + GRID_MM + shift[:2]) - shift[2])))
     return {"volumes_cc": volumes, "spread_pct": spread_pct(volumes),
             "wall_offsets_mm": [w - walls[0] for w in walls],
-            "order_volumes_cc": orders, "order_spread_pct": spread_pct(orders)}
+            "order_volumes_cc": orders, "order_spread_pct": spread_pct(orders),
+            "nudged_volumes_cc": nudged, "nudged_spread_pct": spread_pct(nudged)}
 
 
 def main() -> None:
@@ -114,17 +131,21 @@ def main() -> None:
         for side in SIDES:
             rows.append({"kind": kind, "case": label, "side": side, **shifted_fits(points, side)})
             console.log(f"{label} {side}: spread {rows[-1]['spread_pct']:.1f} %, "
-                        f"over point orders {rows[-1]['order_spread_pct']:.1f} %")
+                        f"over point orders {rows[-1]['order_spread_pct']:.1f} %, "
+                        f"over last bits {rows[-1]['nudged_spread_pct']:.1f} %")
     table = new_table("bench_repeatability — one scan shifted by a few mm: fitted volumes",
                       ("case", "side", "volumes (cc) per shift", "spread", "wall offsets (mm)",
-                       "volumes (cc) per point order", "spread"),
+                       "volumes (cc) per point order", "spread", "volumes (cc), last bits moved", "spread"),
                       f"shifts (mm): {', '.join(str(s) for s in SHIFTS_MM)}; spread (max − min) / mean; wall "
                       "offsets: the chest wall's mean depth around the nipple against the unshifted one; point "
-                      "orders: as ingested, reversed, two shuffles (unshifted).")
+                      "orders: as ingested, reversed, two shuffles (unshifted); last bits: the unshifted points as "
+                      "ingested "
+                      f"and each coordinate × (1 + {NUDGE:g}·N(0, 1)), {len(NUDGE_SEEDS)} seeds.")
     for r in rows:
         table.add_row(r["case"], r["side"], " ".join(f"{v:.0f}" for v in r["volumes_cc"]), f"{r['spread_pct']:.1f} %",
                       " ".join(f"{w:+.1f}" for w in r["wall_offsets_mm"]),
-                      " ".join(f"{v:.0f}" for v in r["order_volumes_cc"]), f"{r['order_spread_pct']:.1f} %")
+                      " ".join(f"{v:.0f}" for v in r["order_volumes_cc"]), f"{r['order_spread_pct']:.1f} %",
+                      " ".join(f"{v:.1f}" for v in r["nudged_volumes_cc"]), f"{r['nudged_spread_pct']:.2f} %")
     console.print(table)
     real = [r["spread_pct"] for r in rows if r["kind"] == "realistic"]
     chen = [r["spread_pct"] for r in rows if r["kind"] == "chen"]
@@ -139,6 +160,12 @@ def main() -> None:
                       "median": round(statistics.median(real), 2), "worst": round(max(real), 2), "target": None,
                       "baseline_median": round(statistics.median(chen), 2), "baseline_worst": round(max(chen), 2),
                       "orders": 4}))
+    real = [r["nudged_spread_pct"] for r in rows if r["kind"] == "realistic"]
+    chen = [r["nudged_spread_pct"] for r in rows if r["kind"] == "chen"]
+    print(json.dumps({"benchmark": "bench_repeatability", "figure": "volume_spread_under_last_bits_pct",
+                      "median": round(statistics.median(real), 3), "worst": round(max(real), 3), "target": None,
+                      "baseline_median": round(statistics.median(chen), 3), "baseline_worst": round(max(chen), 3),
+                      "nudge": NUDGE, "seeds": len(NUDGE_SEEDS)}))
 
 
 if __name__ == "__main__":
