@@ -117,9 +117,19 @@ def test_the_same_body_in_another_frame_and_units_gives_the_same_breast_and_its_
     assert m2["width_mm"] == pytest.approx(m1["width_mm"], rel=MODEL_REL)
     assert m2["volume_cc"] == pytest.approx(m1["volume_cc"], rel=MODEL_REL)
     assert np.linalg.norm(v1.mean(axis=0) - v2.mean(axis=0)) <= MODEL_MM     # the same surface, in her frame
-    # a breast is wider than it is tall on her chest: the width is not the outline's height
-    ring = to_body(outline(fitted(body)), "+y")
-    assert m1["width_mm"] > np.ptp(ring[:, 1]) + 30.0
+
+
+def test_a_woman_wider_from_left_to_right_has_a_wider_breast_base_not_a_taller_one(body):
+    """Truth: the width is measured left to right. Her scan stretched by 30 % along her left axis (a wider woman,
+    the same height) is fitted with a base wider than it is tall by 30 mm: a filter that measured the width from top
+    to bottom fails. (Her own breasts' bases are about as wide as they are tall.)"""
+    scans, _ = body
+    units, up = FRAMES["mm +y"]
+    wide = to_body(scans["mm +y"].vertices, up) * [1.3, 1.0, 1.0]
+    fit = compute_breast_fit(Mesh(transform_points(file_from_body(up, units), wide)), side="left", units=units, up=up)
+    measures = get_breast_measures(fit, units=units, up=up)
+    ring = to_body(outline(fit), up)
+    assert measures["width_mm"] > np.ptp(ring[:, 1]) + 30.0, (measures["width_mm"], np.ptp(ring[:, 1]))
 
 
 def test_a_scan_in_metres_said_to_be_in_mm_is_refused_as_ingest_refuses_it(body):
