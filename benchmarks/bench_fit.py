@@ -64,7 +64,7 @@ from breastplan.deform.global_deformations import Deformation
 from breastplan.fitting import breast_fit
 from breastplan.fitting.breast_fit import MESH_GRID, BreastFit, fit_breast, model_mesh
 from breastplan.fitting.ffd import FIT_POINTS, STOP_RESIDUAL, _closest
-from breastplan.fitting.sampling import seeded_subset
+from breastplan.fitting.sampling import position_subset
 from breastplan.fitting.superquadric import fit_superquadric, initial_guess
 from breastplan.scenes import synthetic
 from breastplan.ingest.pipeline import ingest_frames
@@ -209,7 +209,7 @@ def closest_floor(fit: BreastFit, points: np.ndarray) -> tuple[float, float]:
     from): of the FIT_POINTS data subset fit_ffd solves with, and of all the data."""
     vertices, faces = model_mesh(fit.superquadric)
     faces32 = np.ascontiguousarray(faces, dtype=np.uint32)
-    sub = seeded_subset(points, FIT_POINTS)
+    sub = position_subset(points, FIT_POINTS)
     return timed(lambda: _closest(vertices, faces32, sub)), timed(lambda: _closest(vertices, faces32, points))
 
 

@@ -9,11 +9,10 @@ same), and the spread of the fitted volumes, (max − min) / mean, is reported; 
 of the chest wall found under the breast (at the unshifted nipple's foot, ±60 mm around it) against
 the unshifted one. The unshifted breast is also fitted with its points in other orders (reversed,
 two seeded shuffles): the same points, so any spread would be the fit's own doing; the fit works on
-its points in canonical order (`breastplan.point_order`: its seeded subsets are drawn in
-that order, not by the caller's indices), so the spread is 0 (it was 2–3 % at the median, up to 9.5 % worst,
-when the subsets were drawn by index). And with its coordinates moved in their last bits (another machine's
-rounding upstream of the fit, docs/realistic.md): a last bit can reorder two points of nearly equal x, and so
-draw another subset, and the solver's path itself turns on rounding. Cases: 4 MakeHuman bodies of
+its points in canonical order (`breastplan.point_order`) and solves on subsets chosen by their positions, so
+the spread is 0 (it was 2–3 % at the median, up to 9.5 % worst, when the subsets were drawn by the caller's
+indices). And with its coordinates moved in their last bits (another machine's rounding upstream of the fit,
+docs/realistic.md): the subsets are the same, and what moves is the solver's own path. Cases: 4 MakeHuman bodies of
 bench_realistic's pairs (cup 0.3 and 0.2, firmness 0
 of cup 0.7 and 0.9) in one view each, both sides; baseline: 2 Chen torsos in the same run.
 

@@ -10,8 +10,8 @@ Laplacian) until the mean normalised residual ‖d − m‖/‖d‖ (docs/model.
 by ‖o‖) is below 0.0015 (thesis stopping rule), the residual stops improving, or the
 iterations run out: the budget is counted in iterations, never in seconds, so a result does not
 depend on the machine's load. Nor on the order of the data points or the BLAS thread count: the fit
-works on the points in canonical order (`breastplan.point_order`; its subset is drawn in that
-order) on one BLAS thread, and returns the residuals in the caller's order.
+works on the points in canonical order (`breastplan.point_order`) and on a subset chosen by their
+positions (`position_subset`), on one BLAS thread, and returns the residuals in the caller's order.
 
 Matching on the *closed* mesh holds the base cap to the data's base ring on the chest wall;
 the tangential weight is the Levenberg–Marquardt damping: raised after a step that made the
@@ -30,7 +30,7 @@ from breastplan.deform.lattice import Lattice
 from breastplan.point_order import canonical_order, in_caller_order
 
 from .closest import closest_points
-from .sampling import one_blas_thread, seeded_subset
+from .sampling import one_blas_thread, position_subset
 
 STOP_RESIDUAL = 0.0015
 MAX_ITERATIONS = 1000
@@ -41,7 +41,7 @@ CREEP = (20, 0.01)
 """(iterations, relative gain): a fit whose residual gained less than 1 % over its last 20
 iterations has converged too — it is creeping towards a shape the lattice cannot hold."""
 FIT_POINTS = 2000
-"""Data points per solve (a seeded subset of the points in canonical order): 2000 surface points pin
+"""Data points per solve (`position_subset`): 2000 surface points pin
 375 lattice coordinates."""
 DAMPING = (0.01, 0.03, 1.0)
 """Tangential weight: floor, start, ceiling."""
@@ -79,7 +79,7 @@ def fit_ffd(data: np.ndarray, vertices: np.ndarray, faces: np.ndarray, n: int = 
 def _fit(data, vertices, faces, n, smoothness, held, max_iterations, box, stop):
     """`fit_ffd` on the data in canonical order: the lattice, fitted vertices, final residual, the
     data's distances, iterations and whether it converged."""
-    sub = seeded_subset(data, FIT_POINTS)
+    sub = position_subset(data, FIT_POINTS)
     lattice = Lattice.around(np.vstack([data, vertices]), n) if box is None else Lattice(box.lo, box.hi, box.shape)
     B = lattice.basis(vertices)
     K = lattice.size

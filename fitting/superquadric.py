@@ -23,11 +23,11 @@ from breastplan.errors import counted
 from breastplan.point_order import canonical_order, in_caller_order
 from breastplan.primitive import EPS_BOUNDS
 
-from .sampling import one_blas_thread, seeded_subset
+from .sampling import one_blas_thread, position_subset
 
 FIT_POINTS = 3000
-"""Larger clouds are fitted on a seeded random subset of this size, drawn from the points in
-canonical order (`breastplan.point_order`: the same subset whatever the order of the points; the
+"""Larger clouds are fitted on a subset of this size chosen by the points' positions
+(`position_subset`: the same subset whatever the order of the points or their last bits; the
 residuals of all points are reported): 3000 surface points pin 7 shape and 6 pose parameters to ≈ 0.1 %."""
 MAX_TURN_RAD = 0.35
 """Bound on each rotation-vector component (≈ 20°): the breast frame already fixes the axes, and
@@ -224,8 +224,8 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
 
     The deformation parameters start from zero unless `x0` gives the whole parameter vector; with
     top-shape, see `_fit_with_top_shape`. The fit is a function of the point set: it works on the
-    points in canonical order (`breastplan.point_order`) on one BLAS thread, and returns the
-    residuals in the caller's order.
+    points in canonical order (`breastplan.point_order`), solves on subsets chosen by position
+    (`position_subset`) on one BLAS thread, and returns the residuals in the caller's order.
     """
     kinds = tuple(k for k in KIND_PARAMS if k in set(deformations))  # docs/model.md §3 order
     unknown = set(deformations) - set(KIND_PARAMS)
@@ -248,9 +248,9 @@ def fit_superquadric(points_mm, *, deformations=(), chest_prior: bool = True, lo
 def _fit(everything: np.ndarray, kinds: tuple[str, ...], x0: np.ndarray | None, chest_prior: bool, loss: str,
          f_scale_mm: float):
     """The solver's end for `fit_superquadric` on every point (mu, canonical order)."""
-    p = seeded_subset(everything, FIT_POINTS)
+    p = position_subset(everything, FIT_POINTS)
     solve = _Solver(chest_prior, loss, float(to_model_units(f_scale_mm)))
-    fitted = seeded_subset(p, DEFORMED_FIT_POINTS) if kinds else p
+    fitted = position_subset(p, DEFORMED_FIT_POINTS) if kinds else p
     if x0 is None and "top-shape" in kinds:
         return _fit_with_top_shape(p, fitted, kinds, solve)
     return _solve_plausibly(fitted, kinds, initial_guess(p, kinds) if x0 is None else x0, 0, solve)
@@ -293,7 +293,7 @@ def _top_shape_start(p: np.ndarray, kinds: tuple[str, ...], solve: "_Solver") ->
     q, nfev = p - x[10:13], 0
     for _ in range(2):
         still = (q[:, 1] < -LOWER_MARGIN * np.exp(x[3])) | (q[:, 2] < LOW_SHARE * np.exp(x[4]))
-        sol = solve(seeded_subset(p[still], DEFORMED_FIT_POINTS), rest, x, max_nfev=START_NFEV, max_turn=START_TURN_RAD)
+        sol = solve(position_subset(p[still], DEFORMED_FIT_POINTS), rest, x, max_nfev=START_NFEV, max_turn=START_TURN_RAD)
         x, nfev, q = sol.x, nfev + sol.nfev, _undone(sol.x, p, rest)
     a, e1, e2, _, _ = _unpack(x)
     primitive = Primitive(*a, e1, e2)
