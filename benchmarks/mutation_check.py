@@ -390,8 +390,9 @@ MUTANTS = [
     one("operated-volume-grown-skin", "her volume after an operation counting her skin its grown footprint took in",
         "plan/operated.py", "volume = now.sides[side].volume_cc + cells.volume_cc(side) - grown.volume_cc(side)",
         "volume = cells.volume_cc(side)", ("tests/test_plan_operations.py", "tests/test_symmetrising.py")),
-    one("page-nipples-not-operated", "the report's nipples left where they were found on an operated state",
-        "plan/report.py", "at(idx.nipples,on?on.nipples:L.nipples);", "at(idx.nipples,L.nipples);",
+    one("page-nipples-not-operated", "the report's marks (her nipples among them) left where they were found on an "
+        "operated state", "plan/report.py",
+        "const m=state&&shownD?F.map((p,r)=>p.map((v,c)=>v+shownD[markAt+3*(a+r)+c])):F;", "const m=F;",
         ("tests/test_plan_operations.py",)),
     one("lift-heights-from-below-the-arrival", "a lift's heights taken from the rise lower down, the rise read where "
         "the skin arrives, not carried by the map its points move by",
