@@ -109,8 +109,9 @@ DIGITS = 6
 
 
 def page_data(plan: Plan, views: Views) -> dict:
-    """The JSON the page's script reads: geometry, every slider state and the state it opens on."""
-    sides = list(plan.sides)
+    """The JSON the page's script reads: geometry, every slider state and the state it opens on (her sides in
+    `Plan.shown_sides` order, so the legend lists her right first)."""
+    sides = plan.shown_sides
     return {"sides": sides, "torso": _points(views.torso), "patch": _points(views.patch),
             "skin_faces": _faces(views.skin, len(views.torso) + len(views.patch)),
             "scans": {s: _points(views.scans[s]) for s in sides},
@@ -118,12 +119,12 @@ def page_data(plan: Plan, views: Views) -> dict:
             "earlier": {s: _mesh(*views.earlier[s]) for s in views.earlier},
             "landmarks": {k: v.round(2).tolist() for k, v in views.landmarks.items()},
             "side_labels": {s: v.round(1).tolist() for s, v in views.side_labels.items()},
-            "folds": {s: {"xyz": v.round(1).tolist(), "from": plan.measures.ptosis["before"][s]["fold_from"]}
-                      for s, v in views.folds.items()},
+            "folds": {s: {"xyz": views.folds[s].round(1).tolist(),
+                          "from": plan.measures.ptosis["before"][s]["fold_from"]} for s in sides if s in views.folds},
             "before": {s: {k: round(float(v), DIGITS) for k, v in plan.measures.before[s].items()} for s in sides},
             "asymmetry_before": {k: round(float(v), DIGITS) for k, v in
                                  plan.measures.asymmetry.get("before", {}).items()},
-            "bounds": _bounds(views), "footprints": {s: v.round(2).tolist() for s, v in views.footprints.items()},
+            "bounds": _bounds(views), "footprints": {s: views.footprints[s].round(2).tolist() for s in sides},
             "grid": _grid(plan, views), **_skin_colour(views), "light": list(LIGHT),
             "mark_layout": [list(m) for m in views.mark_layout],
             "operated_labels": None if views.operated_labels is None else {
@@ -134,7 +135,7 @@ def page_data(plan: Plan, views: Views) -> dict:
 def _grid(plan: Plan, views: Views) -> dict:
     """Every slider state (`Plan.grid`): its name, words and measures, and its displacements of the patch then of
     each side's breast mesh as shared modes (`plan.modes`), and the state planned."""
-    grid, sides = plan.grid, list(plan.sides)
+    grid, sides = plan.grid, plan.shown_sides
     moved = np.concatenate([views.moved - views.patch.astype(np.float32)] + [
         views.planned_meshes[s] - views.meshes[s][0].astype(np.float32) for s in sides]
         + [views.marks_moved - _found_marks(views).astype(np.float32)], axis=1)

@@ -143,7 +143,8 @@ def test_her_symmetry_and_ptosis_are_measured_before_and_as_planned_and_shown(pl
         assert MplPath(outline[:, :2]).contains_point(nipple[side][:2])       # round it, seen by the camera
     page = (case / "report.html").read_text()
     assert "<h2>Symmetry</h2>" in page and "<h2>Ptosis (Regnault)</h2>" in page
-    assert "<h2>Volume, measured on her skin</h2>" in page and '"footprints":{"left":[[' in page
+    assert "<h2>Volume, measured on her skin</h2>" in page
+    assert '"footprints":{"right":[[' in page                  # her right first, as the legend lists her sides
     hidden = [symmetry[when]["lower_contours_hidden"] for when in ("before", "after")]
     assert all(h in (0, 1, 2) for h in hidden)
     assert ('id="contour-hidden"' in page) == any(hidden)       # said under the table when a contour is hidden
