@@ -11,6 +11,7 @@ from breastplan.options import PlanOptions
 from breastplan.plan import views as views_module
 from breastplan.plan.job import run_plan
 from breastplan.plan.pictures import SHOT_PX, VIEWS, before_after, camera, picture
+from breastplan.plan.surface import PlannedChange
 from breastplan.plan.views import build_views
 from breastplan.scenes.makehuman import BodyOptions, make_body
 from breastplan.scenes.realistic import (CameraOptions, file_from_body, make_body_scene, write_closed_scan,
@@ -68,8 +69,6 @@ def test_her_skin_from_a_closed_body_scan_shows_no_crack_under_her_breasts(tmp_p
     for name, (before, _) in before_after(views, views.state(views.keys[0])).items():
         share, pixels = holes(before)
         assert share < 0.0002, (name, share, pixels)
-    from breastplan.plan.surface import PlannedChange
-
     blend = PlannedChange._weights                         # a wider blend moves a wider patch of her skin
     with pytest.MonkeyPatch.context() as m:
         m.setattr(PlannedChange, "_weights", lambda change, local_mm: blend(change, 0.8 * local_mm))
