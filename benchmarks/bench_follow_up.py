@@ -40,14 +40,14 @@ from rich.console import Console
 from threadpoolctl import threadpool_limits
 
 from breastplan import transform_points
-from breastplan.case import Provenance, Source
+from breastplan.case import Provenance
 from breastplan.fitting.breast_fit import fit_scan
 from breastplan.ingest.follow_up import carried_wall
 from breastplan.scenes.makehuman import BodyOptions, make_body
 from breastplan.ingest.pipeline import ingest_frames
 from breastplan.scenes.realistic import BodyScene, CameraOptions, camera_pose
 from breastplan.ingest.recording import DepthFrames
-from breastplan.ingest.scan import scan_record
+from breastplan.ingest.scan import depth_source, scan_record
 from breastplan.options import SIDES, IngestOptions
 from breastplan.plan.breast_volume import (CELL_MM, BreastVolumes, change_on_earlier_wall, grown_footprint,
                                           measure_breasts)
@@ -69,7 +69,7 @@ def visit(body: BodyOptions, camera: CameraOptions, seed: int):
     made = make_body(body)
     scene = BodyScene(made, camera, camera_pose(0.5 * (made.nipples["left"] + made.nipples["right"]), camera))
     frames = DepthFrames(scene.frames(8, seed), camera.K, "bench")
-    scans = {s: scan_record(ingest_frames(frames, IngestOptions(s)), Source("recording", "bench"), IngestOptions(s),
+    scans = {s: scan_record(ingest_frames(frames, IngestOptions(s)), depth_source(frames), IngestOptions(s),
                             Provenance()) for s in SIDES}
     first = scans["left"]
     measured = measure_breasts(first.body, {s: scans[s].nipple_camera_mm for s in SIDES})

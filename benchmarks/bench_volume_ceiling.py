@@ -53,13 +53,13 @@ from scipy.spatial import cKDTree
 from threadpoolctl import threadpool_limits
 
 from breastplan import transform_points
-from breastplan.case import Provenance, Source
+from breastplan.case import Provenance
 from breastplan.fitting.breast_fit import fit_scan
 from breastplan.ingest.follow_up import carried_wall, carry_wall, chest_around_breast
 from breastplan.ingest.pipeline import ingest_frames
 from breastplan.scenes.realistic import make_body_scene
 from breastplan.ingest.recording import DepthFrames
-from breastplan.ingest.scan import scan_record
+from breastplan.ingest.scan import depth_source, scan_record
 from breastplan.options import IngestOptions
 
 from bench_realistic import FRAMES, PAIRS, VIEWS, new_table
@@ -81,13 +81,14 @@ def member(pair, view: int, m: int, side: str) -> dict:
     pose, camera = VIEWS[view]
     scene = make_body_scene(pair.body(m, pose), camera)
     options = IngestOptions(side=side)
-    ingested = ingest_frames(DepthFrames(scene.frames(FRAMES, view), scene.camera.K, "synthetic"), options)
+    frames = DepthFrames(scene.frames(FRAMES, view), scene.camera.K, "synthetic")
+    ingested = ingest_frames(frames, options)
     with threadpool_limits(1, "blas"):
         fit = fit_scan(ingested)
     view_from_body = ingested.input_to_view @ scene.camera_from_body
     view_from_breast = ingested.input_to_view @ np.linalg.inv(ingested.input_to_breast)
     return {"scene": scene, "ingested": ingested, "fit": fit, "view_from_body": view_from_body,
-            "scan": scan_record(ingested, Source("recording", "synthetic"), options, Provenance()),
+            "scan": scan_record(ingested, depth_source(frames), options, Provenance()),
             "crop_view": transform_points(view_from_breast, ingested.points), "half_cc": scene.body.half_volumes_cc()[side]}
 
 

@@ -113,6 +113,8 @@ MUTANTS = [
     one("ffd-smoothness-swapped", "the FFD's λ for seen and partly seen breasts exchanged",
         "fitting/breast_fit.py", "SMOOTHNESS[1] if unseen.mean() > UNSEEN_SHARE else SMOOTHNESS[0]",
         "SMOOTHNESS[0] if unseen.mean() > UNSEEN_SHARE else SMOOTHNESS[1]", ("tests/test_fit.py",)),
+    one("case-source-unchecked", "a scan.npz whose source no scan comes from, or a depth camera without a camera, "
+        "read as it is", "core/case.py", "        _check_source(npz, source)\n", "", ("tests/test_fit.py",)),
     # --- ingest ----------------------------------------------------------------------------------------
     one("ingest-metres-factor-100", "a scan file detected in metres scaled by 100 instead of 1000",
         "ingest/files.py", 'return 1000.0, f"units m (detected', 'return 100.0, f"units m (detected', INGEST),

@@ -74,6 +74,10 @@ class Provenance:
         return cls(dict(p.get("inputs", {})), dict(p.get("options", {})), str(p.get("version", "")))
 
 
+SOURCE_KINDS = ("recording", "device", "file")
+"""Where a scan's points can come from: a depth recording, a live depth camera, or a scan file."""
+
+
 @dataclass(frozen=True)
 class Source:
     """Where a scan's points came from."""
@@ -294,6 +298,7 @@ class Case:
         roi = art["crop_roi_camera_mm"]
         source = Source(str(art["source_kind"]), str(art["source"]), int(art["frames"]), art["intrinsics"],
                         art["image_size"])
+        _check_source(npz, source)
         return Scan(points=breast.points, normals=breast.normals, torso_camera=torso.points,
                     input_to_breast=art["transform_camera_to_breast"], input_to_view=art["view_from_camera"],
                     side=side, nipple_camera_mm=art["nipple_camera_mm"], chest_wall=wall,
@@ -463,6 +468,22 @@ def _fit_problem(art, primitive: Primitive, mesh) -> str | None:
     if not 0.0 < float(art["volume_cc_mesh"]) + float(art["volume_cc_below_base"]) < np.inf:
         return "records a volume down to the chest wall that is not positive"
     return None
+
+
+def _check_source(npz: Path, source: Source) -> None:
+    """ArtefactError unless `source` is one SOURCE_KINDS names and, from a depth camera, holds the camera: at
+    least one frame, finite intrinsics with positive focal lengths and a positive image size."""
+    if source.kind not in SOURCE_KINDS:
+        raise ArtefactError(npz, f"names its source '{source.kind}', not one of {', '.join(SOURCE_KINDS)}")
+    if source.kind == "file":
+        return
+    K, size = np.asarray(source.K, float), np.asarray(source.image_size)
+    if not (source.frames >= 1 and K.shape == (3, 3) and np.isfinite(K).all() and K[0, 0] > 0 and K[1, 1] > 0
+            and size.shape == (2,) and (size > 0).all()):
+        focal = (f"focal lengths {K[0, 0]:g} and {K[1, 1]:g} px" if K.shape == (3, 3)
+                 else f"intrinsics of shape {K.shape}")
+        raise ArtefactError(npz, f"says its points came from a depth camera ({source.kind}) but holds no usable "
+                                 f"camera: {source.frames} frames, {focal}, image {size.ravel().tolist()} px")
 
 
 def _is_unit_vector(value) -> bool:

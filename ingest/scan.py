@@ -53,7 +53,7 @@ def ingest_sides(input: Path | None, options: list[IngestOptions]) -> list[Scan]
         from .pipeline import frames_body
 
         cloud, body_of = None, lambda up, c: frames_body(depth, c)  # noqa: E731
-        source = _depth_source(depth, "recording" if input is not None else "device")
+        source = depth_source(depth, "recording" if input is not None else "device")
     else:
         cloud = read_scan_file(input, first.units)
         from .pipeline import cloud_body
@@ -90,7 +90,8 @@ def _clock(ms: dict) -> Clock:
     return clock
 
 
-def _depth_source(depth: DepthFrames, kind: str) -> Source:
+def depth_source(depth: DepthFrames, kind: str = "recording") -> Source:
+    """The `Source` of depth frames: their kind ("recording" or "device"), description, count, intrinsics and size."""
     return Source(kind, depth.source, int(depth.depth.shape[0]), depth.K, np.array(depth.size))
 
 

@@ -14,7 +14,7 @@ import pytest
 from breastplan import Primitive, read_ply, to_mm, transform_points, write_ply
 from breastplan.deform.global_deformations import Deformation
 from breastplan.deform.names import DEFORMATION_PARAMS, PLAUSIBLE, at_bounds
-from breastplan.case import Case, sha256
+from breastplan.case import Case, Source, sha256
 from breastplan.chest_wall import ChestWall
 from breastplan.fitting.breast_fit import MESH_GRID, fit_breast
 from breastplan.meshes import mesh_volume
@@ -318,10 +318,18 @@ def test_fit_command_writes_the_artefacts_it_reports(cli, case):
     ("chest_wall", ChestWall(np.zeros(6), 3, np.zeros(2), 1.0),
      "'chest_wall' whose coefficients do not match its degree"),
     ("input_to_view", np.diag([1.0, 1.0, 0.0, 1.0]), "'view_from_camera' that is not a rigid transform"),
+    ("source", Source("hologram", "examples/sample.mcap", 8, np.eye(3), np.array([640, 400])),
+     "names its source 'hologram', not one of recording, device, file"),
+    ("source", Source("recording", "examples/sample.mcap", 8, np.diag([-500.0, 500.0, 1.0]), np.array([640, 400])),
+     "holds no usable camera: 8 frames, focal lengths -500 and 500 px"),
+    ("source", Source("recording", "examples/sample.mcap", 0, np.diag([500.0, 500.0, 1.0]), np.array([640, 400])),
+     "holds no usable camera: 0 frames"),
 ])
 def test_fit_of_a_case_whose_chest_wall_or_frames_are_damaged_is_bad_input(cli, case, tmp_path, field, value, words):
-    """Truth: the fit evaluates the case's chest wall and inverts its transforms; a scan.npz that
-    cannot give them is named in one sentence, exit 3, and no fit is written."""
+    """Truth: the fit evaluates the case's chest wall and inverts its transforms, and a plan draws her skin and says
+    how far the camera stood from what scan.npz says of its source; a scan.npz that cannot give them (or names a
+    source no scan comes from, or a depth camera without a camera) is named in one sentence, exit 3, and no fit is
+    written."""
     import dataclasses
     import shutil
 

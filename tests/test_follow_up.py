@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from breastplan import BadInputError, transform_points
-from breastplan.case import Provenance, Source
+from breastplan.case import Provenance
 from breastplan.fitting.breast_fit import fit_scan
 from breastplan.scenes import synthetic
 from breastplan.ingest.follow_up import carried_wall, chest_around_breast
@@ -39,9 +39,9 @@ def scene_and_scan(cup: float, camera: str, side: str = "left", view: int = 0):
 
 
 def _scan(frames: DepthFrames, side: str):
-    from breastplan.ingest.scan import scan_record
+    from breastplan.ingest.scan import depth_source, scan_record
     options = IngestOptions(side=side)
-    return scan_record(ingest_frames(frames, options), Source("recording", "synthetic"), options, Provenance())
+    return scan_record(ingest_frames(frames, options), depth_source(frames), options, Provenance())
 
 
 @pytest.fixture(scope="module")
