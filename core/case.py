@@ -472,18 +472,17 @@ def _fit_problem(art, primitive: Primitive, mesh) -> str | None:
 
 def _check_source(npz: Path, source: Source) -> None:
     """ArtefactError unless `source` is one SOURCE_KINDS names and, from a depth camera, holds the camera: at
-    least one frame, finite intrinsics with positive focal lengths and a positive image size."""
+    least one frame, positive focal lengths and a positive image size (their shapes and finiteness are
+    _SCAN_SPEC's)."""
     if source.kind not in SOURCE_KINDS:
         raise ArtefactError(npz, f"names its source '{source.kind}', not one of {', '.join(SOURCE_KINDS)}")
     if source.kind == "file":
         return
-    K, size = np.asarray(source.K, float), np.asarray(source.image_size)
-    if not (source.frames >= 1 and K.shape == (3, 3) and np.isfinite(K).all() and K[0, 0] > 0 and K[1, 1] > 0
-            and size.shape == (2,) and (size > 0).all()):
-        focal = (f"focal lengths {K[0, 0]:g} and {K[1, 1]:g} px" if K.shape == (3, 3)
-                 else f"intrinsics of shape {K.shape}")
+    K, size = source.K, source.image_size
+    if not (source.frames >= 1 and K[0, 0] > 0 and K[1, 1] > 0 and (size > 0).all()):
         raise ArtefactError(npz, f"says its points came from a depth camera ({source.kind}) but holds no usable "
-                                 f"camera: {source.frames} frames, {focal}, image {size.ravel().tolist()} px")
+                                 f"camera: {source.frames} frames, focal lengths {K[0, 0]:g} and {K[1, 1]:g} px, "
+                                 f"image {size.tolist()} px")
 
 
 def _is_unit_vector(value) -> bool:
