@@ -12,9 +12,9 @@ two seeded shuffles): the same points, so any spread would be the fit's own doin
 its points in canonical order (`breastplan.point_order`) and solves on subsets chosen by their positions, so
 the spread is 0 (it was 2–3 % at the median, up to 9.5 % worst, when the subsets were drawn by the caller's
 indices). And with its coordinates moved in their last bits (another machine's rounding upstream of the fit,
-docs/realistic.md): the subsets are the same, and what moves is the solver's own path. Cases: 4 MakeHuman bodies of
-bench_realistic's pairs (cup 0.3 and 0.2, firmness 0
-of cup 0.7 and 0.9) in one view each, both sides; baseline: 2 Chen torsos in the same run.
+docs/realistic.md): the subsets are the same, and what moves is the solver's own path. Cases: 4 MakeHuman
+bodies of bench_realistic's pairs (cup 0.3 and 0.2, firmness 0 of cup 0.7 and 0.9) in one view each, both
+sides; baseline: 2 Chen torsos in the same run.
 
 Nothing is asserted and there is no target; the last three lines are the JSON summaries.
 
@@ -82,28 +82,30 @@ def spread_pct(volumes: list[float]) -> float:
     return 100.0 * (max(volumes) - min(volumes)) / statistics.mean(volumes)
 
 
+def refitted_volumes(ingested: Ingested, variants) -> list[float]:
+    """Fitted volumes (cc) of the same breast with each of `variants`, dicts of the fields it replaces (its points,
+    and its normals with them)."""
+    volumes = []
+    for fields in variants:
+        with threadpool_limits(1, "blas"):
+            volumes.append(fit_scan(dataclasses.replace(ingested, **fields)).volume_cc)
+    return volumes
+
+
 def reordered_volumes(ingested: Ingested) -> list[float]:
     """Fitted volumes (cc) of the same breast with its points reversed and in two seeded shuffles."""
     n = len(ingested.points)
     orders = (np.arange(n)[::-1],) + tuple(np.random.default_rng(seed).permutation(n) for seed in (1, 2))
-    volumes = []
-    for order in orders:
-        reordered = dataclasses.replace(ingested, points=np.ascontiguousarray(ingested.points[order]),
-                                        normals=np.ascontiguousarray(ingested.normals[order]))
-        with threadpool_limits(1, "blas"):
-            volumes.append(fit_scan(reordered).volume_cc)
-    return volumes
+    return refitted_volumes(ingested, [{"points": np.ascontiguousarray(ingested.points[order]),
+                                        "normals": np.ascontiguousarray(ingested.normals[order])} for order in orders])
 
 
 def nudged_volumes(ingested: Ingested) -> list[float]:
     """Fitted volumes (cc) of the same breast with each coordinate moved in its last bits (a relative
     NUDGE, seeded): what another machine's rounding upstream of the fit does to its points."""
-    volumes = []
-    for seed in NUDGE_SEEDS:
-        moved = ingested.points * (1.0 + NUDGE * np.random.default_rng(seed).standard_normal(ingested.points.shape))
-        with threadpool_limits(1, "blas"):
-            volumes.append(fit_scan(dataclasses.replace(ingested, points=moved)).volume_cc)
-    return volumes
+    p = ingested.points
+    nudges = (NUDGE * np.random.default_rng(seed).standard_normal(p.shape) for seed in NUDGE_SEEDS)
+    return refitted_volumes(ingested, [{"points": p * (1.0 + nudge)} for nudge in nudges])
 
 
 def shifted_fits(points: np.ndarray, side: str) -> dict:
@@ -138,8 +140,7 @@ def main() -> None:
                       f"shifts (mm): {', '.join(str(s) for s in SHIFTS_MM)}; spread (max − min) / mean; wall "
                       "offsets: the chest wall's mean depth around the nipple against the unshifted one; point "
                       "orders: as ingested, reversed, two shuffles (unshifted); last bits: the unshifted points as "
-                      "ingested "
-                      f"and each coordinate × (1 + {NUDGE:g}·N(0, 1)), {len(NUDGE_SEEDS)} seeds.")
+                      f"ingested and each coordinate × (1 + {NUDGE:g}·N(0, 1)), {len(NUDGE_SEEDS)} seeds.")
     for r in rows:
         table.add_row(r["case"], r["side"], " ".join(f"{v:.0f}" for v in r["volumes_cc"]), f"{r['spread_pct']:.1f} %",
                       " ".join(f"{w:+.1f}" for w in r["wall_offsets_mm"]),
