@@ -19,6 +19,7 @@ from scipy.spatial import Delaunay
 
 from breastplan import transform_points
 from breastplan.ingest.cloud import voxel_colours, voxel_downsample
+from breastplan.point_order import in_caller_order
 
 from .measures import midline_profile
 from .result import Plan
@@ -115,8 +116,8 @@ def build_views(plan: Plan) -> Views:
     still_in, patch_in = torso_in[~near], torso_in[near]
     show = lambda p: transform_points(to_display, p)  # noqa: E731
     meshes = {s: (show(sp.surface_input), sp.fit.faces) for s, sp in plan.sides.items()}
-    at = np.empty(len(torso_in), np.int64)                 # each torso point's index among the drawn
-    at[np.concatenate([np.flatnonzero(~near), np.flatnonzero(near)])] = np.arange(len(torso_in))
+    drawn_order = np.concatenate([np.flatnonzero(~near), np.flatnonzero(near)])   # still, then patch
+    at = in_caller_order(drawn_order, np.arange(len(torso_in)))                   # each torso point among the drawn
     nipples = np.array([sp.scan.nipple_camera_mm for sp in plan.sides.values()])
     ahead = FOOTPRINT_LIFT_MM * plan.volumes.landmarks.anterior_axis
     footprints = {s: v.footprint_input_mm + ahead for s, v in plan.volumes.sides.items()}
