@@ -10,9 +10,12 @@ sternal notch the origin):
    down (the lower pole and the nipple rise whole, which is what tightens the lower pole against the fold) and falls
    to 0 at the footprint's upper border with a C² step (the upper chest stays). The fold rises with the breast.
 3. **Volume kept**: the raised heights are then scaled so that her volume on her skin is as before, exactly.
-4. **Her skin moved**: each point of her skin moves up by δ · w where it lies, and forward or back by the change of
-   the surface's height between its old place and its new one, so that the areola travels with the nipple (that
-   move fading where her skin turns from ahead, STEEP_FADE).
+4. **Her skin moved**: each point of her skin moves up by δ · w · f where it lies, and forward or back by the change
+   of the surface's height between its old place and its new one, so that the areola travels with the nipple (that
+   move fading where her skin, before or after, turns from ahead, STEEP_FADE). f rises from 0 at her footprint's
+   border to 1 at her areola with a C² step, so that her skin is drawn whole: the skin at the footprint's border stays
+   where the chest beyond it does, and the lower pole's skin stretches over the band the breast rose from, landing on
+   the planned surface there.
 
 A target at or below her nipple, or more than MAX_RISE of the way from her nipple to her footprint's upper border
 (beyond what a lift can reach: above it her breast has no skin left to bring), is refused in a sentence.
@@ -22,19 +25,25 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy import ndimage
 
 from breastplan import BadInputError, transform_points
 
-from .breast_volume import BreastVolumes
+from .breast_volume import CELL_MM, BreastVolumes, SkinCells
 from .skin_lift import SkinLift, facing, scaled, up_the_breast
 from .surface import smoothstep
 
 STEEP_FADE = 2.0
-"""Her skin's move forward or back is scaled by min(1, STEEP_FADE · cos² of its tilt from ahead) (`skin_lift.facing`):
-whole up to 45°, fading to none on skin seen edge-on. At the side of her breast a height field holds her skin poorly,
-and a point risen a few millimetres would otherwise take a height tens of millimetres away, into her or out of her."""
+"""Her skin's move forward or back is scaled by min(1, STEEP_FADE · cos² of its tilt from ahead) (`skin_lift.facing`),
+where it lies or where it rises to, whichever is steeper: whole up to 45°, fading to none on skin seen edge-on. At the
+side of her breast a height field holds her skin poorly, and a point risen a few millimetres would otherwise take a
+height tens of millimetres away, into her or out of her."""
 MAX_RISE = 0.6
 """A lift raises the nipple at most this share of the way to her footprint's upper border above it."""
+FADE_MM = 15.0
+"""The least distance inside her footprint's border over which her skin's rise fades to none (mm)."""
+AREOLA_MM = 15.0
+"""Her skin within this distance of the nipple rises with it whole (mm)."""
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -44,7 +53,7 @@ class Mastopexy(SkinLift):
 
     side: str
     rise_mm: float                   # δ: the nipple's rise
-    weight: np.ndarray               # (nx, ny) w
+    weight: np.ndarray               # (nx, ny) w · f: how much of δ her skin rises by over the cells
     height_mm: np.ndarray            # (nx, ny) her skin's heights above the wall before
     wall_mm: np.ndarray              # (nx, ny)
 
@@ -56,7 +65,9 @@ class Mastopexy(SkinLift):
         moved = body[:, :2] + np.column_stack([np.zeros_like(up), up])
         surface = self.wall_mm + self.height_mm
         forward = (self.sampled(surface + self.lift_mm, moved, "nearest") - self.sampled(surface, body, "nearest"))
-        forward *= self.sampled(np.minimum(1.0, STEEP_FADE * facing(surface)), body, "nearest")
+        steep = [self.sampled(np.minimum(1.0, STEEP_FADE * facing(s)), at, "nearest")
+                 for s, at in ((surface, body), (surface + self.lift_mm, moved))]
+        forward *= np.minimum(*steep)
         return np.column_stack([np.zeros_like(up), up, forward * (up > 0)]) @ T[:3, :3]   # body → input frame
 
 
@@ -66,6 +77,14 @@ def carried_up(height_mm: np.ndarray, y_mm: np.ndarray, rise_mm: np.ndarray) -> 
     points move (the map y → y + rise made monotone where a steep fall of the rise would fold it)."""
     to = np.maximum.accumulate(y_mm[None, :] + rise_mm, axis=1)
     return np.stack([np.interp(y_mm, to[i], height_mm[i]) for i in range(len(height_mm))])   # per column
+
+
+def _inside(cells: SkinCells, mask: np.ndarray, nipple_body) -> np.ndarray:
+    """(nx, ny) f over the cells: 0 at the border of the footprint `mask`, rising to 1 with a C² step over the distance
+    from the border to AREOLA_MM short of the nipple ((3,) body frame), FADE_MM at least: her areola rises whole."""
+    inside = (ndimage.distance_transform_edt(mask) - 0.5) * CELL_MM          # mm from the border, at cell centres
+    nipple = inside[np.argmin(np.abs(cells.x - nipple_body[0])), np.argmin(np.abs(cells.y - nipple_body[1]))]
+    return np.where(mask, smoothstep(1.0 - inside / max(FADE_MM, nipple - AREOLA_MM)), 0.0)
 
 
 def nipple_height(nipple_body, *, above_fold_mm: float | None = None, fold_below_nipple_mm: float | None = None,
@@ -127,5 +146,6 @@ def mastopexy(volumes: BreastVolumes, side: str, nipple_mm, height_mm: float) ->
     change = np.where(mask, raised - cells.height_mm, 0.0)
     after = replace(cells, height_mm=cells.height_mm + change)
     kept = scaled(after, side, np.where(mask, raised, 0.0), mask, cells.volume_cc(side) - after.volume_cc(side))
-    return Mastopexy(cells.x, cells.y, change + kept, mask, T, side=side, rise_mm=rise, weight=weight,
+    return Mastopexy(cells.x, cells.y, change + kept, mask, T, side=side, rise_mm=rise,
+                     weight=weight * _inside(cells, mask, nipple),
                      height_mm=cells.height_mm, wall_mm=cells.wall_mm)

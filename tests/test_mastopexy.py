@@ -1,14 +1,16 @@
 """Lift (`plan.mastopexy`) on a MakeHuman patient whose breasts hang unequally (MakeHuman's asymmetry target),
 scanned as a clinic scans her, against truths stated here: her volume on her skin is kept; her nipple comes to
 the height asked (her other nipple's, or a distance from her sternal notch as lifted); her areola travels with it;
-her other breast and her chest above the breast stay; the lifted nipple stands as far in front of her as her other
-one; a lift no breast allows is refused in a sentence; the heights carried up are the heights the skin had."""
+her other breast and her chest above the breast stay; her skin is drawn whole and her footprint's outline stays;
+the lifted nipple stands as far in front of her as her other one; a lift no breast allows is refused in a sentence;
+the heights carried up are the heights the skin had."""
 from __future__ import annotations
 
 from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from test_breast_volume import measured, scanned
 
@@ -61,6 +63,23 @@ def test_no_point_of_her_skin_moves_more_than_twice_her_nipples_rise(rise):
     for side in ("left", "right"):
         lifted = mastopexy(m, side, nipples[side], body[side][1] + rise)
         assert np.linalg.norm(lifted.displacement(torso), axis=1).max() <= 2.0 * rise, side
+
+
+@pytest.mark.parametrize("rise", [30.0, 50.0])
+def test_her_lifted_skin_is_drawn_whole_and_her_footprints_outline_stays(rise):
+    """Her skin is drawn as moved: a torn skin is two points a few mm apart, one risen with her breast and one left
+    with her chest (they moved the whole rise apart, at her footprint's border and at the steep side of her breast).
+    Whole, neighbours move apart by a share of the rise as her skin stretches over the band her breast rose from;
+    the outline her volume is measured inside stays on her chest."""
+    torso, nipples, m, body = _her()
+    at = transform_points(m.body_from_input, torso)
+    pairs = cKDTree(at).query_pairs(4.0, output_type="ndarray")
+    for side in ("left", "right"):
+        lifted = mastopexy(m, side, nipples[side], body[side][1] + rise)
+        moved = lifted.displacement(torso)
+        assert np.linalg.norm(moved[pairs[:, 0]] - moved[pairs[:, 1]], axis=1).max() <= 0.6 * rise, side
+        outline = m.sides[side].footprint_input_mm
+        assert np.linalg.norm(lifted.displacement(outline), axis=1).max() <= 0.2 * rise, side
 
 
 def test_a_lift_to_a_distance_from_her_sternal_notch_reaches_it_as_lifted():
