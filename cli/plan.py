@@ -249,7 +249,7 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
     for s, op in plan.operated_shown:
         stdout.print(f"{s} operated: {', '.join(op.texts) or 'nothing proposed'}; her volume "
                      f"{op.volume_before_cc:.1f} → {op.volume_cc:.1f} cc on her skin, her nipple moved "
-                     f"{op.nipple_moved_mm:.0f} mm", markup=False, soft_wrap=True)
+                     f"{op.nipple_moved_mm:.0f} mm ({op.nipple_move_words})", markup=False, soft_wrap=True)
         for words in said(op, m):
             stdout.print(f"{s}: {words}", markup=False, soft_wrap=True)
     if m.symmetry["before"]:

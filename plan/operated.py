@@ -74,6 +74,24 @@ class Operated:
         """How far the operations move her nipple (mm)."""
         return float(np.linalg.norm(self.nipple_mm - self.nipple_before_mm))
 
+    @property
+    def nipple_move(self) -> dict[str, float]:
+        """The operations' move of her nipple in her body frame (mm): `up`, `forward` and `outward` (away from her
+        midline; < 0: down, back, towards it)."""
+        if not self.made:
+            return {"up": 0.0, "forward": 0.0, "outward": 0.0}
+        x, y, z = self.made[0].body_from_input[:3, :3] @ (self.nipple_mm - self.nipple_before_mm)
+        return {"up": float(y), "forward": float(z), "outward": float(x if self.side == "left" else -x)}
+
+    @property
+    def nipple_move_words(self) -> str:
+        """Her nipple's move in words, each direction of 1 mm or more, largest first ("62 mm up, 3 mm forward");
+        "under 1 mm" when it moves less in every direction."""
+        names = {"up": ("up", "down"), "forward": ("forward", "back"), "outward": ("outward", "towards her midline")}
+        parts = sorted(((abs(v), names[k][v < 0]) for k, v in self.nipple_move.items() if abs(v) >= 1.0),
+                       reverse=True)
+        return ", ".join(f"{v:.0f} mm {w}" for v, w in parts) or "under 1 mm"
+
     def as_dict(self) -> dict:
         """plan.json's record of the operations: each as written, her volume and nipple before and after."""
         return {"operations": [{"written": spec.text, "kind": spec.kind, **spec.settings,
@@ -82,7 +100,9 @@ class Operated:
                 "volume_before_cc": round(self.volume_before_cc, 1), "volume_after_cc": round(self.volume_cc, 1),
                 "volume_change_cc": round(self.volume_cc - self.volume_before_cc, 1),
                 "nipple_after_input_mm": [round(float(v), 2) for v in self.nipple_mm],
-                "nipple_moved_mm": round(self.nipple_moved_mm, 1), "warnings": list(self.warnings),
+                "nipple_moved_mm": round(self.nipple_moved_mm, 1),
+                "nipple_move_mm": {k: round(v, 1) for k, v in self.nipple_move.items()},
+                "warnings": list(self.warnings),
                 "note": "; ".join(self.notes) or None}
 
 

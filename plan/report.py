@@ -333,16 +333,16 @@ def tables(plan: Plan) -> str:
 
 def _operations_table(plan: Plan) -> str:
     """Each operated side's operations in a surgeon's words, in the order made, her volume on her skin before and
-    after them, how far her nipple moves, and what the plan warns of; "" without operations."""
+    after them, how far and which way her nipple moves, and what the plan warns of; "" without operations."""
     if not plan.operated:
         return ""
     rows = [[f"her {s}", op.words or "none proposed",
-             f"{op.volume_before_cc:.0f} → {op.volume_cc:.0f}", round(op.nipple_moved_mm, 1),
+             f"{op.volume_before_cc:.0f} → {op.volume_cc:.0f}", op.nipple_move_words,
              " ".join(said(op, plan.measures)) or "—"] for s, op in plan.operated_shown]
     after = ("Every state shown is after them: the changes by degree start from her breasts as operated."
              if plan.grid.kinds else "")
     return ('<section id="operations"><h2>Operations planned</h2>' + _table(
-        ["breast", "operations, in the order made", "her volume cc", "her nipple moves mm", "warnings and notes"], rows,
+        ["breast", "operations, in the order made", "her volume cc", "her nipple moves", "warnings and notes"], rows,
         "operations") + (f"<p>{after}</p>" if after else "") + "</section>")
 
 

@@ -7,6 +7,7 @@ before anything is written."""
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -75,6 +76,13 @@ def test_an_implant_adds_its_volume_and_a_resection_takes_its_own_each_on_its_si
     left_move = np.array(moved_left) - np.array(plan["sides"]["left"]["nipple_input_mm"])
     assert left_move @ ahead > 10.0                                         # the implant brings her nipple forward
     assert np.linalg.norm(np.array(moved_right) - plan["sides"]["right"]["nipple_input_mm"]) < 40.0
+    # which way it moves, in her body's axes (towards her left, up, ahead: the plan's landmarks)
+    said = plan["sides"]["left"]["operations"]["nipple_move_mm"]
+    assert [said["outward"], said["up"], said["forward"]] == pytest.approx(
+        [left_move @ landmarks["left_axis"], left_move @ landmarks["up_axis"], left_move @ ahead], abs=0.1)
+    right = plan["sides"]["right"]["operations"]
+    assert right["nipple_move_mm"]["forward"] < 0.0                        # a resection sinks her skin
+    assert np.linalg.norm(list(right["nipple_move_mm"].values())) == pytest.approx(right["nipple_moved_mm"], abs=0.2)
     scanned = np.asarray(read_ply(patient / "both" / "left" / "camera.ply").points, float)   # her torso as scanned
     assert len(scanned) == len(still)
     # the skin drawn carries most of each volume: of the implant's, what lies under her hanging breast (a quarter on
@@ -114,6 +122,7 @@ def test_symmetrising_lifts_her_lower_nipple_to_the_others_height(cli, patient):
     done = plan["sides"][low]["operations"]
     assert [o["kind"] for o in done["operations"]] == ["lift"]
     assert np.array(done["nipple_after_input_mm"]) @ up == pytest.approx(height[high], abs=1.0)
+    assert done["nipple_move_mm"]["up"] == pytest.approx(height[high] - height[low], abs=1.0)
     assert done["volume_after_cc"] == pytest.approx(done["volume_before_cc"], abs=0.1)
     asym = plan["measures"]["asymmetry"]
     assert abs(asym["after"]["nipple_below_notch_mm"]) < abs(asym["before"]["nipple_below_notch_mm"])
@@ -164,6 +173,7 @@ def test_the_report_names_the_operations_and_returns_to_them_from_the_original(c
         rows = d.execute_script("return [...document.querySelectorAll('table.operations tbody tr')]"
                                 ".map(r => r.innerText)")
         assert len(rows) == 2 and rows[0].startswith("her right\ta lift") and "an implant of 250 cc" in rows[1]
+        assert re.search(r"\t\d+ mm up", rows[0]) and re.search(r"\t\d+ mm forward", rows[1])   # which way it moves
         assert d.execute_script("return window.breastplanState") == "operated"
         assert d.execute_script("return document.querySelectorAll('#sliders input').length") == 0
         operated = np.array(d.execute_script("return " + NIPPLES))
