@@ -96,6 +96,30 @@ def outer_words(plan: Plan) -> list[str]:
             f"reach all the way round it: as scanned, it may hold about {said}."]
 
 
+SAID_CC = 5.0
+"""A state says how much its changes by degree change a breast's volume from this much on (cc)."""
+
+
+def volume_said(plan: Plan, i: int) -> list[str]:
+    """How much slider state i's changes by degree change each breast's volume, against every slider off (after the
+    operations, if any), and what that asks for: a change of shape that makes a breast larger asks for volume (an
+    implant, a graft) that the shape alone does not give, one that makes it smaller for a resection. Nothing where no
+    breast changes by SAID_CC."""
+    grid = plan.grid
+    off = grid.index((OFF,) * len(grid.kinds))
+    by = {s: float(grid.measures[s]["volume_cc"][i] - grid.measures[s]["volume_cc"][off])
+          for s in plan.shown_sides}
+    if all(abs(v) < SAID_CC for v in by.values()):
+        return []
+    adds, takes = any(v >= SAID_CC for v in by.values()), any(v <= -SAID_CC for v in by.values())
+    alone = ("neither adds nor takes volume: that takes an implant or a fat graft, or a resection" if adds and takes
+             else "adds no volume: that takes an implant or a fat graft" if adds
+             else "takes no volume away: that takes a resection")
+    return ["these changes make " + " and ".join(f"her {s} breast {abs(v):.0f} cc {'larger' if v > 0 else 'smaller'}"
+                                                for s, v in by.items())
+            + f" (a change of shape alone {alone})"]
+
+
 def draw_rows(pen: ImageDraw.ImageDraw, rows: list[tuple[str, ...]], at: tuple[int, int], face, step: int) -> None:
     """Draw `rows` of text as a table from `at` (px), `step` px apart: each column as wide as its widest cell
     and a gap; the first row (the head) grey."""
@@ -156,15 +180,23 @@ def _pictures_page(plan: Plan, shots: dict) -> Image.Image:
     return page
 
 
+def measure_notes(plan: Plan) -> tuple[str, ...]:
+    """The notes under the handout's measures: how volumes and lengths are measured, which side is which, what her
+    scan leaves unseen (`outer_words`) and what volume the changes as planned ask for (`volume_said`)."""
+    return ("Volumes are measured on the scan of her skin, down to the chest wall beneath each breast; the ± is how "
+            "far a new scan may read.",
+            "Lengths are straight lines between points of her skin, in millimetres.",
+            "Her right breast is on the left of a picture from the front, as someone facing her sees it.",
+            *outer_words(plan),
+            *([f"As planned, {words}." for words in volume_said(plan, plan.grid.planned_index)] if plan.grid.kinds
+              else []))
+
+
 def _measures_page(plan: Plan) -> Image.Image:
     page, pen = _page(plan, "The measures, before and as planned")
     top, rows = MARGIN_PX + 160, measure_rows(plan)
     draw_rows(pen, rows, (MARGIN_PX, top), font(26), 48)
-    notes = (("Volumes are measured on the scan of her skin, down to the chest wall beneath each breast; the ± is "
-              "how far a new scan may read."),
-             "Lengths are straight lines between points of her skin, in millimetres.",
-             "Her right breast is on the left of a picture from the front, as someone facing her sees it.",
-             *outer_words(plan))
+    notes = measure_notes(plan)
     lines = [line for note in notes for line in textwrap.wrap(note, WRAP_CHARS)]
     for i, line in enumerate(lines):
         pen.text((MARGIN_PX, top + 48 * (len(rows) + 1) + 36 * i), line, fill="#333333", font=font(22))

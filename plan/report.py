@@ -40,7 +40,7 @@ from breastplan.fitting.ffd import STOP_RESIDUAL
 
 from .breast_volume import model_differs_much
 from .changes import short_of
-from .handout import DISCLAIMER, PLAIN, outer_words, plain_value, state_words
+from .handout import DISCLAIMER, PLAIN, outer_words, plain_value, state_words, volume_said
 from .measures import asymmetry, measure_label
 from .pictures import FOLD, FOOTPRINT, LANDMARK, LIGHT, VIEWS, camera, picture, skin_colour
 from .result import OFF, OPERATED, Plan
@@ -174,25 +174,7 @@ def _state_said(plan: Plan, i: int) -> str:
     (the page adds where a breast stops short of a slider's degree, `_short`)."""
     grid = plan.grid
     return (state_words(grid, i) + (" (after the operations)" if plan.operated and grid.kinds else "")
-            + "".join(f"; {words}" for words in _volume_said(plan, i)))
-
-
-SAID_CC = 5.0
-"""A state says how much its changes by degree change a breast's volume from this much on (cc)."""
-
-
-def _volume_said(plan: Plan, i: int) -> list[str]:
-    """How much slider state i's changes by degree change each breast's volume, against every slider off (after the
-    operations, if any): a change of shape that makes a breast larger asks for volume (an implant, a graft) that
-    the shape alone does not give. Nothing where no breast changes by SAID_CC."""
-    grid = plan.grid
-    off = grid.index((OFF,) * len(grid.kinds))
-    by = {s: float(grid.measures[s]["volume_cc"][i] - grid.measures[s]["volume_cc"][off])
-          for s in plan.shown_sides}
-    if all(abs(v) < SAID_CC for v in by.values()):
-        return []
-    return ["these changes make " + " and ".join(f"her {s} breast {abs(v):.0f} cc {'larger' if v > 0 else 'smaller'}"
-                                                for s, v in by.items())]
+            + "".join(f"; {words}" for words in volume_said(plan, i)))
 
 
 def _found_marks(views: Views) -> np.ndarray:
@@ -468,7 +450,7 @@ td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4p
 <div><b>Colour</b><br><button id="colour-skin" class="on">Her skin</button><button id="colour-moved">Millimetres moved</button></div>
 <div><b>Compare</b><br><button id="beside">Before and as planned, side by side</button></div>
 <p id="state"></p>
-<p>Her skin as scanned, moved as the plan shown would move it (or coloured by how far each point moves). Seen from the side, her skin ends where the camera in front of her stopped seeing it, at her sides; beneath a breast that hangs, which the camera did not see, her skin is drawn straight from the breast's lower edge back to her chest. Red: the sternal notch, the midline and the nipples the measures start from. Blue: each breast's footprint, the outline her volume is measured inside. Purple: the fold beneath each breast (dotted where the breast hides it and its place is estimated). The legend shows each breast's scanned points and its fitted model on demand.</p>
+<p>Her skin as scanned, moved as the plan shown would move it (or coloured by how far each point moves). Seen from the side, her skin ends where the camera in front of her stopped seeing it, at her sides; beneath a breast that hangs, which the camera did not see, her skin is drawn straight from the breast's lower edge back to her chest. Red: the sternal notch, the midline and the nipples the measures start from. Blue: each breast's footprint, the outline her volume is measured inside. Purple: the fold beneath each breast, where no change moves it (dotted where the breast hides it and its place is estimated: on her chest behind the breast, seen from below or from her side). The legend shows each breast's scanned points and its fitted model on demand.</p>
 </div></main>
 <div id="tables">%TABLES%</div>
 <script>%SCRIPT%</script>

@@ -75,20 +75,21 @@ class Views:
     planned_meshes: dict[str, np.ndarray] | None = None   # side → (S, V, 3) float32 the planned breast in each state
     skin_rgb: np.ndarray | None = None  # (T + P, 3) uint8 her skin's recorded colour at the torso then the patch's
                                         # points (the mean over each TORSO_MM cube); None: none was recorded
-    marks_moved: np.ndarray | None = None   # (S, M, 3) float32 the nipples, footprints and folds in each state
-                                            # of `Plan.grid` (her operations and changes applied), `mark_layout`
+    marks_moved: np.ndarray | None = None   # (S, M, 3) float32 the nipples and footprints in each state of
+                                            # `Plan.grid` (her operations and changes applied), `mark_layout`
     mark_layout: tuple = ()             # (name, side or None, start, stop) of each mark's rows in `marks_moved`
     operated_labels: dict | None = None  # side → (3,) where her side is named on her operated skin; None: no
                                          # operation
 
     def marks(self, state: State) -> dict:
         """What is drawn on her in `state`: "footprints", "folds", "side_labels" and "landmarks" (with the nipples),
-        as found on her skin as scanned, or moved as `state` moves her skin."""
+        as found on her skin as scanned, or moved as `state` moves her skin (her folds stay where they were found:
+        on her chest, where no change or operation moves them)."""
         found = {"footprints": self.footprints, "folds": self.folds, "side_labels": self.side_labels,
                  "landmarks": self.landmarks}
         if state.index is None:
             return found
-        moved = {"footprints": {}, "folds": {}, "side_labels": self.operated_labels or self.side_labels}
+        moved = {"footprints": {}, "folds": self.folds, "side_labels": self.operated_labels or self.side_labels}
         for name, side, a, b in self.mark_layout:
             points = self.marks_moved[state.index, a:b].astype(float)
             if side is None:
@@ -139,15 +140,14 @@ def build_views(plan: Plan) -> Views:
                                                                            nipples).items()},
                  folds={s: show(f) for s, f in folds.items()},
                  skin_rgb=None if rgb is None else np.concatenate([rgb[~near], rgb[near]]),
-                 **_marks_in_states(plan, to_display, nipples, footprints, folds),
+                 **_marks_in_states(plan, to_display, nipples, footprints),
                  operated_labels=_operated_labels(plan, show, nipples) if plan.operated else None)
 
 
-def _marks_in_states(plan: Plan, to_display: np.ndarray, nipples: np.ndarray, footprints: dict, folds: dict) -> dict:
-    """`Views.marks_moved` and `mark_layout`: her nipples ((sides, 3)), footprints and folds (side → (K, 3)), input
-    frame, moved as her skin is in each state of `Plan.grid`."""
-    parts = [("nipples", None, nipples), *(("footprints", s, f) for s, f in footprints.items()),
-             *(("folds", s, f) for s, f in folds.items())]
+def _marks_in_states(plan: Plan, to_display: np.ndarray, nipples: np.ndarray, footprints: dict) -> dict:
+    """`Views.marks_moved` and `mark_layout`: her nipples ((sides, 3)) and footprints (side → (K, 3)), input frame,
+    moved as her skin is in each state of `Plan.grid`."""
+    parts = [("nipples", None, nipples), *(("footprints", s, f) for s, f in footprints.items())]
     ends = np.cumsum([len(p) for *_, p in parts])
     layout = tuple((name, side, int(b - len(p)), int(b)) for (name, side, p), b in zip(parts, ends))
     return {"marks_moved": _moved(plan, np.concatenate([p for *_, p in parts]), to_display), "mark_layout": layout}
@@ -280,20 +280,23 @@ FOLD_HALF_MM = 30.0
 
 def _folds(plan: Plan) -> dict[str, np.ndarray]:
     """Side → (K, 3) a short line along the fold under the breast as the measures place it (body frame: at the
-    height `nipple_to_fold_mm` below the nipple, on her skin, else the wall), input frame; none where the
-    ptosis measure found no fold."""
+    height `nipple_to_fold_mm` below the nipple, on her skin where the fold was seen, on the chest wall behind her
+    breast where it hides the fold and its place was estimated), input frame; none where the ptosis measure found
+    no fold."""
     v = plan.volumes
     cells, to_input = v.cells, np.linalg.inv(v.body_from_input)
     out = {}
     for s, sp in plan.sides.items():
-        below = plan.measures.ptosis["before"][s].get("nipple_to_fold_mm")
+        ptosis = plan.measures.ptosis["before"][s]
+        below = ptosis.get("nipple_to_fold_mm")
         if below is None or not np.isfinite(below):
             continue
         nipple = transform_points(v.body_from_input, sp.scan.nipple_camera_mm[None])[0]
         x = nipple[0] + np.linspace(-FOLD_HALF_MM, FOLD_HALF_MM, 13)
         i = np.clip(np.searchsorted(cells.x, x), 0, len(cells.x) - 1)
         j = np.clip(np.searchsorted(cells.y, nipple[1] - below), 0, len(cells.y) - 1)
-        front = cells.wall_mm[i, j] + np.clip(cells.height_mm[i, j], 0.0, None)
+        seen = ptosis["fold_from"] == "seen"
+        front = cells.wall_mm[i, j] + (np.clip(cells.height_mm[i, j], 0.0, None) if seen else 0.0)
         out[s] = transform_points(to_input, np.column_stack([x, np.full_like(x, nipple[1] - below), front]))
     return out
 

@@ -1089,6 +1089,31 @@ def test_the_report_draws_each_fold_where_nipple_to_fold_is_measured_to(planned)
         assert across.min() < -20.0 and across.max() > 20.0
 
 
+def test_a_fold_her_breast_hides_is_drawn_on_her_chest_behind_it_and_stays_there_in_every_state(computed):
+    """The sample's breasts hide their folds from the camera (their places estimated): each is drawn behind her skin
+    as scanned (her breast stands in front of it), not on her breast; and no change moves it: the fold lies on her
+    chest, at the height it was found."""
+    from breastplan.plan.views import build_views
+
+    views, ptosis = build_views(computed), computed.measures.ptosis["before"]
+    to_input = np.linalg.inv(VIEW_TO_DISPLAY @ computed.body.input_to_view)
+    marks, up = computed.volumes.landmarks, computed.volumes.landmarks.up_axis
+    ahead, left = marks.anterior_axis, marks.left_axis
+    torso = np.asarray(computed.body.torso_input, float)
+    across = np.column_stack([torso @ left, torso @ up])
+    for side, drawn in views.folds.items():
+        assert ptosis[side]["fold_from"] == "estimated"
+        checked = 0
+        for point in transform_points(to_input, drawn):
+            near = np.linalg.norm(across - [point @ left, point @ up], axis=1) < 5.0
+            if near.any():                                                 # her skin was seen in front of it
+                assert (torso[near] @ ahead).max() > point @ ahead + 10.0, side   # her breast stands in front of it
+                checked += 1
+        assert checked >= len(drawn) // 2, side
+        for key in views.keys:
+            assert np.array_equal(views.marks(views.state(key))["folds"][side], drawn)
+
+
 def test_a_side_whose_forked_fit_fails_is_fitted_by_the_plan_itself(planned, tmp_path, monkeypatch):
     """`plan` fits its second side in a forked child; a child that dies leaves that side to the plan, which
     fits it as one process would: the same fit as the command's (fit.npz, but its seconds)."""

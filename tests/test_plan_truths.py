@@ -266,6 +266,7 @@ def test_each_state_says_the_volume_its_changes_add_and_shears_add_none(sample):
     smaller, against every slider off: ptosis and turn are shears (their Jacobian's determinant is 1), so a state
     with top-shape off says nothing of volume; with top-shape on, the figures said are the reference model's
     change of each breast's volume (divergence theorem), where one reaches 5 cc."""
+    from breastplan.plan.handout import measure_notes
     from breastplan.plan.report import _state_said
 
     plan, _, _ = sample
@@ -281,7 +282,11 @@ def test_each_state_says_the_volume_its_changes_add_and_shears_add_none(sample):
         elif max(map(abs, grown.values())) >= 5.5:
             said = " and ".join(f"her {s} breast {abs(grown[s]):.0f} cc {'larger' if grown[s] > 0 else 'smaller'}"
                                 for s in ("right", "left"))
-            assert words.endswith("; these changes make " + said), (grid.keys[i], words)
+            assert "; these changes make " + said + " (a change of shape alone " in words, (grid.keys[i], words)
+            if min(grown.values()) >= 5.5:                            # both larger: the volume must come from somewhere
+                assert words.endswith("adds no volume: that takes an implant or a fat graft)"), (grid.keys[i], words)
+                if i == grid.planned_index:                             # and her handout says so
+                    assert f"As planned, {words.split('; ')[-1]}." in measure_notes(plan)
 
 
 # --- what is written ---------------------------------------------------------------------------
