@@ -26,7 +26,7 @@ from .operation_spec import OperationSpec
 from .result import COMBINED, OFF, OPERATED, Measures, Plan, PlanState, SidePlan, SkinChange, StateGrid, planned_states
 from .surface import PlannedChange
 from .symmetrising import symmetrising
-from .symmetry import bcct_measures, ptosis_from_cells
+from .symmetry import bcct_measures, fold_line, ptosis_from_cells
 
 
 def slider_degrees(requested: float) -> list[float]:
@@ -139,11 +139,12 @@ def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], option
     by_key = {st.key: st for st in states}
     changes, planned, models, measures = {}, {}, {}, {}
     for s, sp in sides.items():
+        fold = her_fold(volumes, sp)
         singles = [[by_key[change_name(k, d)].changes[s] for k, d in zip(kinds, combo) if d != OFF] for combo in combos]
         changes[s] = tuple(one[0] if len(one) == 1 else combine(one) if one else UNCHANGED for one in singles)
         planned[s] = tuple(PlannedChange.of(sp, c, operated.get(s)) for c in changes[s])
         moved = PlannedChange.models(planned[s], np.vstack([sp.surface_input, sp.scan.nipple_camera_mm]))
-        measures[s] = breast_measures_each(volumes.landmarks, moved[:, -1], moved[:, :-1], sp.fit.faces)
+        measures[s] = breast_measures_each(volumes.landmarks, moved[:, -1], moved[:, :-1], sp.fit.faces, fold_mm=fold)
         models[s] = moved[:, :-1].astype(np.float32)
         base, volume = fitted[s]["volume_cc"], volumes.sides[s].volume_cc
         if s in operated:
@@ -169,7 +170,15 @@ def poles_of_her_volume(measures: dict) -> dict:
 
 def _model_measures(volumes: BreastVolumes, sp: SidePlan) -> dict[str, float]:
     """A side's measures on its fitted breast as scanned (the volume the fitted model's)."""
-    return breast_measures(volumes.landmarks, sp.scan.nipple_camera_mm, sp.surface_input, sp.fit.faces)
+    return breast_measures(volumes.landmarks, sp.scan.nipple_camera_mm, sp.surface_input, sp.fit.faces,
+                           fold_mm=her_fold(volumes, sp))
+
+
+def her_fold(volumes: BreastVolumes, sp: SidePlan) -> np.ndarray | None:
+    """(3,) her fold under the side's nipple as found on her skin (`symmetry.fold_line`), input frame; None: none
+    found (the fitted model's base then stands for it)."""
+    line = fold_line(volumes, sp.scan.nipple_camera_mm, sp.side)
+    return None if line is None else line[0]
 
 
 def _state(sides: dict[str, SidePlan], key: str, kind, degree, changes: dict[str, Change],

@@ -260,11 +260,13 @@ def base_ring(faces, centre: int | None = None) -> np.ndarray:
     return ring[ring != c]
 
 
-def breast_measures(landmarks: BodyLandmarks, nipple_mm, vertices_mm, faces, base=None) -> dict[str, float]:
+def breast_measures(landmarks: BodyLandmarks, nipple_mm, vertices_mm, faces, base=None,
+                    fold_mm=None) -> dict[str, float]:
     """One breast's measures (MEASURES), input frame: lengths in mm, volumes in cc.
 
     nipple_mm (3,); vertices_mm (V, 3), faces (F, 3): the closed, outward-oriented breast mesh,
-    its base cap on the chest wall; base: indices of its base outline (default `base_ring(faces)`).
+    its base cap on the chest wall; base: indices of its base outline (default `base_ring(faces)`); fold_mm (3,):
+    her inframammary fold as found on her skin (`plan.symmetry.fold_line`; default: the base outline's lowest vertex).
 
     * volume_cc: volume the mesh encloses;
     * upper_pole_cc, lower_pole_cc: of it, above and below the horizontal plane (normal: up)
@@ -273,12 +275,13 @@ def breast_measures(landmarks: BodyLandmarks, nipple_mm, vertices_mm, faces, bas
     * notch_to_nipple_mm: chord from the sternal notch; nipple_below_notch_mm: the nipple's
       height below the notch along up;
     * nipple_to_midline_mm: distance from the mid-sagittal plane;
-    * nipple_to_fold_mm: chord to the inframammary fold, the lowest base vertex along up;
+    * nipple_to_fold_mm: chord to the inframammary fold (`fold_mm`, else the lowest base vertex along up);
     * width_mm: extent of the base outline along the left–right axis;
     * projection_mm: height of the nipple above the base plane (least squares through the base
       outline)."""
     V = _finite_points(vertices_mm, "the breast mesh")
-    out = breast_measures_each(landmarks, np.asarray(nipple_mm, dtype=float).reshape(1, 3), V[None], faces, base)
+    out = breast_measures_each(landmarks, np.asarray(nipple_mm, dtype=float).reshape(1, 3), V[None], faces, base,
+                               fold_mm)
     return {k: float(v[0]) for k, v in out.items()}
 
 
@@ -286,9 +289,11 @@ EACH_MESHES = 32
 """`breast_measures_each` measures this many meshes at a time (their triangles held at once)."""
 
 
-def breast_measures_each(landmarks: BodyLandmarks, nipples_mm, vertices_mm, faces, base=None) -> dict[str, np.ndarray]:
+def breast_measures_each(landmarks: BodyLandmarks, nipples_mm, vertices_mm, faces, base=None,
+                         fold_mm=None) -> dict[str, np.ndarray]:
     """`breast_measures` of S meshes sharing `faces` (one breast as several plans move it): nipples_mm (S, 3),
-    vertices_mm (S, V, 3); measure name → (S,)."""
+    vertices_mm (S, V, 3); measure name → (S,). A fold given (`fold_mm`, (3,)) is hers in every one: no change
+    moves it."""
     nipples, V = np.asarray(nipples_mm, dtype=float), np.asarray(vertices_mm, dtype=float)
     F = np.asarray(faces, dtype=np.int64)
     ring = V[:, base_ring(F) if base is None else np.asarray(base, dtype=np.int64)]          # (S, R, 3)
@@ -311,7 +316,8 @@ def breast_measures_each(landmarks: BodyLandmarks, nipples_mm, vertices_mm, face
     lower = volume - upper
     centroid = ring.mean(axis=1)
     normal = np.linalg.svd(ring - centroid[:, None], full_matrices=False)[2][:, -1]
-    fold = np.take_along_axis(ring, np.argmin(ring @ U, axis=1)[:, None, None], axis=1)[:, 0]
+    fold = (np.take_along_axis(ring, np.argmin(ring @ U, axis=1)[:, None, None], axis=1)[:, 0] if fold_mm is None
+            else np.asarray(fold_mm, dtype=float).reshape(1, 3))
     out = {
         "volume_cc": volume / 1000.0,
         "upper_pole_cc": upper / 1000.0,

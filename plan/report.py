@@ -330,18 +330,19 @@ def _operations_table(plan: Plan) -> str:
 
 def for_her(plan: Plan) -> str:
     """The main measures in plain words (`plan.handout.PLAIN`), before → as shown (the cells the page's script
-    updates as the state shown changes), what the camera did not see of her outer sides, the disclaimer and a
-    link to her handout."""
+    updates as the state shown changes; printed, as planned, as the poster printed above them shows her), what the
+    camera did not see of her outer sides, the disclaimer and a link to her handout."""
     m, sides = plan.measures, plan.shown_sides
-    head = "".join(f"<th>{html.escape(h)}</th>"
-                   for h in ["measure", *(f"her {s} breast: before → as shown" for s in sides)])
+    head = "".join(f"<th>{h}</th>" for h in ["measure", *(
+        f'her {s} breast: before → {_on_screen("as shown", "as planned")}' for s in sides)])
     body = ""
     for name, (words, unit) in PLAIN.items():
         cells = ""
         for s in sides:
             extra = f"  (± {plan.volumes.sides[s].uncertainty_cc:.0f})" if name == "volume_cc" else ""
-            cells += (f"<td>{plain_value(m.before[s].get(name))} → <span data-after=\"{s} {name}\" data-for-her>"
-                      f"{plain_value(m.after[s].get(name))}</span> {unit}{extra}</td>")
+            cells += (f"<td>{plain_value(m.before[s].get(name))} → "
+                      f"{_on_screen(plain_value(m.after[s].get(name)), data_after=f'{s} {name}', data_for_her='')} "
+                      f"{unit}{extra}</td>")
         body += f"<tr><td>{html.escape(words)}</td>{cells}</tr>"
     return ('<section id="for-her"><h2>For her</h2><table class="for-her"><thead><tr>' + head + "</tr></thead><tbody>"
             + body + "</tbody></table>"
@@ -352,24 +353,36 @@ def for_her(plan: Plan) -> str:
 
 def _measures_table(plan: Plan) -> str:
     """Each side's measures before and as shown, and their asymmetry, with where up came from; the page's
-    script updates the "as shown" cells as the state shown changes."""
+    script updates the "as shown" cells as the state shown changes (printed: as planned, as the poster above)."""
     sides, m = plan.shown_sides, plan.measures
-    head = ["measure"] + [f"{s} {w}" for s in sides for w in ("before", "as shown")]
+    shown = _on_screen("as shown", "as planned")
+    head = ["measure"] + [f"{s} {w}" for s in sides for w in ("before", shown)]
     if m.asymmetry:
-        head += ["asymmetry before", "asymmetry as shown"]
+        head += ["asymmetry before", f"asymmetry {shown}"]
     rows = ""
     for name in m.before[sides[0]]:
         cells = f"<td>{html.escape(measure_label(name))}</td>"
         for s in sides:
-            cells += f'<td>{figure(m.before[s][name])}</td><td data-after="{s} {name}">{figure(m.after[s][name])}</td>'
+            after = _on_screen(figure(m.after[s][name]), data_after=f"{s} {name}")
+            cells += f"<td>{figure(m.before[s][name])}</td><td>{after}</td>"
         if m.asymmetry:
             cells += (f'<td>{figure(m.asymmetry["before"][name])}</td>'
-                      f'<td data-asymmetry="{name}">{figure(m.asymmetry["after"][name])}</td>')
+                      f'<td>{_on_screen(figure(m.asymmetry["after"][name]), data_asymmetry=name)}</td>')
         rows += f"<tr>{cells}</tr>"
-    th = "".join(f"<th>{html.escape(h)}</th>" for h in head)
-    return (f'<h2>Measures (as shown: the state the view shows; as the page opens, the {_opening(plan)})</h2>'
+    th = "".join(f"<th>{h}</th>" for h in head)
+    title = _on_screen(f"as shown: the state the view shows; as the page opens, the {_opening(plan)}", "as planned")
+    return (f'<h2>Measures ({title})</h2>'
             f'<table class="measures"><thead><tr>{th}</tr></thead><tbody>{rows}</tbody></table>'
             f'<p id="up-from">{UP_FROM_TEXT[plan.volumes.landmarks.up_from]}</p>')
+
+
+def _on_screen(shown: str, printed: str | None = None, **data: str) -> str:
+    """HTML of `shown` on screen (the page's script may update it: `data` attributes such as data_after="left
+    volume_cc") and of `printed` in print, the page printed being her plan as planned (`printed` None: `shown` as the
+    page opens, which is the state planned). Both are HTML-escaped text."""
+    attributes = "".join(f' {k.replace("_", "-")}="{html.escape(v)}"' for k, v in data.items())
+    return (f'<span class="on-screen"{attributes}>{html.escape(shown)}</span>'
+            f'<span class="as-planned">{html.escape(shown if printed is None else printed)}</span>')
 
 
 def _opening(plan: Plan) -> str:
@@ -429,20 +442,25 @@ main{display:flex;flex-wrap:wrap;gap:12px;padding:12px}
  table{display:block;overflow-x:auto;max-width:calc(100vw - 32px)}}
 #poster{position:absolute;inset:0;z-index:10;margin:0;background:#fff}#poster[hidden]{display:none}
 #poster img{display:block;max-width:100%;height:auto}
+.as-planned{display:none}
 @media print{header{background:none;color:#000}#controls,#for-surgeon,#plot>div{display:none!important}
  #plot{border:none;width:auto;height:auto}#poster,#poster[hidden]{display:block;position:static}#poster figcaption{display:none}
+ #poster::after{content:"From the front, as planned.";display:block;font-size:13px;color:#555}
+ .on-screen{display:none}.as-planned{display:inline}
+ a[href="report.pdf"]{color:inherit;text-decoration:none}h2{break-after:avoid}
  main{display:block;padding:0}table{break-inside:avoid}}
-#poster figcaption{position:absolute;left:8px;bottom:6px;font-size:13px;color:#555}
+#poster figcaption{position:absolute;left:8px;top:6px;font-size:13px;color:#555}
 #controls{flex:1 1 300px;min-width:300px;max-width:420px}
 .slider{margin:8px 0}.slider label{display:block;font-weight:600}.slider label.off{color:#888}.slider input{width:260px}
 button{margin:2px;padding:4px 10px}button.on{background:#3b3b52;color:#fff}
 table{border-collapse:collapse;margin:6px 0 14px;font-size:13px}td,th{border:1px solid #ccc;padding:3px 6px;text-align:right}
 td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4px}
 #tables{padding:0 16px 16px}
-</style></head><body>
+</style><noscript><style>#controls,#poster figcaption .drawing{display:none}#no-scripts{flex:1 1 300px;max-width:420px;margin:0}</style></noscript></head><body>
 <header><h1>%TITLE%</h1><p id="who">%WHO%</p></header>
 <main><div id="plot"><figure id="poster"><img src="data:image/png;base64,%POSTER%" width="760" height="640" alt="Front view of the plan">
-<figcaption>Front view as planned; the interactive 3-D view is being drawn…</figcaption></figure></div>
+<figcaption>Front view as planned<span class="drawing">; the interactive 3-D view is being drawn…</span></figcaption></figure></div>
+<noscript><p id="no-scripts">Her plan from the front, as planned, and its measures below. The interactive 3-D view, its views and its sliders need JavaScript, which is off in this browser.</p></noscript>
 <div id="controls">
 <div><b>View</b><br><button data-view="right-side">Her right side</button><button data-view="right-oblique">Her right oblique</button><button data-view="front">Front</button><button data-view="left-oblique">Her left oblique</button><button data-view="left-side">Her left side</button><button data-view="top">Top</button></div>
 <div id="sliders"></div>

@@ -131,6 +131,22 @@ def ptosis_grade(volumes: BreastVolumes, nipples_input: dict, side: str) -> dict
     return ptosis_from_cells(nipple, volumes.cells, side)
 
 
+def fold_line(volumes: BreastVolumes, nipple_input, side: str, across_mm=(0.0,)) -> np.ndarray | None:
+    """(K, 3) points of her `side` inframammary fold under its nipple ((3,) input frame), `across_mm` to her left of
+    the nipple's x (body frame), at the height `ptosis_from_cells` finds the fold: on her skin where the fold was seen,
+    on the chest wall behind her breast where it hides the fold; input frame, mm. None where no fold is found."""
+    cells = volumes.cells
+    nipple = volumes.in_body(nipple_input)
+    found = ptosis_from_cells(nipple, cells, side)
+    if found["nipple_to_fold_mm"] is None or not np.isfinite(found["nipple_to_fold_mm"]):
+        return None
+    x, y = nipple[0] + np.asarray(across_mm, float), nipple[1] - found["nipple_to_fold_mm"]
+    i = np.clip(np.searchsorted(cells.x, x), 0, len(cells.x) - 1)
+    j = np.clip(np.searchsorted(cells.y, y), 0, len(cells.y) - 1)
+    front = cells.wall_mm[i, j] + (np.clip(cells.height_mm[i, j], 0.0, None) if found["fold_from"] == "seen" else 0.0)
+    return transform_points(np.linalg.inv(volumes.body_from_input), np.column_stack([x, np.full_like(x, y), front]))
+
+
 def ptosis_from_cells(nipple_body, cells: SkinCells, side: str) -> dict:
     """Regnault's ptosis grade of the `side` breast from its nipple ((3,) her body frame, mm) and her
     skin's cells, with what it rests on, heights along her up axis (mm):

@@ -24,6 +24,7 @@ from breastplan.point_order import in_caller_order
 from .measures import midline_profile
 from .result import Plan
 from .surface import PlannedChange
+from .symmetry import fold_line
 
 TORSO_MM = 5.0
 """Her torso is drawn through the centroids of its points in cubes of this side (mm)."""
@@ -279,26 +280,11 @@ FOLD_HALF_MM = 30.0
 
 
 def _folds(plan: Plan) -> dict[str, np.ndarray]:
-    """Side → (K, 3) a short line along the fold under the breast as the measures place it (body frame: at the
-    height `nipple_to_fold_mm` below the nipple, on her skin where the fold was seen, on the chest wall behind her
-    breast where it hides the fold and its place was estimated), input frame; none where the ptosis measure found
-    no fold."""
-    v = plan.volumes
-    cells, to_input = v.cells, np.linalg.inv(v.body_from_input)
-    out = {}
-    for s, sp in plan.sides.items():
-        ptosis = plan.measures.ptosis["before"][s]
-        below = ptosis.get("nipple_to_fold_mm")
-        if below is None or not np.isfinite(below):
-            continue
-        nipple = transform_points(v.body_from_input, sp.scan.nipple_camera_mm[None])[0]
-        x = nipple[0] + np.linspace(-FOLD_HALF_MM, FOLD_HALF_MM, 13)
-        i = np.clip(np.searchsorted(cells.x, x), 0, len(cells.x) - 1)
-        j = np.clip(np.searchsorted(cells.y, nipple[1] - below), 0, len(cells.y) - 1)
-        seen = ptosis["fold_from"] == "seen"
-        front = cells.wall_mm[i, j] + (np.clip(cells.height_mm[i, j], 0.0, None) if seen else 0.0)
-        out[s] = transform_points(to_input, np.column_stack([x, np.full_like(x, nipple[1] - below), front]))
-    return out
+    """Side → (K, 3) a short line along the fold under the breast as the measures place it (`symmetry.fold_line`),
+    input frame; none where the ptosis measure found no fold."""
+    across = np.linspace(-FOLD_HALF_MM, FOLD_HALF_MM, 13)
+    lines = {s: fold_line(plan.volumes, sp.scan.nipple_camera_mm, s, across) for s, sp in plan.sides.items()}
+    return {s: line for s, line in lines.items() if line is not None}
 
 
 SIDE_LABEL_MM = (30.0, 120.0, 30.0)

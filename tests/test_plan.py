@@ -585,6 +585,10 @@ def test_the_report_opens_on_a_picture_of_the_plan_and_its_measures_without_any_
             assert len(np.unique(poster.reshape(-1, 3), axis=0)) > 200        # a picture, not a blank image
             assert _skin_share(poster) > 0.9                                   # her skin, shaded: no grey, no dots
             assert b.js("document.querySelector('h1').innerText") == "breastplan — surgical plan"
+            visible = "document.querySelector('{}').checkVisibility()"
+            assert b.js(visible.format("#controls")) is False                   # no button that cannot work
+            assert b.js("document.querySelector('#poster figcaption').innerText") == "Front view as planned"
+            assert "need JavaScript, which is off" in b.js("document.getElementById('no-scripts').innerText")
             table = b.rect("table.for-her")
             assert table[3] > table[1] and table[1] < b.height                 # in the first screen
             assert "breast volume" in b.js("document.querySelector('table.for-her').innerText")
@@ -986,10 +990,10 @@ def test_the_report_fits_1024_and_1920_px_colours_what_moves_compares_and_prints
     against camera.ply, read here) and hover gives the value. Side by side, her skin before (as scanned) is
     drawn in a second scene at the same scale, and turning either camera turns the other. Printed, the page
     shows the poster and the text for her — no controls, no 3-D canvas, no surgeon's part — on at most three
-    pages."""
+    pages; the poster is her plan as planned, and so are her measures printed under it, whatever the screen shows."""
     import base64
 
-    case, _, _ = planned
+    case, record, _ = planned
     before, after = read_ply(case / "left" / "camera.ply").points, read_ply(case / "plan" / "combined-torso.ply").points
     largest = float(np.linalg.norm(after - before, axis=1).max())
     plot = "document.getElementById('plot')"
@@ -1046,6 +1050,18 @@ def test_the_report_fits_1024_and_1920_px_colours_what_moves_compares_and_prints
             assert b.js(visible.format(hidden)) is False, hidden
         poster = _plot_pixels(b.screenshot(tmp_path / "printed.png"), b.rect("#poster img"))
         assert _skin_share(poster) > 0.9
+        b.driver.execute_cdp_cmd("Emulation.setEmulatedMedia", {"media": "screen"})
+        b.driver.find_element("css selector", "#original").click()           # her breasts as scanned on screen
+        row = "[...document.querySelectorAll('table.for-her tr')].map(r => r.innerText)"
+        volumes = {when: [f"{record['measures'][when][s]['volume_cc']:.0f}" for s in ("right", "left")]
+                   for when in ("before", "after")}
+        assert volumes["before"] != volumes["after"]
+        shown = b.js(row)
+        assert "as shown" in shown[0] and all(f"{v} → {v} cc" in shown[1] for v in volumes["before"])
+        b.driver.execute_cdp_cmd("Emulation.setEmulatedMedia", {"media": "print"})
+        printed = b.js(row)
+        assert "as planned" in printed[0] and "as shown" not in printed[0]
+        assert all(f"{v} → {w} cc" in printed[1] for v, w in zip(volumes["before"], volumes["after"]))
 
 
 @requires_chromium
