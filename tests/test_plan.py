@@ -1088,7 +1088,8 @@ def test_her_skin_coloured_by_millimetres_moved_and_back_is_drawn_as_at_first(pl
 
 def test_the_report_draws_each_fold_where_nipple_to_fold_is_measured_to(planned):
     """Each breast's fold drawn in the report lies `nipple_to_fold_mm` (plan.json) below its nipple along her up
-    axis, spans the nipple's side to side, and is named seen or estimated as plan.json says."""
+    axis, spans the nipple's side to side, and is named seen or estimated as plan.json says; the measures' nipple to
+    fold is the straight line from the nipple to the fold drawn under it."""
     case, record, _ = planned
     page = (case / "report.html").read_text()
     data = json.loads(re.search(r'<script type="application/json" id="plan-data">(.*?)</script>', page, re.S)[1])
@@ -1103,6 +1104,9 @@ def test_the_report_draws_each_fold_where_nipple_to_fold_is_measured_to(planned)
         assert ((nipple - fold) @ up) == pytest.approx(np.full(len(fold), ptosis["nipple_to_fold_mm"]), abs=3.0)
         across = (fold - nipple) @ left
         assert across.min() < -20.0 and across.max() > 20.0
+        under = fold[np.argmin(np.abs(across))]                                # the drawn fold under the nipple
+        assert record["measures"]["before"][side]["nipple_to_fold_mm"] == pytest.approx(
+            np.linalg.norm(nipple - under), abs=0.2)
 
 
 def test_a_fold_her_breast_hides_is_drawn_on_her_chest_behind_it_and_stays_there_in_every_state(computed):
