@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-from .pictures import SHOT_PX, VIEWS, font
+from .pictures import PICTURED, SHOT_PX, font
 from .result import OFF, Plan, StateGrid
 
 PAGE_PX = (1754, 1240)
@@ -23,9 +23,9 @@ DISCLAIMER = ("A simulation of a planned change on her scanned body: a guide for
 OUTER_SAID_CC = 5.0
 """Her words say what her breast may hold beyond its outer edge, unseen, from this much (cc, a teaspoon); the
 surgeon's tables give every figure."""
-UNSEEN_WORDS = ("From the side, her skin ends where the camera in front of her stopped seeing it, and beneath each "
-                "breast it is drawn straight back to her chest.")
-"""Said under her pictures: a camera in front of her does not see her sides or beneath a breast that hangs."""
+UNSEEN_WORDS = ("The pictures show her front as the camera in front of her saw it; beneath each breast, which it did "
+                "not see, her skin is drawn straight back to her chest.")
+"""Said under her pictures: a camera in front of her does not see beneath a breast that hangs."""
 PLAIN = {"volume_cc": ("breast volume", "cc"),
          "notch_to_nipple_mm": ("nipple to the notch at the base of the neck", "mm"),
          "nipple_to_midline_mm": ("nipple to the middle of the chest", "mm"),
@@ -167,8 +167,8 @@ def _page(plan: Plan, title: str) -> tuple[Image.Image, ImageDraw.ImageDraw]:
 def _pictures_page(plan: Plan, shots: dict) -> Image.Image:
     page, pen = _page(plan, "Before, and as planned")
     w, h = SHOT_PX
-    left, top = (PAGE_PX[0] - w * len(VIEWS)) // 2 + 20, MARGIN_PX + 150
-    for col, name in enumerate(VIEWS):
+    left, top = (PAGE_PX[0] - w * len(PICTURED)) // 2 + 20, MARGIN_PX + 150
+    for col, name in enumerate(PICTURED):
         x = left + col * w
         pen.text((x + w // 2, top - 10), name, fill="#333333", font=font(22), anchor="mb")
         for row, shot in enumerate(shots[name]):

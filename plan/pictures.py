@@ -35,6 +35,10 @@ VIEWS = {"her right side": -90.0, "her right oblique": -45.0, "front": 0.0, "her
          "her left side": 90.0}
 """The standard views a surgeon photographs, in the order they are laid out, and the azimuth of each about her
 vertical axis (degrees; +: the camera towards her left)."""
+PICTURED = ("her right oblique", "front", "her left oblique")
+"""The views of her pictures (her handout, summary.png), of VIEWS: her scan holds her front, which from her side is a
+ribbon of skin with the camera's gaps, beneath her breasts and at her sides; the report's 3-D view turns to every
+view."""
 SHOT_PX = (340, 400)
 """Width and height of each picture of the summary and the handout, px."""
 STEP_MM = 1.0
@@ -68,7 +72,7 @@ def camera(views: Views, states: list[State], azimuth_deg: float, size: tuple[in
     return raster.framing([views.torso, *(st.torso for st in states)], azimuth_deg, *size, stray=STRAY)
 
 
-def before_after(views: Views, state: State, names=tuple(VIEWS)) -> dict[str, tuple[Image.Image, Image.Image]]:
+def before_after(views: Views, state: State, names=PICTURED) -> dict[str, tuple[Image.Image, Image.Image]]:
     """View name → (her skin as scanned, as `state` plans it), SHOT_PX each, framed alike, unmarked."""
     before = views.state("original")
     shots = {}

@@ -69,21 +69,21 @@ def write_plan(plan: Plan, folder: Path, parallel: bool = False) -> dict:
     return record
 
 
-SHOTS_BESIDE = 4
-"""Of her five views, the pictures of this many are drawn by a forked child while the plan writes the report and
-draws the others: about as long."""
+SHOTS_BESIDE = 2
+"""Of her pictured views (`plan.pictures.PICTURED`), the pictures of this many are drawn by a forked child while
+the plan writes the report and draws the others: about as long."""
 
 
 def _shots(views, state, parallel: bool, report: Path, page) -> dict:
-    """`plan.pictures.before_after` of every view for `state`, the report `page()` written to `report` meanwhile:
-    with `parallel`, the first SHOTS_BESIDE views drawn beside (`breastplan.forked`), else here."""
+    """`plan.pictures.before_after` of every pictured view for `state`, the report `page()` written to `report`
+    meanwhile: with `parallel`, the first SHOTS_BESIDE views drawn beside (`breastplan.forked`), else here."""
     from PIL import Image
 
     from breastplan.forked import beside, shared
 
-    from .pictures import SHOT_PX, VIEWS, before_after
+    from .pictures import PICTURED, SHOT_PX, before_after
 
-    theirs, mine = tuple(VIEWS)[:SHOTS_BESIDE], tuple(VIEWS)[SHOTS_BESIDE:]
+    theirs, mine = PICTURED[:SHOTS_BESIDE], PICTURED[SHOTS_BESIDE:]
     drawn = shared((len(theirs), 2, SHOT_PX[1], SHOT_PX[0], 3), np.uint8)
 
     def draw() -> None:
@@ -95,7 +95,7 @@ def _shots(views, state, parallel: bool, report: Path, page) -> dict:
         shots = before_after(views, state, mine)
         shots |= ({n: tuple(Image.fromarray(p) for p in drawn[i]) for i, n in enumerate(theirs)} if finished()
                   else before_after(views, state, theirs))
-    return {n: shots[n] for n in VIEWS}
+    return {n: shots[n] for n in PICTURED}
 
 
 def input_record(plan: Plan) -> dict:

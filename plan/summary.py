@@ -8,11 +8,9 @@ from pathlib import Path
 from PIL import Image, ImageDraw
 
 from .handout import DISCLAIMER, draw_rows, measure_rows, shown_words, vertical_text
-from .pictures import SHOT_PX, font
+from .pictures import PICTURED, SHOT_PX, font
 from .result import Plan
 
-VIEWS = ("her right oblique", "front", "her left oblique")
-"""The summary's columns (`plan.pictures.VIEWS`)."""
 HEAD_PX, LABEL_PX, FOOT_PX = 90, 28, 290
 """Heights of the title band, of the row labels' column (its width) and of the measures and words below, px."""
 WRAP_CHARS, WORDS_LINES = 125, 3
@@ -21,15 +19,15 @@ WRAP_CHARS, WORDS_LINES = 125, 3
 
 def summary_png(plan: Plan, shots: dict, path: Path) -> Path:
     """Write summary.png from `shots` (`plan.pictures.before_after`): her torso before (top row) and as first
-    shown (bottom row) from each of VIEWS; the main measures of each side, a follow-up's change, the state shown
+    shown (bottom row) from each of PICTURED; the main measures of each side, a follow-up's change, the state shown
     and the disclaimer in words."""
     w, h = SHOT_PX
-    page = Image.new("RGB", (LABEL_PX + w * len(VIEWS), HEAD_PX + 2 * h + FOOT_PX), "white")
+    page = Image.new("RGB", (LABEL_PX + w * len(PICTURED), HEAD_PX + 2 * h + FOOT_PX), "white")
     pen = ImageDraw.Draw(page)
     small = font(15)
     pen.text((12, 10), "breastplan — plan summary", fill="black", font=font(22))
     pen.text((12, 40), plan.patient.header, fill="#333333", font=small)
-    for col, name in enumerate(VIEWS):
+    for col, name in enumerate(PICTURED):
         x = LABEL_PX + col * w
         for row, shot in enumerate(shots[name]):
             page.paste(shot, (x, HEAD_PX + row * h))

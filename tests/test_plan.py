@@ -916,13 +916,14 @@ def test_a_left_plan_for_a_named_patient_gives_her_summary_and_handout_her_left_
     skin before (top row) and as planned (bottom row), framed alike; each picture as planned differs from the
     one above it visibly, and right of her midline: her left, on the picture's right from the front and either
     oblique (not the viewer's left). report.pdf: two A4 landscape pages, at most 2 MB; page 1 her skin before
-    and as planned from five views (ten pictures), page 2 text alone, none of it running off the page (nor on the
+    and as planned from her right oblique, the front and her left oblique (six pictures: her
+    scan holds her front, a ribbon from her side), page 2 text alone, none of it running off the page (nor on the
     plan of both breasts, whose words are longer)."""
     from PIL import Image
 
+    from breastplan.plan.pictures import PICTURED as COLUMNS
     from breastplan.plan.pictures import SHOT_PX, VIEWS, camera
     from breastplan.plan.summary import HEAD_PX, LABEL_PX
-    from breastplan.plan.summary import VIEWS as COLUMNS
     from breastplan.plan.views import build_views
 
     out = tmp_path / "left"
@@ -969,7 +970,7 @@ def test_a_left_plan_for_a_named_patient_gives_her_summary_and_handout_her_left_
     r, g, b = first[..., 0], first[..., 1], first[..., 2]
     skin = (r > 90) & (r - g > 20) & (g - b > 10) & (r + g + b < 3 * 235)
     columns = np.flatnonzero(skin.any(axis=0))
-    assert (np.diff(columns) > 20).sum() + 1 == 5                            # five views side by side
+    assert (np.diff(columns) > 20).sum() + 1 == 3                            # three views side by side
     rows = np.flatnonzero(skin.any(axis=1))
     assert (np.diff(rows) > 5).sum() + 1 == 2                                # before over as planned
 
