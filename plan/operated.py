@@ -17,6 +17,7 @@ import numpy as np
 from .breast_volume import BreastVolumes
 from .operation_spec import OperationSpec
 from .skin_lift import SkinLift
+from .symmetry import ptosis_from_cells
 
 
 @dataclass(frozen=True, eq=False)
@@ -32,6 +33,7 @@ class Operated:
     nipple_before_mm: np.ndarray          # (3,) input frame
     nipple_mm: np.ndarray                 # (3,) input frame, after
     note: str | None = None               # what a symmetrising proposal leaves unmatched, in words
+    ptosis: dict | None = None            # her breast's Regnault grade as scanned (`symmetry.ptosis_from_cells`)
 
     def __call__(self, points_mm) -> np.ndarray:
         """Input-frame points (mm) as the operations, in turn, move them."""
@@ -60,8 +62,16 @@ class Operated:
 
     @property
     def warnings(self) -> tuple[str, ...]:
-        """What a surgeon is warned of (a lumpectomy's excised share), in a surgeon's words."""
-        return tuple(w for w in (getattr(op, "warning", None) for op in self.made) if w)
+        """What a surgeon is warned of, in a surgeon's words: a lumpectomy's excised share; a lift of a breast that
+        shows no ptosis as scanned (Regnault grade 0: a lift is made for a breast that hangs)."""
+        made = tuple(w for w in (getattr(op, "warning", None) for op in self.made) if w)
+        if self.ptosis is None or self.ptosis["grade"] != "0" or self.ptosis["nipple_to_fold_mm"] is None:
+            return made
+        unhung = (f"her {self.side} breast shows no ptosis as scanned (Regnault grade 0: its nipple "
+                  f"{self.ptosis['nipple_to_fold_mm']:.0f} mm above her fold); this lift raises a nipple that does not "
+                  "hang")
+        return made + tuple(unhung + (f", by {op.rise_mm:.0f} mm" if hasattr(op, "rise_mm") else "")
+                            for spec, op in zip(self.written, self.made) if spec.kind == "lift")
 
     @property
     def notes(self) -> tuple[str, ...]:
@@ -137,4 +147,4 @@ def operate(volumes: BreastVolumes, nipples: dict, side: str, fold_below_nipple_
         nipple = done(nipple[None])[0]
         made.append(done)
     return Operated(side, tuple(written), tuple(made), volumes.sides[side].volume_cc, now.sides[side].volume_cc,
-                    start, nipple)
+                    start, nipple, ptosis=ptosis_from_cells(volumes.in_body(start), volumes.cells, side))

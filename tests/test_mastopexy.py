@@ -16,6 +16,9 @@ from test_breast_volume import measured, scanned
 
 from breastplan import BadInputError, transform_points
 from breastplan.plan.mastopexy import carried_up, mastopexy, nipple_height, to_notch_distance
+from breastplan.plan.operated import operate
+from breastplan.plan.operation_spec import OperationSpec
+from breastplan.plan.symmetry import ptosis_from_cells
 
 BODY = "asymmetric"
 
@@ -80,6 +83,27 @@ def test_her_lifted_skin_is_drawn_whole_and_her_footprints_outline_stays(rise):
         assert np.linalg.norm(moved[pairs[:, 0]] - moved[pairs[:, 1]], axis=1).max() <= 0.6 * rise, side
         outline = m.sides[side].footprint_input_mm
         assert np.linalg.norm(lifted.displacement(outline), axis=1).max() <= 0.2 * rise, side
+
+
+def test_a_lift_of_a_breast_that_does_not_hang_is_warned_of_and_of_one_that_hangs_not():
+    """A small firm breast (cup 0.4: Regnault grade 0 as scanned, its nipple 40 mm above its fold) lifted to 50 mm
+    above its fold is warned of, in a sentence naming its grade and the rise (10 mm); her breasts that hang (cup 0.85,
+    firmness 0.2: pseudoptosis) are lifted as far without."""
+    for body, warned in (("small", True), (BODY, False)):
+        _, nipples, *_ = scanned(body)
+        m = measured(body)
+        for side in ("left", "right"):
+            nipple = transform_points(m.body_from_input, nipples[side][None])[0]
+            found = ptosis_from_cells(nipple, m.cells, side)
+            assert (found["grade"] == "0") == warned, (body, side, found["grade"])
+            done = operate(m, nipples, side, found["nipple_to_fold_mm"],
+                           (OperationSpec.parse(f"lift:fold={found['nipple_to_fold_mm'] + 10.0:.1f}"),))
+            if warned:
+                assert done.warnings == (f"her {side} breast shows no ptosis as scanned (Regnault grade 0: its nipple "
+                                         f"{found['nipple_to_fold_mm']:.0f} mm above her fold); this lift raises a "
+                                         "nipple that does not hang, by 10 mm",)
+            else:
+                assert done.warnings == (), (body, side)
 
 
 def test_a_lift_to_a_distance_from_her_sternal_notch_reaches_it_as_lifted():
