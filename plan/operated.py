@@ -51,8 +51,7 @@ class Operated:
     def words(self) -> str:
         """The operations in a surgeon's words, in the order made, each made by a clinic's model named ("" for
         none)."""
-        return "; then ".join(spec.words + (f" (as {op.made_by} makes it, from its volume alone)" if op.made_by
-                                            else "") for spec, op in zip(self.written, self.made))
+        return "; then ".join(_as_made(spec, op) for spec, op in zip(self.written, self.made))
 
     @property
     def texts(self) -> tuple[str, ...]:
@@ -114,6 +113,16 @@ class Operated:
                 "nipple_move_mm": {k: round(v, 1) for k, v in self.nipple_move.items()},
                 "warnings": list(self.warnings),
                 "note": "; ".join(self.notes) or None}
+
+
+def _as_made(spec: OperationSpec, op) -> str:
+    """One operation in a surgeon's words as made: the clinic's model that made it named; a reduction's lift "it
+    needs" said to be none where her nipple lies above her fold."""
+    if op.made_by:
+        return spec.words + f" (as {op.made_by} makes it, from its volume alone)"
+    if spec.kind == "reduction" and spec.settings["lift"] == "needed" and op.lift is None:
+        return spec.words + "; none needed: her nipple lies above her fold"
+    return spec.words
 
 
 def said(operated: Operated, measures) -> tuple[str, ...]:

@@ -88,7 +88,8 @@ def test_her_lifted_skin_is_drawn_whole_and_her_footprints_outline_stays(rise):
 def test_a_lift_of_a_breast_that_does_not_hang_is_warned_of_and_of_one_that_hangs_not():
     """A small firm breast (cup 0.4: Regnault grade 0 as scanned, its nipple 40 mm above its fold) lifted to 50 mm
     above its fold is warned of, in a sentence naming its grade and the rise (10 mm); her breasts that hang (cup 0.85,
-    firmness 0.2: pseudoptosis) are lifted as far without."""
+    firmness 0.2: pseudoptosis) are lifted as far without. Above their folds, none is given the lift a reduction
+    "needs", and the reduction says so."""
     for body, warned in (("small", True), (BODY, False)):
         _, nipples, *_ = scanned(body)
         m = measured(body)
@@ -98,6 +99,8 @@ def test_a_lift_of_a_breast_that_does_not_hang_is_warned_of_and_of_one_that_hang
             assert (found["grade"] == "0") == warned, (body, side, found["grade"])
             done = operate(m, nipples, side, found["nipple_to_fold_mm"],
                            (OperationSpec.parse(f"lift:fold={found['nipple_to_fold_mm'] + 10.0:.1f}"),))
+            reduced = operate(m, nipples, side, found["nipple_to_fold_mm"], (OperationSpec.parse("reduction:40"),))
+            assert reduced.words.endswith("; none needed: her nipple lies above her fold")   # it lies above its fold
             if warned:
                 assert done.warnings == (f"her {side} breast shows no ptosis as scanned (Regnault grade 0: its nipple "
                                          f"{found['nipple_to_fold_mm']:.0f} mm above her fold); this lift raises a "
