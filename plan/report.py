@@ -438,7 +438,7 @@ header{padding:10px 16px;background:#3b3b52;color:#fff}header h1{margin:0;font-s
 details{margin:10px 0}summary{cursor:pointer;font-weight:600}
 main{display:flex;flex-wrap:wrap;gap:12px;padding:12px}
 #plot{position:relative;width:min(760px,calc(100vw - 360px));height:640px;background:#fff;border:1px solid #ddd}
-@media (max-width:900px){#plot{width:calc(100vw - 26px);height:min(640px,125vw)}#controls{max-width:none}
+@media (max-width:900px){#plot{width:calc(100vw - 26px);height:min(760px,165vw)}#controls{max-width:none}
  table{display:block;overflow-x:auto;max-width:calc(100vw - 32px)}}
 #poster{position:absolute;inset:0;z-index:10;margin:0;background:#fff}#poster[hidden]{display:none}
 #poster img{display:block;max-width:100%;height:auto}
@@ -689,7 +689,8 @@ current=first;
 put(arrays(first));
 placed(first);
 label(first);
-Plotly.newPlot(gd,drawn(),scenes(layout),{displaylogo:false,responsive:true}).then(()=>{gd.on('plotly_relayout',linked);
+Plotly.newPlot(gd,drawn(),scenes(layout),   // a phone: no tool bar over her head (the view buttons turn her)
+ {displaylogo:false,responsive:true,displayModeBar:gd.clientWidth<NARROW_PX?false:'hover'}).then(()=>{gd.on('plotly_relayout',linked);
  document.getElementById('poster').hidden=true;   // kept for print
  window.breastplanDrawn=window.breastplanState;return painted();})
  .then(()=>{window.breastplanReady=true;performance.mark('breastplan-ready');});   // the 3-D scene painted

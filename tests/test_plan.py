@@ -839,6 +839,8 @@ def test_the_report_fits_a_phones_screen(planned):
         assert plot[2] - plot[0] > 340 and scene[2] - scene[0] > 300
         assert legend[1] >= scene[3] - 1 and legend[3] <= plot[3] + 1                 # below her, inside the plot
         assert b.rect("#controls")[1] >= plot[3]                                      # the controls below the plot
+        assert scene[3] - scene[1] > 0.95 * (scene[2] - scene[0])                    # her standing picture, tall
+        assert b.js("document.querySelector('#plot .modebar')") is None             # no tool bar over her head
         assert b.console_errors() == []
 
 
