@@ -104,10 +104,6 @@ def _faces(faces: np.ndarray, n: int) -> dict:
     return {"faces": _b64(faces, "<i4" if wide else "<u2"), "m": int(len(faces)), "wide": wide}
 
 
-DIGITS = 6
-"""The page's measures are written with this many decimals: the page then rounds them as `figure` does, once."""
-
-
 def page_data(plan: Plan, views: Views) -> dict:
     """The JSON the page's script reads: geometry, every slider state and the state it opens on (her sides in
     `Plan.shown_sides` order, so the legend lists her right first)."""
@@ -121,15 +117,24 @@ def page_data(plan: Plan, views: Views) -> dict:
             "side_labels": {s: v.round(1).tolist() for s, v in views.side_labels.items()},
             "folds": {s: {"xyz": views.folds[s].round(1).tolist(),
                           "from": plan.measures.ptosis["before"][s]["fold_from"]} for s in sides if s in views.folds},
-            "before": {s: {k: round(float(v), DIGITS) for k, v in plan.measures.before[s].items()} for s in sides},
-            "asymmetry_before": {k: round(float(v), DIGITS) for k, v in
-                                 plan.measures.asymmetry.get("before", {}).items()},
+            "before": {s: _written(plan.measures.before[s]) for s in sides},
+            "asymmetry_before": {k: figure(v) for k, v in plan.measures.asymmetry.get("before", {}).items()},
             "bounds": _bounds(views), "footprints": {s: views.footprints[s].round(2).tolist() for s in sides},
             "grid": _grid(plan, views), **_skin_colour(views), "light": list(LIGHT),
             "mark_layout": [list(m) for m in views.mark_layout],
             "operated_labels": None if views.operated_labels is None else {
                 s: v.round(1).tolist() for s, v in views.operated_labels.items()},
             "scan": SCAN, "model": MODEL, "landmark": LANDMARK, "footprint": FOOTPRINT, "fold": FOLD}
+
+
+def _written(measures: dict) -> dict:
+    """One side's measures (scalars, or per state) as the page writes them: each as the surgeon's tables and the
+    terminal write it (`figure`), and those of her table (PLAIN) also as hers (`plain_value`, under "plain:"), so
+    that a figure is rounded once, here, and reads alike on the page and the terminal."""
+    one = lambda write, x: write(None if x is None else float(x))  # noqa: E731
+    each = lambda write, v: one(write, v) if np.ndim(v) == 0 else [one(write, x) for x in v]  # noqa: E731
+    return {**{k: each(figure, v) for k, v in measures.items()},
+            **{f"plain:{k}": each(plain_value, measures[k]) for k in PLAIN if k in measures}}
 
 
 def _grid(plan: Plan, views: Views) -> dict:
@@ -140,13 +145,12 @@ def _grid(plan: Plan, views: Views) -> dict:
         views.planned_meshes[s] - views.meshes[s][0].astype(np.float32) for s in sides]
         + [views.marks_moved - _found_marks(views).astype(np.float32)], axis=1)
     stored = modes_of(moved)
-    rounded = lambda values: np.round(values, DIGITS).tolist()  # noqa: E731
     asym = asymmetry(grid.measures)
     return {"kinds": list(grid.kinds), "degrees": [list(d) for d in grid.degrees], "requested": list(grid.requested),
             "keys": list(grid.keys), "words": [_state_said(plan, i) for i in range(len(grid))],
             "planned": grid.planned_index, **_short(plan),
-            "measures": {s: {k: rounded(v) for k, v in grid.measures[s].items()} for s in sides},
-            "asymmetry": {k: rounded(v["left_minus_right"]) for k, v in asym.items()},
+            "measures": {s: _written(grid.measures[s]) for s in sides},
+            "asymmetry": {k: _written({k: v["left_minus_right"]})[k] for k, v in asym.items()},
             "coefficients": _b64(stored.coefficients, "<f4"), "modes": _b64(stored.modes, "<i2"),
             "scales": stored.scales.astype(float).tolist(), "worst_mm": stored.worst_mm}
 
@@ -229,9 +233,9 @@ def _table(head: list[str], rows: list[list], cls: str = "") -> str:
 
 def figure(v) -> str:
     """A figure as the surgeon's tables give it, here, on the page and on the terminal alike: one decimal from 10
-    on, else three significant digits; "—" for none."""
+    on, else three significant digits; "—" for none (or none finite)."""
     if isinstance(v, float):
-        return f"{v:.1f}" if abs(v) >= 10 else f"{v:.3g}"
+        return "—" if not np.isfinite(v) else f"{v:.1f}" if abs(v) >= 10 else f"{v:.3g}"
     return "—" if v is None else str(v)
 
 
@@ -587,7 +591,6 @@ function arrays(state){   // the moving traces' coordinates in `state`; null: th
  return upd;
 }
 const ids=[idx.skin].concat(P.sides.map(s=>idx[s]));
-const fmt=(v,forHer)=>!isFinite(v)?'—':forHer?(Math.abs(v)>=10?v.toFixed(0):v.toFixed(2)):(Math.abs(v)>=10?v.toFixed(1):String(Number(v.toPrecision(3))));
 function digits(i){   // each kind's slider position in state i
  const out=[];for(let k=G.kinds.length-1;k>=0;k--){const n=G.degrees[k].length;out[k]=i%n;i=Math.floor(i/n);}
  return out;}
@@ -603,9 +606,10 @@ function label(state){   // what is shown, in words; the sliders and the measure
    +(short?' (reaches '+short+(short.includes(' and ')?', her right and left)':')'):'');
   inp.previousSibling.classList.toggle('off',!state);});
  for(const c of document.querySelectorAll('[data-after]')){const [side,name]=c.dataset.after.split(' ');
-  const v=state?state.measures[side][name]:P.before[side][name];c.textContent=fmt(v,c.dataset.forHer!==undefined);}
+  const key=(c.dataset.forHer!==undefined?'plain:':'')+name;   // each figure as the plan wrote it
+  c.textContent=(state?state.measures:P.before)[side][key];}
  for(const c of document.querySelectorAll('[data-asymmetry]')){const name=c.dataset.asymmetry;
-  c.textContent=fmt(state?state.asymmetry[name]:P.asymmetry_before[name],false);}
+  c.textContent=state?state.asymmetry[name]:P.asymmetry_before[name];}
 }
 let colourBy='skin';   // her skin shaded, or each point's distance moved by the state shown (mm)
 const SCALE_AT=0.88;   // where the scale of millimetres moved stands, her picture to its left

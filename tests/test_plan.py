@@ -188,7 +188,8 @@ def test_one_volume_leads_everywhere_and_the_models_is_named_as_the_models(cli, 
     """Her volume measured on her skin is the same number in plan.json's side and measures, on the
     terminal and from `fit` on the side's case, and what her unseen outer sides may hold the same in plan.json,
     on the terminal and in the report (its table, and the words for her); the model's volume is what fit.ply encloses (divergence
-    theorem, here in numpy) and the gap below its base, named as the model's."""
+    theorem, here in numpy) and the gap below its base, named as the model's. Every measure of the terminal's table
+    reads, to its last digit, as the report writes it as it opens and as its script writes it for the state planned."""
     case, record, _ = planned
     for side in ("left", "right"):
         fit = read_ply(case / side / "fit.ply")
@@ -216,8 +217,21 @@ def test_one_volume_leads_everywhere_and_the_models_is_named_as_the_models(cli, 
         printed_model = re.search(rf"^{side} fit: the model's volume ([\d.]+) cc", res.stdout, re.M)   # 0.1 cc
         # plan.json holds it to 0.01 cc: printed from the unrounded value, the two may differ by a rounding
         assert abs(float(printed_model.group(1)) - record["sides"][side]["fit"]["model_volume_cc"]) <= 0.05 + 0.005
+    page = (case / "report.html").read_text()
+    data = json.loads(re.search(r'id="plan-data">(.*?)</script>', page, re.S).group(1).replace("<\\/", "</"))
+    planned = data["grid"]["planned"]
+    rows = re.findall(r"^│ ([a-z ]+?) +│(.+)│$", res.stdout, re.M)     # the terminal's table, her right first
+    assert len(rows) == len(data["before"]["left"]) - 5                      # every measure (and her table's 5 plain)
+    for label, row in rows:
+        name = label.replace(" ", "_")
+        cells = [c.strip() for c in row.split("│")]                        # right before, after, left before, after, …
+        for s, before, after in (("right", *cells[0:2]), ("left", *cells[2:4])):   # the page writes them alike
+            assert re.search(f'<td>{re.escape(before)}</td><td><span class="on-screen" data-after="{s} {name}">'
+                             f"{re.escape(after)}</span>", page), (s, name)
+            assert (data["before"][s][name], data["grid"]["measures"][s][name][planned]) == (before, after)
+        assert (data["asymmetry_before"][name], data["grid"]["asymmetry"][name][planned]) == tuple(cells[4:6])
     said = re.search('<p class="unseen-outer">[^<]*her right breast may hold about (\\d+)\u00a0cc more, and her left '
-                     'about (\\d+)\u00a0cc more\\.</p>', (case / "report.html").read_text())
+                     'about (\\d+)\u00a0cc more\\.</p>', page)
     assert said and all(abs(float(said.group(i)) - record["sides"][s]["volume"]["unseen_outer_cc"]) <= 0.55
                         for i, s in ((1, "right"), (2, "left")))
     copy_of = tmp_path / "case"
