@@ -678,12 +678,17 @@ def test_the_report_opens_offline_and_its_slider_and_views_change_the_drawing(pl
         drawn = b.js("Object.fromEntries(document.getElementById('plot').data.filter(t => t.legendgroup === "
                      "'landmarks').map(t => [t.name, [Array.from(t.x), Array.from(t.y), Array.from(t.z)]]))")
         if os.environ.get("BREASTPLAN_SCREENSHOT"):                         # the README's screenshot
-            b.driver.find_element("css selector", "button[data-view='front']").click()
             b.driver.find_element("css selector", "#combined").click()
             for _ in range(600):
                 if b.js("window.breastplanDrawn") == "combined":
                     break
                 time.sleep(0.05)
+            b.driver.find_element("css selector", "button[data-view='front']").click()
+            for _ in range(600):                                          # the front camera applied, then painted
+                if abs(b.js("document.getElementById('plot').layout.scene.camera.eye.x")) < 1e-6:
+                    break
+                time.sleep(0.05)
+            time.sleep(0.5)
             b.screenshot(os.environ["BREASTPLAN_SCREENSHOT"])
     assert set(drawn) == {"sternal notch", "midline", "nipples (found)"}
     # against the sample's truth, taken from her camera frame to the display frame as the report takes it
