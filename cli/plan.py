@@ -255,7 +255,7 @@ def _print_plan(plan, report_path: Path, seconds: float) -> None:
     if m.symmetry["before"]:
         sym = m.symmetry
         stdout.print("symmetry: " + ", ".join(f"{k.replace('_pct', '')} {sym['before'][k]:.1f} → {sym['after'][k]:.1f} %"
-                                             for k in ("pBRA_pct", "pLBC_pct", "pUNR_pct", "overlap_pct")
+                                             for k in ("pBRA_pct", "pUNR_pct", "pLBC_pct", "overlap_pct")
                                              if _finite(sym["before"].get(k)) and _finite(sym["after"].get(k)))
                      + ("; a breast's lowest point was hidden and is estimated from her other side"
                         if m.contour_hidden else ""))

@@ -362,7 +362,7 @@ def _measures_table(plan: Plan) -> str:
     shown = _on_screen("as shown", "as planned")
     head = ["measure"] + [f"{s} {w}" for s in sides for w in ("before", shown)]
     if m.asymmetry:
-        head += ["asymmetry before", f"asymmetry {shown}"]
+        head += ["left − right before", f"left − right {shown}"]   # as the terminal heads them
     rows = ""
     for name in m.before[sides[0]]:
         cells = f"<td>{html.escape(measure_label(name))}</td>"
