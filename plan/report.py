@@ -458,7 +458,8 @@ main{display:flex;flex-wrap:wrap;gap:12px;padding:12px}
 .slider{margin:8px 0}.slider label{display:block;font-weight:600}.slider label.off{color:#888}.slider input{width:260px}
 button{margin:2px;padding:4px 10px}button.on{background:#3b3b52;color:#fff}
 table{border-collapse:collapse;margin:6px 0 14px;font-size:13px}td,th{border:1px solid #ccc;padding:3px 6px;text-align:right}
-td:first-child,th:first-child{text-align:left}h2{font-size:16px;margin:14px 0 4px}
+td:first-child,th:first-child{text-align:left}
+table.operations :is(td,th):is(:nth-child(2),:nth-child(5)){text-align:left}h2{font-size:16px;margin:14px 0 4px}
 #tables{padding:0 16px 16px}
 </style><noscript><style>#controls,#poster figcaption .drawing{display:none}#no-scripts{flex:1 1 300px;max-width:420px;margin:0}</style></noscript></head><body>
 <header><h1>%TITLE%</h1><p id="who">%WHO%</p></header>
