@@ -447,7 +447,7 @@ MUTANTS = [
         "plan/compute.py", "for k, d in zip(kinds, combo) if d != OFF] for combo in combos]",
         "for k, d in zip(kinds, [c or 1.0 for c in combo])] for combo in combos]", ("tests/test_plan_truths.py",)),
     one("volume-said-against-before", "a state's volume words counted from her breasts as scanned, not from every "
-        "slider off after the operations", "plan/report.py", "off = grid.index((OFF,) * len(grid.kinds))",
+        "slider off after the operations", "plan/handout.py", "off = grid.index((OFF,) * len(grid.kinds))",
         "off = grid.index((OFF,) * len(grid.kinds)) + 1", ("tests/test_plan_truths.py",)),
     one("hole-round-nipple-accepted", "a scan with a hole where her breast is measured round the hole",
         "plan/breast_volume.py", "            if seen < AROUND_SEEN:", "            if seen < 0.0:",
