@@ -522,7 +522,7 @@ function shade(x,y,z){   // vertex colours: her skin lit from LIGHT (either side
 const meshBase={};
 for(const s of P.sides){
  const sc=pts(P.scans[s]);
- traces.push({type:'scatter3d',mode:'markers',name:s+' breast (points as scanned)',x:sc[0],y:sc[1],z:sc[2],visible:'legendonly',
+ traces.push({type:'scatter3d',mode:'markers',name:s+' breast (scanned)',x:sc[0],y:sc[1],z:sc[2],visible:'legendonly',
   marker:{size:1.6,color:P.scan},hoverinfo:'skip'});
  const m=P.meshes[s]; meshBase[s]=b64(m.xyz,Float32Array);
  const f=tri(m);
