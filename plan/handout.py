@@ -1,5 +1,5 @@
 """report.pdf: the handout she takes home — two A4 pages (landscape) made on this machine, no service: her
-torso before and as planned from the five standard views (`plan.pictures`), then the main measures in plain
+torso before and as planned from her obliques and the front (`plan.pictures.PICTURED`), then the main measures in plain
 words, each page with her name, the surgeon, the date and the reminder that it is a simulation."""
 from __future__ import annotations
 
