@@ -49,9 +49,10 @@ def compute_plan(source: Path, fitted: dict[str, SidePlan], options: PlanOptions
             sides[side] = replace(sp, changes=solve_changes(sp, options, method) or (UNCHANGED,))
     with clock("states"):
         states = tuple(_states(sides, options, method, operated))
-    fitted_measures = {s: _model_measures(volumes, sp) for s, sp in sides.items()}
+    folds = {s: her_fold(volumes, sp) for s, sp in sides.items()}
+    fitted_measures = {s: _model_measures(volumes, sp, folds[s]) for s, sp in sides.items()}
     with clock("every slider state"):
-        grid = state_grid(sides, states, options, volumes, fitted_measures, operated)
+        grid = state_grid(sides, states, options, volumes, fitted_measures, folds, operated)
     with clock("measures"):
         requested = planned_states(states, next(iter(sides.values())))
         torsos = tuple(planned_torso(body, sides, st) for st in requested)
@@ -123,14 +124,14 @@ def _states(sides: dict[str, SidePlan], options: PlanOptions, method: Method, op
 
 
 def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], options: PlanOptions,
-               volumes: BreastVolumes, fitted: dict[str, dict[str, float]],
+               volumes: BreastVolumes, fitted: dict[str, dict[str, float]], folds: dict[str, np.ndarray | None],
                operated: dict[str, Operated] | None = None) -> StateGrid:
     """Every combination of the kinds' slider positions (`states` holds each kind's change at each degree; a kind
     off is left out, every kind off is her operations alone; with no kind, the one state of her operations), after
     her `operated` breasts' operations, each side's fitted model so planned, and her measures on it
     (`breast_measures_each`). Her volume on her skin is changed by the operations' exact
     change, then by as much as the fitted model's volume changes from the operations' state (`fitted`: its measures
-    as scanned, `_model_measures`)."""
+    as scanned, `_model_measures`). Nipple to fold is measured to her fold, side → `her_fold`, in every state."""
     operated = operated or {}
     kinds = tuple(k for k, _ in options.changes)
     requested = tuple(d for _, d in options.changes)
@@ -139,12 +140,12 @@ def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], option
     by_key = {st.key: st for st in states}
     changes, planned, models, measures = {}, {}, {}, {}
     for s, sp in sides.items():
-        fold = her_fold(volumes, sp)
         singles = [[by_key[change_name(k, d)].changes[s] for k, d in zip(kinds, combo) if d != OFF] for combo in combos]
         changes[s] = tuple(one[0] if len(one) == 1 else combine(one) if one else UNCHANGED for one in singles)
         planned[s] = tuple(PlannedChange.of(sp, c, operated.get(s)) for c in changes[s])
         moved = PlannedChange.models(planned[s], np.vstack([sp.surface_input, sp.scan.nipple_camera_mm]))
-        measures[s] = breast_measures_each(volumes.landmarks, moved[:, -1], moved[:, :-1], sp.fit.faces, fold_mm=fold)
+        measures[s] = breast_measures_each(volumes.landmarks, moved[:, -1], moved[:, :-1], sp.fit.faces,
+                                           fold_mm=folds[s])
         models[s] = moved[:, :-1].astype(np.float32)
         base, volume = fitted[s]["volume_cc"], volumes.sides[s].volume_cc
         if s in operated:
@@ -168,16 +169,17 @@ def poles_of_her_volume(measures: dict) -> dict:
     return {**measures, **{k: v if v.ndim else float(v) for k, v in poles.items()}}
 
 
-def _model_measures(volumes: BreastVolumes, sp: SidePlan) -> dict[str, float]:
-    """A side's measures on its fitted breast as scanned (the volume the fitted model's)."""
-    return breast_measures(volumes.landmarks, sp.scan.nipple_camera_mm, sp.surface_input, sp.fit.faces,
-                           fold_mm=her_fold(volumes, sp))
+def _model_measures(volumes: BreastVolumes, sp: SidePlan, fold_mm: np.ndarray | None) -> dict[str, float]:
+    """A side's measures on its fitted breast as scanned (the volume the fitted model's; nipple to fold to `fold_mm`,
+    `her_fold`)."""
+    return breast_measures(volumes.landmarks, sp.scan.nipple_camera_mm, sp.surface_input, sp.fit.faces, fold_mm=fold_mm)
 
 
 def her_fold(volumes: BreastVolumes, sp: SidePlan) -> np.ndarray | None:
-    """(3,) her fold under the side's nipple as found on her skin (`symmetry.fold_line`), input frame; None: none
-    found (the fitted model's base then stands for it)."""
-    line = fold_line(volumes, sp.scan.nipple_camera_mm, sp.side)
+    """(3,) her fold under the side's nipple as found on her skin (her ptosis, `symmetry.fold_line`), input frame;
+    None: none found (the fitted model's base then stands for it)."""
+    nipple = sp.scan.nipple_camera_mm
+    line = fold_line(volumes, nipple, ptosis_from_cells(volumes.in_body(nipple), volumes.cells, sp.side))
     return None if line is None else line[0]
 
 

@@ -131,10 +131,14 @@ def _written(measures: dict) -> dict:
     """One side's measures (scalars, or per state) as the page writes them: each as the surgeon's tables and the
     terminal write it (`figure`), and those of her table (PLAIN) also as hers (`plain_value`, under "plain:"), so
     that a figure is rounded once, here, and reads alike on the page and the terminal."""
-    one = lambda write, x: write(None if x is None else float(x))  # noqa: E731
-    each = lambda write, v: one(write, v) if np.ndim(v) == 0 else [one(write, x) for x in v]  # noqa: E731
-    return {**{k: each(figure, v) for k, v in measures.items()},
-            **{f"plain:{k}": each(plain_value, measures[k]) for k in PLAIN if k in measures}}
+    return {**{k: _each(figure, v) for k, v in measures.items()},
+            **{f"plain:{k}": _each(plain_value, measures[k]) for k in PLAIN if k in measures}}
+
+
+def _each(write, values):
+    """`write` (`figure`, `plain_value`) of one value, or of each of a state's values (a list)."""
+    one = lambda x: write(None if x is None else float(x))  # noqa: E731
+    return one(values) if np.ndim(values) == 0 else [one(x) for x in values]
 
 
 def _grid(plan: Plan, views: Views) -> dict:
@@ -150,7 +154,7 @@ def _grid(plan: Plan, views: Views) -> dict:
             "keys": list(grid.keys), "words": [_state_said(plan, i) for i in range(len(grid))],
             "planned": grid.planned_index, **_short(plan),
             "measures": {s: _written(grid.measures[s]) for s in sides},
-            "asymmetry": {k: _written({k: v["left_minus_right"]})[k] for k, v in asym.items()},
+            "asymmetry": {k: _each(figure, v["left_minus_right"]) for k, v in asym.items()},
             "coefficients": _b64(stored.coefficients, "<f4"), "modes": _b64(stored.modes, "<i2"),
             "scales": stored.scales.astype(float).tolist(), "worst_mm": stored.worst_mm}
 

@@ -131,13 +131,13 @@ def ptosis_grade(volumes: BreastVolumes, nipples_input: dict, side: str) -> dict
     return ptosis_from_cells(nipple, volumes.cells, side)
 
 
-def fold_line(volumes: BreastVolumes, nipple_input, side: str, across_mm=(0.0,)) -> np.ndarray | None:
-    """(K, 3) points of her `side` inframammary fold under its nipple ((3,) input frame), `across_mm` to her left of
-    the nipple's x (body frame), at the height `ptosis_from_cells` finds the fold: on her skin where the fold was seen,
-    on the chest wall behind her breast where it hides the fold; input frame, mm. None where no fold is found."""
+def fold_line(volumes: BreastVolumes, nipple_input, found: dict, across_mm=(0.0,)) -> np.ndarray | None:
+    """(K, 3) points of a breast's inframammary fold under its nipple ((3,) input frame), `across_mm` to her left of
+    the nipple's x (body frame), at the height its ptosis (`found`, `ptosis_from_cells`) puts the fold: on her skin
+    where the fold was seen, on the chest wall behind her breast where it hides the fold; input frame, mm. None where
+    no fold was found."""
     cells = volumes.cells
     nipple = volumes.in_body(nipple_input)
-    found = ptosis_from_cells(nipple, cells, side)
     if found["nipple_to_fold_mm"] is None or not np.isfinite(found["nipple_to_fold_mm"]):
         return None
     x, y = nipple[0] + np.asarray(across_mm, float), nipple[1] - found["nipple_to_fold_mm"]

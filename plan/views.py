@@ -280,10 +280,11 @@ FOLD_HALF_MM = 30.0
 
 
 def _folds(plan: Plan) -> dict[str, np.ndarray]:
-    """Side → (K, 3) a short line along the fold under the breast as the measures place it (`symmetry.fold_line`),
-    input frame; none where the ptosis measure found no fold."""
+    """Side → (K, 3) a short line along the fold under the breast as the plan's ptosis measure places it
+    (`symmetry.fold_line`), input frame; none where it found no fold."""
     across = np.linspace(-FOLD_HALF_MM, FOLD_HALF_MM, 13)
-    lines = {s: fold_line(plan.volumes, sp.scan.nipple_camera_mm, s, across) for s, sp in plan.sides.items()}
+    lines = {s: fold_line(plan.volumes, sp.scan.nipple_camera_mm, plan.measures.ptosis["before"][s], across)
+             for s, sp in plan.sides.items()}
     return {s: line for s, line in lines.items() if line is not None}
 
 
