@@ -653,7 +653,7 @@ function scenes(layout){   // the layout's scenes for one view or two side by si
  if(beside)out.scene2=Object.assign({},axes,left);else delete out.scene2;
  return out;}
 const drawn=()=>beside?traces:traces.filter((_,i)=>i!==idx.before);   // the traces drawn: the scene before only beside
-const found={nipples:{null:L.nipples},footprints:P.footprints,folds:Object.fromEntries(Object.entries(P.folds).map(([s,f])=>[s,f.xyz]))};
+const found={nipples:{null:L.nipples},footprints:P.footprints};   // the marks that move with her skin (`mark_layout`)
 const markAt=3*(nP+P.sides.reduce((n,s)=>n+P.meshes[s].n,0));   // the marks' displacements follow the meshes'
 function placed(state){   // the marks on her: as found, or moved as the state shown moves her skin
  const at=(t,F)=>{traces[t]=Object.assign({},traces[t],{x:F.map(p=>p[0]),y:F.map(p=>p[1]),z:F.map(p=>p[2])});};
