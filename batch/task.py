@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from breastplan.building import LEFTOVER, sibling, swap_in
+from breastplan.code_digest import code_digest
 
 
 
@@ -74,11 +75,11 @@ def _plan(task: Task) -> None:
 
 
 def finished(case: Path, sha256: str, options: dict) -> bool:
-    """Whether `case` holds a whole plan of the input of this SHA-256 with these options: its plan.json
-    says so, and every file it names is there, with each side's scan and fit."""
+    """Whether `case` holds a whole plan of the input of this SHA-256 with these options, made by this code:
+    its plan.json says so, and every file it names is there, with each side's scan and fit."""
     planned = _plan_file(case)
     return (planned is not None and planned.current and planned.input_sha256 == sha256
-            and planned.options == options and planned.files is not None
+            and planned.options == options and planned.code == code_digest() and planned.files is not None
             and all((case / f).is_file() for f in planned.files))
 
 

@@ -115,6 +115,12 @@ MUTANTS = [
         "SMOOTHNESS[0] if unseen.mean() > UNSEEN_SHARE else SMOOTHNESS[1]", ("tests/test_fit.py",)),
     one("case-source-unchecked", "a scan.npz whose source no scan comes from, or a depth camera without a camera, "
         "read as it is", "core/case.py", "        _check_source(npz, source)\n", "", ("tests/test_fit.py",)),
+    one("stage-reused-from-other-code", "a case's stage reused though another breastplan's code made it",
+        "core/case.py", "(found.inputs, found.options, found.code) != (wanted.inputs, wanted.options, wanted.code)",
+        "(found.inputs, found.options) != (wanted.inputs, wanted.options)", ("tests/test_case.py",)),
+    one("batch-reuses-other-codes-plan", "a batch reuses a finished case that another breastplan's code planned",
+        "batch/task.py", "planned.options == options and planned.code == code_digest() and",
+        "planned.options == options and", ("tests/test_batch_reuse.py",)),
     # --- ingest ----------------------------------------------------------------------------------------
     one("ingest-metres-factor-100", "a scan file detected in metres scaled by 100 instead of 1000",
         "ingest/files.py", 'return 1000.0, f"units m (detected', 'return 100.0, f"units m (detected', INGEST),

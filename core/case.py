@@ -8,7 +8,7 @@ Each artefact set is written all or nothing (`atomic_set`): its PLYs are staged 
 NPZ last, and a process killed at any point leaves the previous set or (completed by `recover`,
 which every load runs first) the new one. The NPZ records the SHA-256 of each sibling, so a set
 whose files do not belong together (a file copied in, a write by another tool) is refused on load.
-Every NPZ records its provenance: the content hashes of its inputs and the options that made it
+Every NPZ records its provenance: the content hashes of its inputs, the options and the code that made it
 (docs/artefacts.md).
 """
 from __future__ import annotations
@@ -22,6 +22,7 @@ import numpy as np
 
 from . import __version__
 from .artefacts import load_npz, save_npz
+from .code_digest import code_digest
 from .atomic import Stage, atomic_set, recover
 from .body import Body
 from .chest_wall import ChestWall
@@ -54,11 +55,13 @@ def sha256(path: str | Path) -> str:
 
 @dataclass(frozen=True)
 class Provenance:
-    """What made an artefact: content hashes of its inputs (name → SHA-256), options, version."""
+    """What made an artefact: content hashes of its inputs (name → SHA-256), options, version, and the
+    digest of the code that made it (`code_digest`)."""
 
     inputs: dict[str, str] = field(default_factory=dict)
     options: dict = field(default_factory=dict)
     version: str = __version__
+    code: str = field(default_factory=code_digest)
 
     @classmethod
     def of(cls, inputs: dict[str, str | Path], options: dict) -> "Provenance":
@@ -66,12 +69,13 @@ class Provenance:
         return cls({name: sha256(path) for name, path in inputs.items()}, dict(options))
 
     def as_dict(self) -> dict:
-        return {"inputs": self.inputs, "options": self.options, "version": self.version}
+        return {"inputs": self.inputs, "options": self.options, "version": self.version, "code": self.code}
 
     @classmethod
     def from_meta(cls, meta: dict) -> "Provenance":
         p = meta.get("provenance") or {}
-        return cls(dict(p.get("inputs", {})), dict(p.get("options", {})), str(p.get("version", "")))
+        return cls(dict(p.get("inputs", {})), dict(p.get("options", {})), str(p.get("version", "")),
+                   str(p.get("code", "")))
 
 
 SOURCE_KINDS = ("recording", "device", "file")
@@ -179,7 +183,7 @@ _FIT_SPEC = {"primitive": ("f", (7,)), "pose": ("f", (4, 4)), "deformation": ("f
              "iterations": ("iu", (2,)), "seconds": ("f", (2,)), "residual_map_mm": ("f", ("n",))}
 
 
-_PROVENANCE_META = {"inputs": {"*": str}, "options": dict, "version": str}
+_PROVENANCE_META = {"inputs": {"*": str}, "options": dict, "version": str, "code": str}
 _SET_META = {"set": {"*": str}, "provenance": _PROVENANCE_META}
 _SCAN_META = {**_SET_META, "timings_ms": {"*": float}, "nipple_found": str, "plumb_camera": [float]}
 _FIT_META = {**_SET_META, "points": int, "converged": bool, "stopping_rule_met": bool}
@@ -390,15 +394,15 @@ class Case:
             return Provenance()
 
     def is_fresh(self, npz_name: str, wanted: Provenance) -> bool:
-        """Whether the NPZ exists, was made from inputs of the same content with the same options,
-        and its set is whole (a stage that can be reused)."""
+        """Whether the NPZ exists, was made from inputs of the same content with the same options by the
+        same code, and its set is whole (a stage that can be reused)."""
         self._recover()
         if not self.path(npz_name).is_file():
             return False
         try:
             meta = self._meta(npz_name)
             found = Provenance.from_meta(meta)
-            if (found.inputs, found.options) != (wanted.inputs, wanted.options):
+            if (found.inputs, found.options, found.code) != (wanted.inputs, wanted.options, wanted.code):
                 return False
             self._check_set(npz_name, meta)
         except NewerArtefactError:

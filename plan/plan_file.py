@@ -1,8 +1,8 @@
 """plan.json read back: what a case folder's plan says it planned, and the files it names.
 
 `plan.record` writes plan.json; this is its one reader, for what decides whether a case folder can be
-reused (`plan`, `batch`): its schema, its input's content hash, its options and its files; and for each
-breast's lead figures, which `batch` tabulates (`read_measures`).
+reused (`plan`, `batch`): its schema, its input's content hash, its options, the code that planned it and its
+files; and for each breast's lead figures, which `batch` tabulates (`read_measures`).
 """
 from __future__ import annotations
 
@@ -27,6 +27,7 @@ class PlanFile:
     options: dict
     files: tuple[str, ...] | None
     patient_id: str | None = None      # her ID in the clinic's records, when the plan was given one
+    code: str | None = None            # the digest of the code that planned it (`code_digest`); None: not recorded
 
     @property
     def current(self) -> bool:
@@ -47,10 +48,10 @@ def read_plan_file(folder: Path) -> PlanFile | None:
     schema, given = str(record.get("schema", "")), record.get("input")
     sha = given.get("sha256") if isinstance(given, dict) else None
     options = record.get("options") if isinstance(record.get("options"), dict) else {}
-    patient_id = _at(record, "patient", "patient_id")
+    patient_id, code = _at(record, "patient", "patient_id"), record.get("code")
     return PlanFile(schema, sha if isinstance(sha, str) else None, options,
                     _files(record) if schema == PLAN_SCHEMA else None,
-                    patient_id if isinstance(patient_id, str) else None)
+                    patient_id if isinstance(patient_id, str) else None, code if isinstance(code, str) else None)
 
 
 MEASURE_COLUMNS = ("side", "planned", "volume_cc", "uncertainty_cc", "unseen_outer_cc", "footprint_area_cm2",

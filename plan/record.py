@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from breastplan import __version__, transform_points, write_ply
+from breastplan.code_digest import code_digest
 from breastplan.atomic import Stage, atomic_set
 from breastplan.case import Case, Provenance, sha256
 from breastplan.json_text import measure_values, to_json, utf8
@@ -48,7 +49,7 @@ def write_plan(plan: Plan, folder: Path, parallel: bool = False) -> dict:
             if side in plan.operated:
                 sides[side]["operations"] = plan.operated[side].as_dict()
         torso_files = {}
-        record = {"schema": PLAN_SCHEMA, "version": __version__, "input": input_record(plan),
+        record = {"schema": PLAN_SCHEMA, "version": __version__, "code": code_digest(), "input": input_record(plan),
                   "options": plan.options.as_dict(), "stopping_rule": STOP_RESIDUAL, "sides": sides,
                   "measures": measures_record(plan), "versions": plan.versions,
                   "patient": plan.patient.as_dict(),

@@ -2,8 +2,8 @@
 happens to its workers, in seconds each (one case of the sample recording is planned once):
 
 * a case is reused only when it is a whole plan of the same input content with the same options — the
-  method, the sides and the earlier case of a follow-up (`--wall-from`) included; any other is planned
-  again (the cases sent to the executor are recorded, not planned, by a stand-in executor);
+  method, the sides and the earlier case of a follow-up (`--wall-from`) included — made by the same code; any
+  other is planned again (the cases sent to the executor are recorded, not planned, by a stand-in executor);
 * a case whose worker process dies (killed, out of memory) is failed, never done, and a batch whose every
   case failed has not succeeded — with the real local executor, its workers killed as they start.
 """
@@ -100,6 +100,19 @@ def test_a_case_of_an_input_whose_content_changed_is_planned_again(planned, sent
     changed.mkdir()
     (changed / "anna.mcap").write_bytes(SAMPLE.read_bytes() + b"\0")      # the same name, other content
     batch = run_batch(changed, out, BatchOptions(plan=PlanOptions(changes=CHANGES)))
+    assert statuses(batch) == {"anna.mcap": "failed"} and len(sent) == 1
+
+
+def test_a_case_planned_by_another_breastplan_is_planned_again(planned, sent, tmp_path):
+    """Truth: the case's plan.json says other code planned it (an upgrade since, or an edit of the source): its
+    figures are that code's, so the batch plans it again rather than tabulate them beside this code's."""
+    folder, out = planned
+    older = tmp_path / "cases"
+    shutil.copytree(out, older, symlinks=True)
+    record = json.loads((older / "anna" / "plan.json").read_text())
+    record["code"] = "0" * 64
+    (older / "anna" / "plan.json").write_text(json.dumps(record))
+    batch = run_batch(folder, older, BatchOptions(plan=PlanOptions(changes=CHANGES)))
     assert statuses(batch) == {"anna.mcap": "failed"} and len(sent) == 1
 
 

@@ -185,6 +185,7 @@ def test_provenance_says_whether_a_stage_can_be_reused(tmp_path):
     assert case.is_fresh(Case.FIT_NPZ, made)
     assert not case.is_fresh(Case.FIT_NPZ, Provenance(made.inputs, FitOptions(lattice=4).as_dict()))
     assert not case.is_fresh(Case.FIT_NPZ, Provenance({"scan.ply": "0" * 64}, made.options))
+    assert not case.is_fresh(Case.FIT_NPZ, dataclasses.replace(made, code="0" * 64))    # made by other code
     assert not Case(tmp_path / "empty").is_fresh(Case.FIT_NPZ, made)
 
 
