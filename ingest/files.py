@@ -30,6 +30,7 @@ from typing import Iterator, NamedTuple
 import numpy as np
 
 from breastplan import BadInputError, read_ply, require_file
+from breastplan.point_order import canonical_faces
 from breastplan.errors import counted
 from breastplan.case import CAMERA_FRAME
 from breastplan.ply import MAX_ELEMENTS as MAX_POINTS, FaceLayoutError, faces_problem
@@ -213,6 +214,7 @@ def _mm_per_unit(path: Path | None, extent: float, units: str) -> tuple[float, s
 def _sample_surface(path: Path, points_mm: np.ndarray, faces: np.ndarray, colours=None) -> tuple:
     """Sample a mesh (mm) uniformly by area, ~1 point per mm², seeded: (points, normals from the triangles,
     colours interpolated from the vertices' (N, 3) uint8, or None)."""
+    faces = canonical_faces(points_mm, faces)          # the sampling is the surface's, whatever the files' order
     with _open3d() as o3d:
         mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(points_mm),
                                          o3d.utility.Vector3iVector(np.ascontiguousarray(faces, dtype=np.int32)))

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from breastplan import read_ply, write_ply
-from breastplan.scenes.makehuman import BodyOptions
-from breastplan.scenes.realistic import CameraOptions, make_body_scene, write_scan_file
+from breastplan.scenes.makehuman import BodyOptions, make_body
+from breastplan.scenes.realistic import CameraOptions, make_body_scene, write_closed_scan, write_scan_file
 
 
 def _plan(cli, scan, out, threads: int) -> dict:
@@ -66,3 +66,20 @@ def test_a_plan_is_the_same_for_any_order_of_the_points_any_blas_threads_and_fro
     assert (tmp_path / "a" / "summary.png").read_bytes() == (tmp_path / "c" / "summary.png").read_bytes()
     assert _undated(tmp_path / "a" / "report.pdf") == _undated(tmp_path / "c" / "report.pdf")
     assert all(r["volume"]["volume_cc"] > 100 for r in first["sides"].values())
+
+
+@pytest.mark.long
+def test_a_closed_mesh_plans_the_same_whatever_the_order_of_its_triangles_and_their_corners(cli, tmp_path):
+    """A 360° scanner's mesh is sampled into points: the same surface with its vertices, its triangles and each
+    triangle's corners listed in another order (each triangle still facing out) gives the same plan.json."""
+    write_closed_scan(tmp_path / "closed.ply", make_body(BodyOptions(cup=0.6, weight=0.4, pose="a-pose")))
+    mesh = read_ply(tmp_path / "closed.ply")
+    rng = np.random.default_rng(7)
+    moved = rng.permutation(len(mesh.points))                       # vertex i of the file is vertex moved[i]
+    where = np.empty_like(moved)
+    where[moved] = np.arange(len(moved))
+    faces = where[mesh.faces][rng.permutation(len(mesh.faces))]
+    faces = np.take_along_axis(faces, (rng.integers(0, 3, len(faces))[:, None] + np.arange(3)) % 3, 1)
+    write_ply(tmp_path / "reordered.ply", mesh.points[moved], faces=faces)
+    first = _numbers(_plan(cli, tmp_path / "closed.ply", tmp_path / "a", threads=1))
+    assert _numbers(_plan(cli, tmp_path / "reordered.ply", tmp_path / "b", threads=1)) == first
