@@ -7,7 +7,8 @@ leading outside the folder or into a loop of links, a case name already taken by
 (`a.ply` and `a.mcap` both become case `a`; the first in sorted order is planned), or a case inside
 another's (`a/left.ply` beside `a.ply`). A plan file beside a scan (`a.plan.yaml`, `.plan.yml` or
 `.plan.json` beside `a.ply`: `plan.written_plan`) goes with it, and is no input of its own; one with no
-scan of its name beside it is skipped, saying so.
+scan of its name beside it is skipped, saying so. An OBJ's material and texture of its own name beside it
+(`a.mtl`, `a.png` beside `a.obj`, as scanners export them) are read with it, and are no inputs either.
 """
 from __future__ import annotations
 
@@ -22,6 +23,8 @@ SCAN_SUFFIXES = (".mcap", *SUPPORTED)
 """A recording (.mcap) or a scan file of a format ingest reads."""
 PLAN_SUFFIXES = (".plan.yaml", ".plan.yml", ".plan.json")
 """A scan's own plan file: its name, then one of these."""
+OBJ_COMPANIONS = (".mtl", ".png", ".jpg", ".jpeg", ".bmp", ".tga", ".tif", ".tiff")
+"""What a scanner writes beside its OBJ, of the OBJ's name: its material and its texture."""
 
 
 @dataclass(frozen=True)
@@ -60,7 +63,13 @@ def find_inputs(folder: Path, out: Path | None = None) -> list[Input]:
             if not f.startswith("."):
                 found.append(_classify(folder, root, base / f))
     found.sort(key=lambda i: i.name)
-    return _mark_duplicates(_with_plan_files(found))
+    return _mark_duplicates(_with_plan_files(_without_obj_companions(found)))
+
+
+def _without_obj_companions(found: list[Input]) -> list[Input]:
+    """The inputs less each OBJ's material and texture of its own name beside it (OBJ_COMPANIONS)."""
+    objs = {i.case for i in found if i.skipped is None and i.name.lower().endswith(".obj")}
+    return [i for i in found if not (Path(i.name).suffix.lower() in OBJ_COMPANIONS and i.case in objs)]
 
 
 def _with_plan_files(found: list[Input]) -> list[Input]:

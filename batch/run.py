@@ -114,6 +114,11 @@ def _rows_and_tasks(inputs: list[Input], out: Path, options: BatchOptions) -> tu
             continue
         case = out.resolve() / i.case
         earlier = None if options.wall_from is None else str(Path(options.wall_from).resolve() / i.case)
+        if earlier is not None and not Path(earlier).is_dir():
+            row.status = "failed"
+            row.error = (f"{i.path}: has no earlier visit to follow up: {Path(options.wall_from) / i.case} does not "
+                         f"exist (the earlier batch planned no scan named {i.case}).")
+            continue
         try:
             plan = {**_her_plan(options.plan, i.plan_file).as_dict(), "wall_from": earlier}
         except ValueError as exc:

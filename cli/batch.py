@@ -6,6 +6,7 @@ from typing import List, Optional
 
 import typer
 
+from breastplan.errors import counted
 from breastplan.options import DEFAULT_PLAN, DEGREE_KINDS, BatchOptions, OptionError, PlanOptions
 
 from .app import JSON, UNITS_HELP, UP_HELP, command
@@ -87,8 +88,8 @@ def batch(
 
 def _print_summary(out: Path, manifest) -> None:
     s = manifest.summary()
-    stdout.print(f"batch: {s['inputs']} inputs — {s['done']} planned, {s['reused']} reused, {s['failed']} failed, "
-                 f"{s['skipped']} skipped; manifest → {out / 'manifest.csv'}, each breast's measures → "
+    stdout.print(f"batch: {counted(s['inputs'], 'input')} — {s['done']} planned, {s['reused']} reused, "
+                 f"{s['failed']} failed, {s['skipped']} skipped; manifest → {out / 'manifest.csv'}, each breast's measures → "
                  f"{out / 'measures.csv'}", markup=False, soft_wrap=True)
     for row in manifest.rows:
         if row.status == "failed":

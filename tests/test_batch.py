@@ -87,6 +87,16 @@ def test_find_inputs_names_each_file_and_why_it_is_skipped(patients, tmp_path):
     assert found["gone.ply"].skipped is None          # found; it fails when read
 
 
+def test_an_objs_material_and_texture_beside_it_are_no_inputs(tmp_path):
+    """A scanner's export: eva.obj with eva.mtl and eva.png beside it; a texture of no OBJ's name is still listed."""
+    for name in ("eva.obj", "eva.mtl", "eva.png", "ward/eva.png", "logo.png"):
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        (tmp_path / name).write_bytes(b"")
+    found = {i.name: i.skipped for i in find_inputs(tmp_path)}
+    assert set(found) == {"eva.obj", "ward/eva.png", "logo.png"} and found["eva.obj"] is None
+    assert found["logo.png"].startswith("not a scan or recording") and found["ward/eva.png"] is not None
+
+
 def test_find_inputs_skips_a_named_pipe_which_reading_would_block_on(tmp_path):
     os.mkfifo(tmp_path / "pipe.ply")
     (tmp_path / "gone.ply").symlink_to(tmp_path / "deleted.ply")

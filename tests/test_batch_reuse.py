@@ -89,9 +89,20 @@ def test_a_case_planned_alone_is_planned_again_as_a_follow_up(planned, sent, tmp
     there, which the case planned alone is not."""
     folder, out = planned
     earlier = tmp_path / "last-year"
+    (earlier / "anna").mkdir(parents=True)
     batch = run_batch(folder, out, BatchOptions(plan=PlanOptions(changes=CHANGES), wall_from=str(earlier)))
     assert statuses(batch) == {"anna.mcap": "failed"}
     assert [t.options["wall_from"] for t in sent] == [str(earlier.resolve() / "anna")]
+
+
+def test_a_scan_with_no_earlier_visit_of_its_name_fails_saying_so_and_is_sent_to_no_worker(planned, sent, tmp_path):
+    folder, out = planned
+    earlier = tmp_path / "last-year"
+    earlier.mkdir()
+    batch = run_batch(folder, out, BatchOptions(plan=PlanOptions(changes=CHANGES), wall_from=str(earlier)))
+    row = batch.manifest.rows[0]
+    assert row.status == "failed" and sent == []
+    assert row.error.startswith(f"{folder / 'anna.mcap'}: has no earlier visit") and str(earlier / "anna") in row.error
 
 
 def test_a_case_of_an_input_whose_content_changed_is_planned_again(planned, sent, tmp_path):
