@@ -15,6 +15,7 @@ import logging
 import multiprocessing
 import os
 import signal
+import threading
 import sys
 from collections import Counter
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -226,10 +227,25 @@ def _cluster(scheduler: str | None, jobs: int):
     from distributed import LocalCluster
 
     one_thread_environment()                      # inherited by the worker processes
-    with dask.config.set(DASK_WORKER_CONFIG), LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
-                                                           dashboard_address=None,
-                                                           silence_logs=logging.CRITICAL) as cluster:
+    with dask.config.set(DASK_WORKER_CONFIG), _deaf_to_ctrl_c():
+        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.CRITICAL)
+    with cluster:
         yield cluster
+
+
+@contextlib.contextmanager
+def _deaf_to_ctrl_c():
+    """Ctrl-C ignored while processes are started (they keep ignoring it: a terminal's Ctrl-C reaches every
+    process of its group, and the batch, which stops them, says what became of the cases)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 _child: ProcessPoolExecutor | None = None

@@ -345,7 +345,7 @@ def _alive(pid: int) -> bool:
         return False
 
 
-def _three_patients_batched_until_one_is_finished(cli, tmp_path, **popen):
+def _three_patients_batched_until_one_is_finished(cli, tmp_path, executor=(), **popen):
     """(input folder, output folder, names, the running batch) once one of three cases is whole."""
     folder = tmp_path / "scans"
     folder.mkdir()
@@ -353,7 +353,7 @@ def _three_patients_batched_until_one_is_finished(cli, tmp_path, **popen):
     for name in names:
         shutil.copy(SAMPLE, folder / f"{name}.mcap")
     out = tmp_path / "cases"
-    batch = subprocess.Popen([cli, "batch", folder, "--out", out, "--jobs", "2"], **popen)
+    batch = subprocess.Popen([cli, "batch", folder, "--out", out, "--jobs", "2", *executor], **popen)
     while not any(_whole(out / n) for n in names):
         assert batch.poll() is None, "the batch ended before it could be stopped"
         time.sleep(0.1)
@@ -391,16 +391,18 @@ def test_kill_9_at_a_random_moment_loses_no_finished_case_and_leaves_none_half_w
 
 
 @pytest.mark.long
-def test_ctrl_c_stops_the_batch_at_once_with_its_manifest_true_to_the_disk(cli, tmp_path):
+@pytest.mark.parametrize("executor", [(), ("--executor", "dask")], ids=["local", "dask"])
+def test_ctrl_c_stops_the_batch_at_once_with_its_manifest_true_to_the_disk(cli, tmp_path, executor):
     """SIGINT to the batch and its workers (a terminal's Ctrl-C) once a case is finished: the cases being
-    planned are dropped, not finished behind the manifest's back; the sentence says what is left and the
-    same command finishes it."""
+    planned are dropped, not finished behind the manifest's back; the sentence says what is left, with no
+    worker's traceback, and the same command finishes it."""
     folder, out, names, batch = _three_patients_batched_until_one_is_finished(   # SIGINT heard, as at a terminal,
-        cli, tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,  # even
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))   # when the tests run in the background
+        cli, tmp_path, executor, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,  # even when the tests
+        start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))   # run in the back
     os.killpg(batch.pid, signal.SIGINT)
     _, err = batch.communicate()
     assert batch.returncode == 130, err[-2000:]
+    assert "Traceback" not in err, err[-3000:]
     rows = _manifest(out)
     settled = [n for n in names if rows[f"{n}.mcap"]["status"] == "done"]
     assert settled and all(_whole(out / n) for n in settled)
