@@ -25,7 +25,9 @@ model (`fit_scan(ingested).volume_cc` per side, BLAS on one thread as `breastpla
      averaged), averaged over the other scans — target: worst ≤ 4 mm; the same in the true frame
      beside it;
    * honesty: the share of the scans' volumes within their stated ± (`uncertainty_cc`) of their
-     breast's median volume — target ≥ 90 % over all re-scans (the fitted model states no ±).
+     breast's median volume — target ≥ 90 % over all re-scans (the fitted model states no ±);
+   * her width (`plan.base_width`): its max − min over the re-scans, beside the fitted model's base
+     outline's width (`breast_measures`), no target; and on the symmetric bodies (2.), |left − right|.
 2. symmetric bodies: 2 bodies (weight 0.85 / cup 0.2; weight 0.5 / cup 0.7) in 6 views each (each
    pose twice, with a wall and without, yaw −10..10°): |left − right| / mean volume — target ≤ 3 %
    in every view (the bodies' true half-body volumes differ by under 3 cc). Beside it, with no target:
@@ -81,7 +83,9 @@ from breastplan.ingest.pipeline import ingest_frames
 from breastplan.scenes.realistic import BodyScene, CameraOptions, camera_pose
 from breastplan.ingest.recording import DepthFrames
 from breastplan.options import SIDES, IngestOptions
+from breastplan.plan.base_width import base_width_mm
 from breastplan.plan.breast_volume import CELL_MM, measure_breasts
+from breastplan.plan.measures import breast_measures
 
 from bench_realistic import figure, new_table, print_figures
 from timing import rounded
@@ -193,6 +197,7 @@ class SceneResult:
     nipple_error_mm: dict = field(default_factory=dict)  # side → found vs true nipple, 3-D
     new: dict = field(default_factory=dict)      # side → {volume_cc, uncertainty_cc, nipple_body, ...}
     fitted: dict = field(default_factory=dict)   # side → volume_cc
+    fitted_width: dict = field(default_factory=dict)  # side → the fitted model's width_mm (`breast_measures`)
     frame: dict = field(default_factory=dict)    # the found landmarks in the true body frame: notch, up, left
     front_lr_cc: dict = field(default_factory=dict)  # a perfect front view's left − right: `front_difference_cc`
 
@@ -201,7 +206,7 @@ class SceneResult:
         new = {side: {k: v for k, v in d.items() if not k.startswith("footprint")} for side, d in self.new.items()}
         return {"set": s.set, "body": s.body, "view": s.label, "seed": s.seed, "truth_cc": self.truth_cc,
                 "seconds": self.seconds, "errors": self.errors, "nipple_error_mm": self.nipple_error_mm,
-                "new": new, "fitted": self.fitted, "frame": self.frame}
+                "new": new, "fitted": self.fitted, "fitted_width_mm": self.fitted_width, "frame": self.frame}
 
 
 def scanned_and_measured(scene: BodyScene, seed: int, label: str):
@@ -260,6 +265,7 @@ def run_scene(shot: Shot) -> SceneResult:
         for side, b in m.sides.items():
             out.new[side] = {
                 "volume_cc": float(b.volume_cc), "uncertainty_cc": float(b.uncertainty_cc),
+                "width_mm": base_width_mm(m.cells, m.in_body(nipples[side]), side),
                 "unseen_outer_cc": float(b.unseen_outer_cc),
                 "nipple_body": transform_points(m.body_from_input, nipples[side][None])[0],
                 "nipple_true_frame": transform_points(true_T, nipples[side][None])[0],
@@ -270,7 +276,11 @@ def run_scene(shot: Shot) -> SceneResult:
     t0 = time.perf_counter()
     for side, ingested in ing.items():
         try:
-            out.fitted[side] = float(fit_scan(ingested).volume_cc)
+            fit = fit_scan(ingested)
+            out.fitted[side] = float(fit.volume_cc)
+            if m is not None:
+                surface = transform_points(np.linalg.inv(ingested.input_to_breast), fit.vertices)
+                out.fitted_width[side] = breast_measures(m.landmarks, nipples[side], surface, fit.faces)["width_mm"]
         except BadInputError as exc:
             out.errors.append((f"fit {side}", str(exc)))
     out.seconds["fit"] = time.perf_counter() - t0
@@ -374,8 +384,13 @@ def rescan_rows(results: list[SceneResult]) -> list[dict]:
             fit = [r.fitted[side] for r in scans if side in r.fitted]
             med = statistics.median(vol) if vol else None
             frames = [r.frame for r in scans if r.frame]
+            widths = [n["width_mm"] for n in new]
+            fitted_widths = [r.fitted_width[side] for r in scans if side in r.fitted_width]
             rows.append({
                 "body": name, "side": side, "scans": len(scans), "new_cc": vol, "fitted_cc": fit,
+                "new_width_mm": widths, "fitted_width_mm": fitted_widths,
+                "new_width_spread_mm": float(np.ptp(widths)) if len(widths) > 1 else None,
+                "fitted_width_spread_mm": float(np.ptp(fitted_widths)) if len(fitted_widths) > 1 else None,
                 "uncertainty_cc": [n["uncertainty_cc"] for n in new],
                 "new_cv_pct": cv_pct(vol), "new_spread_pct": spread_pct(vol),
                 "fitted_cv_pct": cv_pct(fit), "fitted_spread_pct": spread_pct(fit),
@@ -420,7 +435,9 @@ def volumes(r: SceneResult, which: str) -> dict:
 def symmetric_rows(results: list[SceneResult]) -> list[dict]:
     return [{"body": r.shot.body, "view": r.shot.label, "true_lr_cc": lr(r.truth_cc),
              "new_cc": volumes(r, "new"), "fitted_cc": volumes(r, "fitted"),
-             "new_pct": sym_pct(volumes(r, "new")), "fitted_pct": sym_pct(volumes(r, "fitted"))}
+             "new_pct": sym_pct(volumes(r, "new")), "fitted_pct": sym_pct(volumes(r, "fitted")),
+             "new_width_lr_mm": lr({s: v["width_mm"] for s, v in r.new.items()}),
+             "fitted_width_lr_mm": lr(r.fitted_width)}
             for r in results if r.shot.set == "symmetric"]
 
 
@@ -543,6 +560,17 @@ def figures_of(resc: list[dict], sym: list[dict], asym: list[dict], results: lis
                     "none where they had one): the nipple from the re-scans' mean, found body frame; its volume "
                     "from their median (no target: the up axis then comes from the wall on one visit and from her "
                     "midline profile on the other)"),
+        figure("rescan_width_spread_worst", worst_of(r["new_width_spread_mm"] for r in resc), None,
+               worst_of(r["fitted_width_spread_mm"] for r in resc), "mm",
+               median=median_of(r["new_width_spread_mm"] for r in resc),
+               baseline_median=median_of(r["fitted_width_spread_mm"] for r in resc),
+               over=f"{breasts}: max − min of her width on her skin (`base_width_mm`); baseline: the fitted model's "
+                    "base outline's (`breast_measures`' width_mm); no target"),
+        figure("symmetric_width_difference_worst", worst_abs(s["new_width_lr_mm"] for s in sym), None,
+               worst_abs(s["fitted_width_lr_mm"] for s in sym), "mm",
+               median=median_of(abs(s["new_width_lr_mm"]) for s in sym if s["new_width_lr_mm"] is not None),
+               over=f"{len(sym)} views of 2 symmetric bodies: |left − right| of her width; baseline: the fitted "
+                    "model's; no target"),
         figure("rescan_honesty", 100.0 * honest / measured if measured else None, T["honesty_pct"], None, "%",
                at_most=False, over=f"{honest}/{measured} re-scan volumes within their ± of their breast's median "
                                    "(the fitted model states no ±)"),
@@ -625,16 +653,18 @@ def print_tables(console: Console, results, resc, sym, asym, figures) -> None:
     console.print(table)
     table = new_table("bench_volume_repeat 1 — re-scans: nipple and footprint spreads (mm)",
                       ("body", "side", "nipple", "nipple, true frame", "frame alone", "notch", "up axis",
-                       "left axis", "footprint", "footprint, true frame"),
+                       "left axis", "footprint", "footprint, true frame", "width: skin", "width: model"),
                       "nipple: the largest distance of a scan's nipple from the scans' mean, in the found body frame; "
                       "true frame: the same nipples in MakeHuman's frame (ingest alone); frame alone: the true nipple "
                       "in the found frames; notch: the found sternal notch's spread in MakeHuman's frame; up / left axis: "
                       "the found axes' largest angle from their mean there (°); footprint: mean x–y distance from "
-                      "the median-volume scan's curve.")
+                      "the median-volume scan's curve; width: max − min of her width on her skin, and of the fitted "
+                      "model's.")
     for r in resc:
         table.add_row(r["body"], r["side"], mm(r["nipple_spread_mm"]), mm(r["nipple_spread_true_frame_mm"]),
                       mm(r["frame_spread_mm"]), mm(r["notch_spread_mm"]), mm(r["up_spread_deg"]),
-                      mm(r["left_spread_deg"]), mm(r["footprint_spread_mm"]), mm(r["footprint_spread_true_frame_mm"]))
+                      mm(r["left_spread_deg"]), mm(r["footprint_spread_mm"]), mm(r["footprint_spread_true_frame_mm"]),
+                      mm(r["new_width_spread_mm"]), mm(r["fitted_width_spread_mm"]))
     console.print(table)
     table = new_table("bench_volume_repeat 2 — symmetric bodies: |left − right| / mean",
                       ("body", "view", "true L − R", "new L / R (cc)", "new", "fitted L / R (cc)", "fitted"))

@@ -16,6 +16,7 @@ from breastplan.case import sha256
 from breastplan.clock import Clock
 from breastplan.options import PlanOptions
 
+from .base_width import base_width_mm
 from .breast_volume import BreastVolumes, change_on_earlier_wall, measure_breasts
 from .camera_distance import camera_distance_mm, distance_notes
 from .changes import UNCHANGED, Change, Method, change_name, combine, solve_change
@@ -50,13 +51,14 @@ def compute_plan(source: Path, fitted: dict[str, SidePlan], options: PlanOptions
     with clock("states"):
         states = tuple(_states(sides, options, method, operated))
     folds = {s: her_fold(volumes, sp) for s, sp in sides.items()}
+    widths = {s: base_width_mm(volumes.cells, volumes.in_body(sp.scan.nipple_camera_mm), s) for s, sp in sides.items()}
     fitted_measures = {s: _model_measures(volumes, sp, folds[s]) for s, sp in sides.items()}
     with clock("every slider state"):
-        grid = state_grid(sides, states, options, volumes, fitted_measures, folds, operated)
+        grid = state_grid(sides, states, options, volumes, fitted_measures, folds, widths, operated)
     with clock("measures"):
         requested = planned_states(states, next(iter(sides.values())))
         torsos = tuple(planned_torso(body, sides, st) for st in requested)
-        measures = plan_measures(sides, volumes, requested[-1], torsos[-1], fitted_measures,
+        measures = plan_measures(sides, volumes, widths, requested[-1], torsos[-1], fitted_measures,
                                  grid.measures_at(grid.planned_index))
         skin = {} if earlier is None else skin_changes(body, sides, volumes, earlier)
     now = camera_distance_mm({s: sp.scan.nipple_from_camera_mm for s, sp in sides.items()})
@@ -125,13 +127,14 @@ def _states(sides: dict[str, SidePlan], options: PlanOptions, method: Method, op
 
 def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], options: PlanOptions,
                volumes: BreastVolumes, fitted: dict[str, dict[str, float]], folds: dict[str, np.ndarray | None],
-               operated: dict[str, Operated] | None = None) -> StateGrid:
+               widths: dict[str, float], operated: dict[str, Operated] | None = None) -> StateGrid:
     """Every combination of the kinds' slider positions (`states` holds each kind's change at each degree; a kind
     off is left out, every kind off is her operations alone; with no kind, the one state of her operations), after
     her `operated` breasts' operations, each side's fitted model so planned, and her measures on it
     (`breast_measures_each`). Her volume on her skin is changed by the operations' exact
     change, then by as much as the fitted model's volume changes from the operations' state (`fitted`: its measures
-    as scanned, `_model_measures`). Nipple to fold is measured to her fold, side → `her_fold`, in every state."""
+    as scanned, `_model_measures`); her width on her skin (side → mm, `base_width_mm`) likewise by as much as the
+    model's. Nipple to fold is measured to her fold, side → `her_fold`, in every state."""
     operated = operated or {}
     kinds = tuple(k for k, _ in options.changes)
     requested = tuple(d for _, d in options.changes)
@@ -153,6 +156,7 @@ def state_grid(sides: dict[str, SidePlan], states: tuple[PlanState, ...], option
             base = breast_measures(volumes.landmarks, op.nipple_mm, op(sp.surface_input), sp.fit.faces)["volume_cc"]
             volume = op.volume_cc
         measures[s]["volume_cc"] += volume - base
+        measures[s]["width_mm"] += widths[s] - fitted[s]["width_mm"]
         measures[s] = poles_of_her_volume(measures[s])
     keys = tuple(COMBINED if len(kinds) > 1 and combo == requested else
                  "+".join(change_name(k, d) for k, d in zip(kinds, combo) if d != OFF) or OPERATED for combo in combos)
@@ -204,16 +208,19 @@ def planned_torso(body: Body, sides: dict[str, SidePlan], state: PlanState) -> n
     return moved
 
 
-def plan_measures(sides: dict[str, SidePlan], volumes: BreastVolumes, shown: PlanState, torso: np.ndarray,
-                  fitted: dict[str, dict[str, float]], after: dict[str, dict[str, float]]) -> Measures:
+def plan_measures(sides: dict[str, SidePlan], volumes: BreastVolumes, widths: dict[str, float], shown: PlanState,
+                  torso: np.ndarray, fitted: dict[str, dict[str, float]],
+                  after: dict[str, dict[str, float]]) -> Measures:
     """Each side's measures before (`fitted`: on the fitted breasts as scanned, `_model_measures`) and as planned
     (`shown`, her torso so: `torso`, input frame, mm; `after`: its measures, `StateGrid.measures_at`), and their
-    asymmetry (left − right). The volume is hers, measured on her skin."""
+    asymmetry (left − right). The volume and the width (side → mm, `base_width_mm`) are hers, measured on her
+    skin."""
     before, nipples = {}, {"before": {}, "after": {}}
     for side, sp in sides.items():
         nipple, planned = sp.scan.nipple_camera_mm, shown.planned[side]
         nipples["before"][side], nipples["after"][side] = nipple, planned.model(nipple[None])[0]
-        before[side] = poles_of_her_volume({**fitted[side], "volume_cc": volumes.sides[side].volume_cc})
+        before[side] = poles_of_her_volume({**fitted[side], "volume_cc": volumes.sides[side].volume_cc,
+                                            "width_mm": widths[side]})
     asym = {when: {k: v["left_minus_right"] for k, v in asymmetry(m).items()} for when, m in
             (("before", before), ("after", after))}
     symmetry, ptosis = _symmetry(volumes, nipples, torso)
