@@ -43,7 +43,7 @@ def train_statistical(
     if out.suffix != ".npz":
         raise usage_error(f"the model file must end in .npz, got {out.name}", "--out")
     writable(out)
-    from breastplan.learn.operation_pairs import is_operation_table
+    from breastplan.plan.operation_pairs import is_operation_table
 
     if is_operation_table(pairs):
         if corresponding or lattice != 5:
@@ -71,8 +71,8 @@ def train_statistical(
 
 
 def _operation_model(pairs: Path, out: Path, regressor: str, as_json: bool, clock: Clock) -> None:
-    """An operation's model learnt from its pairs folder (`learn.operation_pairs`), written to `out`."""
-    from breastplan.learn.operation_pairs import learnt_pairs, read_operation_pairs
+    """An operation's model learnt from its pairs folder (`plan.operation_pairs`), written to `out`."""
+    from breastplan.plan.operation_pairs import learnt_pairs, read_operation_pairs
 
     with about(pairs / "pairs.csv"):
         rows = read_operation_pairs(pairs)

@@ -16,9 +16,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from breastplan import BadInputError
+from breastplan.case import Case
+from breastplan.learn.pair_folder import SPLITS, columns, member, read_table
 from breastplan.options import OptionError
 
-from .pair_folder import SPLITS, columns, member, read_table
+from .compute import measure_scans
+from .learnt_operation import LEARNT, Pair
+from .operation_spec import OperationSpec
 
 COLUMNS = ("before", "after", "operation", "side", "split")
 REQUIRED = COLUMNS[:4]
@@ -51,9 +55,6 @@ def read_operation_pairs(folder: str | Path) -> list[OperationRow]:
     """The rows of `folder`/pairs.csv, in file order; BadInputError naming pairs.csv (and the line) for any defect
     of the table or the case folders it names, and for pairs of more than one kind of operation or of one the
     models do not learn."""
-    from breastplan.plan.learnt_operation import LEARNT
-    from breastplan.plan.operation_spec import OperationSpec
-
     table, root, (line, header), lines = read_table(folder)
     index = columns(table, line, header, COLUMNS, REQUIRED)
     rows, kinds = [], set()
@@ -88,14 +89,9 @@ def read_operation_pairs(folder: str | Path) -> list[OperationRow]:
 
 
 def learnt_pairs(rows: list[OperationRow], advance=lambda: None) -> list:
-    """The training rows' pairs (`plan.learnt_operation.Pair`, one per breast operated), each woman measured on her
+    """The training rows' pairs (`learnt_operation.Pair`, one per breast operated), each woman measured on her
     skin before and after (each case folder once); BadInputError naming a case folder that does not hold the
     breast its row names."""
-    from breastplan.case import Case
-    from breastplan.plan.compute import measure_scans
-    from breastplan.plan.learnt_operation import Pair
-    from breastplan.plan.operation_spec import OperationSpec
-
     measured = {}
 
     def of(folder: Path, sides: tuple[str, ...]):
