@@ -27,6 +27,8 @@ def canonical_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     r = dense[f]
     turn = (np.argmin(r, axis=1)[:, None] + np.arange(3)) % 3
     f, r = np.take_along_axis(f, turn, 1), np.take_along_axis(r, turn, 1)
+    if len(order) < 1 << 21:                          # the three ranks packed in one key: one sort, not three
+        return f[np.argsort((r[:, 0] << 42) | (r[:, 1] << 21) | r[:, 2], kind="stable")]
     return f[np.lexsort(r.T[::-1])]
 
 
