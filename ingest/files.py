@@ -30,6 +30,7 @@ from typing import Iterator, NamedTuple
 import numpy as np
 
 from breastplan import BadInputError, read_ply, require_file
+from breastplan.point_order import canonical_faces
 from breastplan.errors import counted
 from breastplan.case import CAMERA_FRAME
 from breastplan.ply import MAX_ELEMENTS as MAX_POINTS, FaceLayoutError, faces_problem
@@ -38,12 +39,12 @@ from breastplan.units import SCAN_EXTENT_MM
 from breastplan.units import extent as extent_of
 
 from .crash_probe import crash_of
-from .surface_samples import surface_samples
 
 SUPPORTED = (".ply", ".obj", ".stl", ".pcd", ".xyz", ".glb", ".gltf")
 POINTS_PER_MM2 = 1.0
 SAMPLE_RANGE = (20_000, 400_000)
 """Bounds on the number of points sampled from a mesh surface."""
+SAMPLE_SEED = 0
 METRE_EXTENT = (0.05, SCAN_EXTENT_MM / 1000.0)
 MM_EXTENT = (50.0, SCAN_EXTENT_MM)
 """Plausible extents of a scan in metres and in millimetres: from a breast alone to a patient with
@@ -211,18 +212,22 @@ def _mm_per_unit(path: Path | None, extent: float, units: str) -> tuple[float, s
 
 
 def _sample_surface(path: Path, points_mm: np.ndarray, faces: np.ndarray, colours=None) -> tuple:
-    """Sample a mesh (mm) evenly by area, ~1 point per mm², with no random draw (`surface_samples`): (points,
-    normals from the triangles, colours interpolated from the vertices' (N, 3) uint8, or None)."""
-    tri = np.asarray(points_mm, float)[np.asarray(faces, np.int64)]
-    area = 0.5 * float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
-    if not area > 0:
-        raise BadInputError(path, "is a mesh whose triangles have no area")
-    n = int(np.clip(round(area * POINTS_PER_MM2), *SAMPLE_RANGE))
-    points, normals, corners, weights = surface_samples(points_mm, faces, n)
-    if colours is None:
-        return points, normals, None
-    mixed = np.einsum("nk,nkc->nc", weights, np.asarray(colours, float)[corners])
-    return points, normals, np.rint(mixed).clip(0, 255).astype(np.uint8)
+    """Sample a mesh (mm) uniformly by area, ~1 point per mm², seeded: (points, normals from the triangles,
+    colours interpolated from the vertices' (N, 3) uint8, or None)."""
+    faces = canonical_faces(points_mm, faces)          # the sampling is the surface's, whatever the files' order
+    with _open3d() as o3d:
+        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(points_mm),
+                                         o3d.utility.Vector3iVector(np.ascontiguousarray(faces, dtype=np.int32)))
+        if colours is not None:
+            mesh.vertex_colors = o3d.utility.Vector3dVector(np.asarray(colours, float) / 255.0)
+        area = mesh.get_surface_area()
+        if not area > 0:
+            raise BadInputError(path, "is a mesh whose triangles have no area")
+        n = int(np.clip(round(area * POINTS_PER_MM2), *SAMPLE_RANGE))
+        o3d.utility.random.seed(SAMPLE_SEED)
+        cloud = mesh.sample_points_uniformly(n, use_triangle_normal=True)
+        sampled = _rgb8(cloud.colors) if colours is not None else None
+    return np.asarray(cloud.points), np.asarray(cloud.normals), sampled
 
 
 def _rgb8(colors) -> np.ndarray:
