@@ -23,10 +23,12 @@ from breastplan.scenes.realistic import CameraOptions, make_body_scene, write_sc
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "meshlab_pipeline.py"
 NIPPLE_MM = 8.0
 """The nipple tolerance of the isolation tests (tests/test_realistic.py)."""
-VOLUME_FACTOR = 1.5
-"""As in tests/test_filters.py: the fitted volume and the volume the cup adds to her half body measure
-the breast only roughly alike (the cup target also thickens the chest around the breast, and a cup of
-0 keeps a small mound)."""
+VOLUME_FACTOR = 1.6
+"""As in tests/test_filters.py (1.5 there): the fitted volume and the volume the cup adds to her half body
+measure the breast only roughly alike (the cup target also thickens the chest around the breast, and a cup of
+0 keeps a small mound). Here the breast is fitted on points drawn from a Poisson surface, and the fitted
+model moves with the draw: four seeds of the same surface's draw fitted it at 164–187 cc, 1.36–1.56 times
+what the cup adds."""
 
 
 @pytest.fixture(scope="module")
