@@ -15,8 +15,8 @@ import logging
 import multiprocessing
 import os
 import signal
-import threading
 import sys
+import threading
 from collections import Counter
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool

@@ -89,8 +89,8 @@ def batch(
 def _print_summary(out: Path, manifest) -> None:
     s = manifest.summary()
     stdout.print(f"batch: {counted(s['inputs'], 'input')} — {s['done']} planned, {s['reused']} reused, "
-                 f"{s['failed']} failed, {s['skipped']} skipped; manifest → {out / 'manifest.csv'}, each breast's measures → "
-                 f"{out / 'measures.csv'}", markup=False, soft_wrap=True)
+                 f"{s['failed']} failed, {s['skipped']} skipped; manifest → {out / 'manifest.csv'}, "
+                 f"each breast's measures → {out / 'measures.csv'}", markup=False, soft_wrap=True)
     for row in manifest.rows:
         if row.status == "failed":
             stdout.print(f"  failed: {row.error}", markup=False, soft_wrap=True)
