@@ -99,10 +99,14 @@ def test_a_scan_with_no_earlier_visit_of_its_name_fails_saying_so_and_is_sent_to
     folder, out = planned
     earlier = tmp_path / "last-year"
     earlier.mkdir()
+    plan_json = (out / "anna" / "plan.json").read_bytes()
     batch = run_batch(folder, out, BatchOptions(plan=PlanOptions(changes=CHANGES), wall_from=str(earlier)))
     row = batch.manifest.rows[0]
     assert row.status == "failed" and sent == []
     assert row.error.startswith(f"{folder / 'anna.mcap'}: has no earlier visit") and str(earlier / "anna") in row.error
+    assert not batch.manifest.succeeded()                              # the command's exit 3: none was planned
+    assert (out / "anna" / "plan.json").read_bytes() == plan_json      # her earlier plan left as it was
+    assert list(earlier.iterdir()) == []                               # nothing written where it looked
 
 
 def test_a_case_of_an_input_whose_content_changed_is_planned_again(planned, sent, tmp_path):
